@@ -1,0 +1,53 @@
+"""The `fdi` command line: one subcommand per job.
+
+Each subcommand lives in `fdi_daemon/commands/<name>.py` and provides
+``HELP`` (one line), ``configure(parser)`` and ``run(args) -> int``. Command modules keep
+heavy imports inside ``run`` so that ``fdi --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from fdi_daemon import __version__
+from fdi_daemon.errors import UserError
+
+#: subcommand name -> module under fdi_daemon.commands
+COMMANDS: dict[str, str] = {}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fdi",
+        description="On-line Coulomb/viscous friction fault detection and isolation.",
+    )
+    parser.add_argument("--version", action="version", version=f"fdi {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(f"fdi_daemon.commands.{module_name}")
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.configure(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except UserError as exc:
+        print(f"fdi {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print(f"fdi {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""One module per `fdi` subcommand: HELP, configure(parser), run(args) -> int."""

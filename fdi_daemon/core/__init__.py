@@ -1,0 +1,1 @@
+"""Pure numerics, no I/O: IIR blocks, velocity estimator, window least squares, statistics."""

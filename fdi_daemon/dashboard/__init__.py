@@ -1,0 +1,1 @@
+"""The rich terminal dashboard; it reads status snapshots only."""

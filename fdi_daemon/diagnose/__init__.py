@@ -1,0 +1,1 @@
+"""The model-discrepancy workflow (`fdi diagnose`) and its library of physical effects."""

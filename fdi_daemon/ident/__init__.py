@@ -1,0 +1,1 @@
+"""Offline identification: spectral estimate, rational fit, output-error fit, friction signature."""

@@ -1,0 +1,1 @@
+"""Links (serial framing, Modbus register maps), recordings and sinks."""

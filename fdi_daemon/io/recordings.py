@@ -1,0 +1,397 @@
+"""Recordings: read and write the recording contract of DESIGN.md.
+
+A recording is a set of equally long 1-D columns. Required: ``t`` (s), ``v_in`` (V),
+``accel`` (m/s²); optional ``position`` (m) and ``seq`` (sample counter); any other column
+(the simulator's ground truth, for example) is kept and ignored by the monitor.
+Metadata are string key/value pairs (``fs``, ``scenario``, ``seed`` ...).
+
+Formats, chosen by file name:
+- ``.csv`` / ``.csv.gz``: header row, ``# key: value`` comment lines for metadata;
+- ``.npz``: one array per column, metadata as JSON in ``__meta__``;
+- ``.mat`` (MATLAB v5): one variable per column, metadata as JSON in ``meta_json``.
+
+Sampling is checked on read: a gap, a duplicate or time going backwards (in ``seq`` where
+present, else in ``t``) is reported, never papered over. ``read_recording(strict=True)``
+refuses such a file with a one-line error; ``strict=False`` returns it with the findings
+in ``Recording.sampling`` so that replay can turn them into ``data_gap`` events.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fdi_daemon.errors import RecordingError
+
+REQUIRED_COLUMNS = ("t", "v_in", "accel")
+
+#: relative tolerance on a sample interval before it counts as irregular
+DT_TOLERANCE = 0.25
+
+
+@dataclass(frozen=True)
+class SamplingIssue:
+    """One irregularity in the sampling: ``kind`` is "gap", "duplicate" or "backwards"."""
+
+    kind: str
+    index: int  # index of the first sample after the irregularity
+    t: float
+    missing_samples: int = 0  # for gaps: samples that should have been there
+
+    def describe(self) -> str:
+        if self.kind == "gap":
+            return f"gap of {self.missing_samples} sample(s) before t={self.t:.6g} s (row {self.index})"
+        if self.kind == "duplicate":
+            return f"duplicate sample at t={self.t:.6g} s (row {self.index})"
+        return f"time goes backwards at t={self.t:.6g} s (row {self.index})"
+
+
+@dataclass
+class SamplingReport:
+    """Result of the uniform-sampling check."""
+
+    fs_hz: float
+    issues: list[SamplingIssue] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.issues
+
+    def summary(self, limit: int = 3) -> str:
+        counts: dict[str, int] = {}
+        for issue in self.issues:
+            counts[issue.kind] = counts.get(issue.kind, 0) + 1
+        head = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in counts.items())
+        first = "; ".join(i.describe() for i in self.issues[:limit])
+        more = f"; ... {len(self.issues) - limit} more" if len(self.issues) > limit else ""
+        return f"{head}: {first}{more}"
+
+
+@dataclass
+class Recording:
+    """Columns of equal length plus string metadata."""
+
+    columns: dict[str, np.ndarray]
+    meta: dict[str, str] = field(default_factory=dict)
+    sampling: SamplingReport | None = None
+
+    def __post_init__(self) -> None:
+        lengths = {name: len(col) for name, col in self.columns.items()}
+        if len(set(lengths.values())) > 1:
+            raise RecordingError(f"columns differ in length: {lengths}")
+
+    def __len__(self) -> int:
+        return len(self.columns["t"])
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.columns[name]
+        except KeyError:
+            raise RecordingError(
+                f"no column {name!r} (columns: {', '.join(self.columns)})"
+            ) from None
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.columns["t"]
+
+    @property
+    def v_in(self) -> np.ndarray:
+        return self.columns["v_in"]
+
+    @property
+    def accel(self) -> np.ndarray:
+        return self.columns["accel"]
+
+    @property
+    def fs(self) -> float:
+        """Sampling rate in Hz: the ``fs`` metadata if present, else from the median step."""
+        if "fs" in self.meta:
+            return float(self.meta["fs"])
+        return nominal_fs_hz(self.t, self.columns.get("seq"))
+
+    def window(self, t0: float, t1: float) -> "Recording":
+        """The samples with t0 <= t < t1 (times in s)."""
+        keep = (self.t >= t0) & (self.t < t1)
+        if not keep.any():
+            raise RecordingError(
+                f"window {t0:g}:{t1:g} s holds no samples "
+                f"(recording spans {self.t[0]:g} to {self.t[-1]:g} s)"
+            )
+        return Recording({k: v[keep] for k, v in self.columns.items()}, dict(self.meta))
+
+
+def nominal_fs_hz(t: np.ndarray, seq: np.ndarray | None = None) -> float:
+    """Sampling rate in Hz from the median time step per sample counter step."""
+    if len(t) < 2:
+        raise RecordingError("a recording needs at least 2 samples to know its sampling rate")
+    dt = np.diff(t)
+    if seq is not None:
+        dseq = np.diff(seq)
+        ok = dseq > 0
+        if ok.any():
+            dt = dt[ok] / dseq[ok]
+    dt = dt[dt > 0]
+    if dt.size == 0:
+        raise RecordingError("time column never increases: cannot tell the sampling rate")
+    return float(1.0 / np.median(dt))
+
+
+def check_sampling(t: np.ndarray, seq: np.ndarray | None = None,
+                   fs_hz: float | None = None) -> SamplingReport:
+    """Find gaps, duplicates and backward steps in ``seq`` (preferred) or ``t``."""
+    fs = fs_hz if fs_hz is not None else nominal_fs_hz(t, seq)
+    issues: list[SamplingIssue] = []
+    if seq is not None:
+        steps = np.diff(seq.astype(np.int64))
+        for i in np.flatnonzero(steps != 1):
+            step = int(steps[i])
+            kind = "gap" if step > 1 else ("duplicate" if step == 0 else "backwards")
+            issues.append(SamplingIssue(kind, int(i + 1), float(t[i + 1]),
+                                        step - 1 if step > 1 else 0))
+        return SamplingReport(fs, issues)
+    steps = np.diff(t) * fs  # in samples
+    bad = np.flatnonzero(np.abs(steps - 1.0) > DT_TOLERANCE)
+    for i in bad:
+        step = float(steps[i])
+        if step > 1.0 + DT_TOLERANCE:
+            issues.append(SamplingIssue("gap", int(i + 1), float(t[i + 1]),
+                                        max(1, int(round(step)) - 1)))
+        elif step < -DT_TOLERANCE:
+            issues.append(SamplingIssue("backwards", int(i + 1), float(t[i + 1])))
+        else:  # a step of less than 0.75 samples: the same sample again, or a clock slip
+            issues.append(SamplingIssue("duplicate", int(i + 1), float(t[i + 1])))
+    return SamplingReport(fs, issues)
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+def read_recording(path: str | Path, strict: bool = True,
+                   required: tuple[str, ...] = REQUIRED_COLUMNS) -> Recording:
+    """Read a recording in any supported format and check its sampling.
+
+    strict: refuse gaps, duplicates and backward time with a RecordingError; otherwise
+    return them in ``Recording.sampling``.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file")
+    if path.is_dir():
+        raise RecordingError(f"{path}: is a directory, not a recording")
+    name = path.name.lower()
+    try:
+        if name.endswith(".csv") or name.endswith(".csv.gz"):
+            columns, meta = _read_csv(path)
+        elif name.endswith(".npz"):
+            columns, meta = _read_npz(path)
+        elif name.endswith(".mat"):
+            columns, meta = _read_mat(path)
+        else:
+            raise RecordingError(
+                f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
+    except RecordingError:
+        raise
+    except (OSError, EOFError, ValueError, KeyError, TypeError, UnicodeDecodeError,
+            NotImplementedError) as exc:
+        raise RecordingError(f"{path}: cannot read recording: {_one_line(exc)}") from None
+
+    missing = [c for c in required if c not in columns]
+    if missing:
+        raise RecordingError(
+            f"{path}: missing column(s) {', '.join(missing)} "
+            f"(found: {', '.join(columns) or 'none'})")
+    if "t" in columns and not np.all(np.isfinite(columns["t"])):
+        bad = int(np.flatnonzero(~np.isfinite(columns["t"]))[0])
+        raise RecordingError(f"{path}: time column t is not finite at row {bad}")
+    rec = Recording(columns, meta)
+    if len(rec) < 2:
+        raise RecordingError(f"{path}: holds {len(rec)} sample(s); at least 2 are needed")
+    fs_meta = _meta_fs(meta, path)
+    rec.sampling = check_sampling(rec.t, columns.get("seq"), fs_meta)
+    if strict and not rec.sampling.ok:
+        raise RecordingError(f"{path}: irregular sampling, {rec.sampling.summary()}")
+    return rec
+
+
+def _meta_fs(meta: dict[str, str], path: Path) -> float | None:
+    if "fs" not in meta:
+        return None
+    try:
+        fs = float(meta["fs"])
+    except ValueError:
+        raise RecordingError(f"{path}: metadata fs={meta['fs']!r} is not a number") from None
+    if not (math.isfinite(fs) and fs > 0):
+        raise RecordingError(f"{path}: metadata fs={meta['fs']!r} must be a positive number")
+    return fs
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _open_text(path: Path):
+    if path.name.lower().endswith(".gz"):
+        return gzip.open(path, "rt", encoding="utf-8", newline="")
+    return open(path, "r", encoding="utf-8", newline="")
+
+
+def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    meta: dict[str, str] = {}
+    header: list[str] | None = None
+    header_line = 0
+    with _open_text(path) as fh:
+        text = fh.read()
+    lines = text.splitlines()
+    body_start = len(lines)
+    for number, line in enumerate(lines, start=1):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            key, sep, value = stripped[1:].partition(":")
+            if sep and key.strip() and header is None:
+                meta[key.strip()] = value.strip()
+            continue
+        header = [h.strip() for h in stripped.split(",")]
+        header_line = number
+        body_start = number
+        break
+    if header is None:
+        raise RecordingError(f"{path}: no header row (expected e.g. 't,v_in,accel')")
+    if len(set(header)) != len(header) or any(not h for h in header):
+        raise RecordingError(f"{path}: header row {header_line} has empty or repeated names")
+    body = "\n".join(lines[body_start:])
+    ncol = len(header)
+    try:
+        with np.errstate(all="ignore"):
+            data = np.loadtxt(io.StringIO(body), delimiter=",", comments="#", ndmin=2,
+                              dtype=np.float64)
+    except ValueError:
+        raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol)) from None
+    if data.size == 0:
+        data = np.empty((0, ncol))
+    if data.shape[1] != ncol:
+        raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol))
+    columns = {name: np.ascontiguousarray(data[:, j]) for j, name in enumerate(header)}
+    if "seq" in columns:
+        columns["seq"] = _as_counter(columns["seq"], path)
+    return columns, meta
+
+
+def _locate_bad_csv_line(path: Path, lines: list[str], start: int, ncol: int) -> str:
+    for number in range(start + 1, len(lines) + 1):
+        line = lines[number - 1].strip()
+        if not line or line.startswith("#"):
+            continue
+        cells = line.split(",")
+        if len(cells) != ncol:
+            return f"{path}: line {number} has {len(cells)} field(s), the header has {ncol}"
+        for cell in cells:
+            try:
+                float(cell)
+            except ValueError:
+                return f"{path}: line {number}: {cell.strip()!r} is not a number"
+    return f"{path}: malformed CSV body"
+
+
+def _as_counter(seq: np.ndarray, path: Path) -> np.ndarray:
+    if not np.all(np.isfinite(seq)) or np.any(seq != np.round(seq)):
+        raise RecordingError(f"{path}: column seq must hold whole numbers")
+    return seq.astype(np.int64)
+
+
+def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    with np.load(path, allow_pickle=False) as data:
+        meta = json.loads(str(data["__meta__"])) if "__meta__" in data.files else {}
+        columns = {}
+        for name in data.files:
+            if name == "__meta__":
+                continue
+            columns[name] = _column(np.asarray(data[name]), name, path)
+    return columns, {str(k): str(v) for k, v in meta.items()}
+
+
+def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    from scipy.io import loadmat
+
+    data = loadmat(str(path), squeeze_me=True, chars_as_strings=True)
+    meta: dict[str, str] = {}
+    columns = {}
+    for name, value in data.items():
+        if name.startswith("__"):
+            continue
+        if name == "meta_json":
+            meta = {str(k): str(v) for k, v in json.loads(str(value)).items()}
+            continue
+        arr = np.asarray(value)
+        if arr.dtype.kind in "biuf" and arr.ndim == 1:
+            columns[name] = _column(arr, name, path)
+    return columns, meta
+
+
+def _column(arr: np.ndarray, name: str, path: Path) -> np.ndarray:
+    if arr.ndim != 1 or arr.dtype.kind not in "biuf":
+        raise RecordingError(f"{path}: variable {name!r} is not a 1-D numeric array")
+    if name == "seq":
+        return _as_counter(arr.astype(np.float64), path)
+    return arr.astype(np.float64)
+
+
+# ----------------------------------------------------------------------------- writing
+
+
+def write_recording(path: str | Path, rec: Recording) -> Path:
+    """Write ``rec`` in the format named by the file's ending; returns the path."""
+    path = Path(path)
+    name = path.name.lower()
+    if path.parent and not path.parent.exists():
+        raise RecordingError(f"{path}: directory {path.parent} does not exist")
+    meta = {str(k): str(v) for k, v in rec.meta.items()}
+    if name.endswith(".csv") or name.endswith(".csv.gz"):
+        _write_csv(path, rec.columns, meta)
+    elif name.endswith(".npz"):
+        np.savez_compressed(path, __meta__=np.array(json.dumps(meta)), **rec.columns)
+    elif name.endswith(".mat"):
+        from scipy.io import savemat
+
+        savemat(str(path), {**rec.columns, "meta_json": json.dumps(meta)},
+                do_compression=True, oned_as="column")
+    else:
+        raise RecordingError(f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
+    return path
+
+
+def csv_header_lines(names: list[str], meta: dict[str, str]) -> str:
+    """The metadata comments and header row that open a CSV recording."""
+    for key, value in meta.items():
+        if "\n" in key or "\n" in value or ":" in key:
+            raise RecordingError(f"metadata {key!r} cannot be written as a CSV comment")
+    head = "".join(f"# {k}: {v}\n" for k, v in meta.items())
+    return head + ",".join(names) + "\n"
+
+
+def format_csv_rows(columns: dict[str, np.ndarray]) -> str:
+    """CSV rows for the columns: counters as integers, the rest with 10 significant digits."""
+    names = list(columns)
+    fmt = ",".join("%d" if n == "seq" else ("%.9f" if n == "t" else "%.10g") for n in names)
+    matrix = np.column_stack([columns[n] for n in names]) if names else np.empty((0, 0))
+    buf = io.StringIO()
+    np.savetxt(buf, matrix, fmt=fmt, delimiter=",")
+    return buf.getvalue()
+
+
+def _write_csv(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str]) -> None:
+    text = csv_header_lines(list(columns), meta) + format_csv_rows(columns)
+    if path.name.lower().endswith(".gz"):
+        with gzip.open(path, "wt", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+    else:
+        with open(path, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)

@@ -1,0 +1,1 @@
+"""The daemon: sample loop, status socket, sd_notify/watchdog, recorder."""

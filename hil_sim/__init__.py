@@ -1,0 +1,1 @@
+"""Software-in-the-loop pneumatic rig: physics, scenarios, fake devices (Modbus, serial)."""

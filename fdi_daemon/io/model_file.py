@@ -1,0 +1,168 @@
+"""The model file (YAML): what `identify` and `signature` write and the monitor reads.
+
+Keys (DESIGN.md; more are welcome, these keep their meaning):
+- ``fs``: sampling rate in Hz;
+- ``plant: {b: [b0..bn], a: [1, a1..an]}``: Ĝ = B/A in powers of q⁻¹ (eq. 1, b0 = 0);
+- ``fault_filter: {b: [...], f: [1, ...], nk: 0, gamma_f: x}``: G_e = B/F (eq. 8) and γ_f (eq. 11);
+- ``velocity``: settings of the velocity estimator (high-pass + integrator), kept as a mapping;
+- ``detector``: detector settings, kept as a mapping;
+- ``provenance``: where the model came from (source hash, date, fit metrics);
+- any other top-level key (for example ``effects`` from `fdi diagnose`) is kept as it is.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from fdi_daemon.errors import ConfigError
+
+KNOWN_KEYS = ("fs", "plant", "fault_filter", "velocity", "detector", "provenance")
+
+
+@dataclass
+class FaultFilter:
+    """G_e(q) = q^-nk B(q)/F(q) (eq. 8) and the signature ratio γ_f (eq. 11)."""
+
+    b: np.ndarray
+    f: np.ndarray
+    nk: int = 0
+    gamma_f: float = 0.0
+
+
+@dataclass
+class FdiModel:
+    """Everything the monitor needs about one rig."""
+
+    fs: float
+    plant_b: np.ndarray
+    plant_a: np.ndarray
+    fault_filter: FaultFilter | None = None
+    velocity: dict[str, Any] = field(default_factory=dict)
+    detector: dict[str, Any] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "fs": float(self.fs),
+            "plant": {"b": _floats(self.plant_b), "a": _floats(self.plant_a)},
+        }
+        if self.fault_filter is not None:
+            ff = self.fault_filter
+            out["fault_filter"] = {"b": _floats(ff.b), "f": _floats(ff.f), "nk": int(ff.nk),
+                                   "gamma_f": float(ff.gamma_f)}
+        for key in ("velocity", "detector", "provenance"):
+            value = getattr(self, key)
+            if value:
+                out[key] = _plain(value)
+        out.update(_plain(self.extra))
+        return out
+
+
+def _floats(values: np.ndarray) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=float)]
+
+
+def _plain(value: Any) -> Any:
+    """Numpy scalars/arrays to plain Python so that yaml.safe_dump can write them."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def save_model(path: str | Path, model: FdiModel) -> Path:
+    """Write the model as YAML (keys in the documented order)."""
+    path = Path(path)
+    try:
+        with open(path, "w", encoding="utf-8") as fh:
+            yaml.safe_dump(model.to_dict(), fh, sort_keys=False, default_flow_style=None)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot write model: {exc.strerror or exc}") from None
+    return path
+
+
+def load_model(path: str | Path) -> FdiModel:
+    """Read and validate a model file; errors name the file and the key."""
+    path = Path(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such model file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read model file: {exc}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{path}: not valid YAML{where}") from None
+    return model_from_dict(data, str(path))
+
+
+def model_from_dict(data: Any, source: str = "model") -> FdiModel:
+    """Validate a parsed model mapping (see the module docstring for the keys)."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: a model file must be a mapping with keys fs, plant, ...")
+    fs = _positive(data, "fs", source)
+    plant = _mapping(data, "plant", source, required=True)
+    plant_b = _coefficients(plant, "b", f"{source}: plant")
+    plant_a = _coefficients(plant, "a", f"{source}: plant", monic=True)
+    fault_filter = None
+    if data.get("fault_filter") is not None:
+        ff = _mapping(data, "fault_filter", source, required=True)
+        nk = ff.get("nk", 0)
+        if not isinstance(nk, int) or isinstance(nk, bool) or nk < 0:
+            raise ConfigError(f"{source}: fault_filter.nk must be a whole number >= 0")
+        gamma = ff.get("gamma_f", 0.0)
+        if isinstance(gamma, bool) or not isinstance(gamma, (int, float)) or not math.isfinite(gamma):
+            raise ConfigError(f"{source}: fault_filter.gamma_f must be a finite number")
+        fault_filter = FaultFilter(
+            b=_coefficients(ff, "b", f"{source}: fault_filter"),
+            f=_coefficients(ff, "f", f"{source}: fault_filter", monic=True),
+            nk=nk, gamma_f=float(gamma))
+    sections = {key: _mapping(data, key, source, required=False)
+                for key in ("velocity", "detector", "provenance")}
+    extra = {k: v for k, v in data.items() if k not in KNOWN_KEYS}
+    return FdiModel(fs=fs, plant_b=plant_b, plant_a=plant_a, fault_filter=fault_filter,
+                    extra=extra, **sections)
+
+
+def _positive(data: dict, key: str, source: str) -> float:
+    value = data.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            math.isfinite(value) and value > 0):
+        raise ConfigError(f"{source}: {key} must be a positive number (got {value!r})")
+    return float(value)
+
+
+def _mapping(data: dict, key: str, source: str, required: bool) -> dict:
+    value = data.get(key)
+    if value is None and not required:
+        return {}
+    if not isinstance(value, dict):
+        raise ConfigError(f"{source}: {key} must be a mapping")
+    return value
+
+
+def _coefficients(section: dict, key: str, where: str, monic: bool = False) -> np.ndarray:
+    value = section.get(key)
+    if not isinstance(value, list) or not value or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        raise ConfigError(f"{where}.{key} must be a non-empty list of numbers")
+    arr = np.asarray(value, dtype=float)
+    if not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{where}.{key} holds a non-finite coefficient")
+    if monic and arr[0] != 1.0:
+        raise ConfigError(f"{where}.{key} must start with 1 (monic denominator)")
+    return arr

@@ -1,0 +1,5 @@
+"""Shared pytest configuration: plots never need a screen."""
+
+import matplotlib
+
+matplotlib.use("Agg")

@@ -1,0 +1,61 @@
+"""The model file contract: round trip and validation that names the key."""
+
+import numpy as np
+import pytest
+
+from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.model_file import FaultFilter, FdiModel, load_model, save_model
+
+
+def sample_model():
+    return FdiModel(
+        fs=256.0,
+        plant_b=np.array([0.0, 0.01, -0.02, 0.015, -0.004]),
+        plant_a=np.array([1.0, -2.9, 3.2, -1.6, 0.31]),
+        fault_filter=FaultFilter(b=np.array([0.1, -0.2, 0.05, 0.02, 0.0]),
+                                 f=np.array([1.0, -1.2, 0.5, -0.1]), nk=0, gamma_f=2.4),
+        velocity={"highpass_hz": 1.0, "highpass_order": 3},
+        provenance={"source_sha256": "ab" * 32, "fit_percent": np.float64(93.5)},
+        extra={"effects": [{"name": "coulomb_friction", "params": {"level": 0.3}}]},
+    )
+
+
+def test_round_trip_keeps_every_key(tmp_path):
+    model = sample_model()
+    back = load_model(save_model(tmp_path / "m.yaml", model))
+    np.testing.assert_array_equal(back.plant_b, model.plant_b)
+    np.testing.assert_array_equal(back.plant_a, model.plant_a)
+    np.testing.assert_array_equal(back.fault_filter.b, model.fault_filter.b)
+    assert back.fault_filter.gamma_f == 2.4
+    assert back.velocity == model.velocity
+    assert back.provenance["fit_percent"] == 93.5
+    assert back.extra["effects"][0]["name"] == "coulomb_friction"
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("fs: 256\n", r"plant must be a mapping"),
+        ("fs: -1\nplant: {b: [0, 1], a: [1, 0.5]}\n", r"fs must be a positive number"),
+        ("fs: 256\nplant: {b: [0, 1], a: [2, 0.5]}\n", r"plant.a must start with 1"),
+        ("fs: 256\nplant: {b: [], a: [1]}\n", r"plant.b must be a non-empty list"),
+        ("fs: 256\nplant: {b: [0, x], a: [1]}\n", r"plant.b must be a non-empty list"),
+        ("fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], f: [1], nk: -1}\n",
+         r"fault_filter.nk must be a whole number"),
+        ("fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], f: [1], gamma_f: .nan}\n",
+         r"gamma_f must be a finite number"),
+        ("fs: 256\nplant: {b: [0, 1], a: [1]}\nvelocity: 3\n", r"velocity must be a mapping"),
+        ("- just a list\n", r"must be a mapping"),
+        ("fs: [unclosed\n", r"not valid YAML at line"),
+    ],
+)
+def test_invalid_models_name_the_key(tmp_path, text, message):
+    path = tmp_path / "m.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_model(path)
+
+
+def test_missing_model_file(tmp_path):
+    with pytest.raises(ConfigError, match="no such model file"):
+        load_model(tmp_path / "absent.yaml")

@@ -1,0 +1,168 @@
+"""The recording contract: formats round-trip, sampling checks, clear errors."""
+
+import gzip
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fdi_daemon.errors import RecordingError
+from fdi_daemon.io.recordings import (
+    Recording,
+    check_sampling,
+    nominal_fs_hz,
+    read_recording,
+    write_recording,
+)
+
+FS = 256.0
+
+
+def make_recording(n=512, seed=3, with_seq=True):
+    rng = np.random.default_rng(seed)
+    cols = {
+        "t": np.arange(n) / FS,
+        "v_in": rng.uniform(-1.5, 1.5, n),
+        "accel": rng.normal(0.0, 2.0, n),
+        "position": rng.normal(0.0, 0.01, n),
+        "friction_force": rng.normal(0.0, 1.0, n),
+    }
+    if with_seq:
+        cols["seq"] = np.arange(1000, 1000 + n, dtype=np.int64)
+    return Recording(cols, {"fs": "256", "scenario": "unit test"})
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".csv.gz", ".npz", ".mat"])
+def test_round_trip_every_format(tmp_path, suffix):
+    rec = make_recording()
+    path = write_recording(tmp_path / f"rec{suffix}", rec)
+    back = read_recording(path)
+    assert set(back.columns) == set(rec.columns)
+    assert back.meta["scenario"] == "unit test"
+    assert back.fs == FS
+    for name, col in rec.columns.items():
+        # CSV keeps 10 significant digits (9 decimals for t); binary formats are exact
+        if suffix.startswith(".csv"):
+            np.testing.assert_allclose(back[name], col, rtol=1e-9, atol=1e-9)
+        else:
+            np.testing.assert_array_equal(back[name], col)
+    assert back["seq"].dtype == np.int64
+    assert back.sampling.ok
+
+
+def test_csv_is_plain_text_with_metadata_comments(tmp_path):
+    path = write_recording(tmp_path / "rec.csv", make_recording(n=4))
+    lines = path.read_text().splitlines()
+    assert lines[0] == "# fs: 256"
+    assert lines[2].startswith("t,v_in,accel")
+    assert len(lines) == 3 + 4
+
+
+def test_gz_is_really_gzip(tmp_path):
+    path = write_recording(tmp_path / "rec.csv.gz", make_recording(n=8))
+    with gzip.open(path, "rt") as fh:
+        assert fh.readline().startswith("# fs:")
+
+
+def test_nan_samples_are_kept_not_refused(tmp_path):
+    rec = make_recording(n=64)
+    rec.columns["accel"][10] = np.nan
+    back = read_recording(write_recording(tmp_path / "rec.csv", rec))
+    assert np.isnan(back.accel[10]) and np.isfinite(back.accel[11])
+
+
+def test_gap_in_seq_is_reported_with_its_size(tmp_path):
+    rec = make_recording(n=100)
+    keep = np.r_[0:40, 45:100]  # 5 samples lost
+    gapped = Recording({k: v[keep] for k, v in rec.columns.items()}, rec.meta)
+    path = write_recording(tmp_path / "rec.csv", gapped)
+    with pytest.raises(RecordingError, match=r"gap of 5 sample\(s\)"):
+        read_recording(path)
+    report = read_recording(path, strict=False).sampling
+    assert [(i.kind, i.index, i.missing_samples) for i in report.issues] == [("gap", 40, 5)]
+
+
+def test_gap_and_duplicate_in_time_without_seq():
+    t = np.arange(50) / FS
+    t = np.r_[t[:20], t[20], t[20:30], t[33:]]  # a duplicate at row 21, 3 lost before row 31
+    report = check_sampling(t, None, FS)
+    kinds = [(i.kind, i.index) for i in report.issues]
+    assert ("duplicate", 21) in kinds
+    gaps = [i for i in report.issues if i.kind == "gap"]
+    assert len(gaps) == 1 and gaps[0].missing_samples == 3
+
+
+def test_time_going_backwards_is_reported():
+    t = np.arange(20) / FS
+    t[12] = t[5]
+    kinds = {i.kind for i in check_sampling(t, None, FS).issues}
+    assert "backwards" in kinds
+
+
+def test_fs_is_estimated_from_median_step_when_metadata_missing():
+    t = np.arange(300) / 100.0
+    assert nominal_fs_hz(t) == pytest.approx(100.0)
+
+
+@pytest.mark.parametrize(
+    "body, message",
+    [
+        ("t,v_in,accel\n0,1,2\n0.1,x,3\n", r"line 3: 'x' is not a number"),
+        ("t,v_in,accel\n0,1,2\n0.1,2\n", r"line 3 has 2 field\(s\), the header has 3"),
+        ("# only comments\n", r"no header row"),
+        ("t,v_in\n0,1\n1,2\n", r"missing column\(s\) accel"),
+        ("t,v_in,accel\n0,1,2\n", r"at least 2 are needed"),
+        ("t,t,accel\n0,1,2\n", r"empty or repeated names"),
+        ("# fs: fast\nt,v_in,accel\n0,1,2\n1,1,2\n", r"fs='fast' is not a number"),
+        ("t,v_in,accel\n0,1,2\nnan,1,2\n", r"time column t is not finite at row 1"),
+    ],
+)
+def test_malformed_csv_gives_one_clear_line(tmp_path, body, message):
+    path = tmp_path / "bad.csv"
+    path.write_text(body)
+    with pytest.raises(RecordingError, match=message) as info:
+        read_recording(path)
+    assert "\n" not in str(info.value)
+
+
+def test_unreadable_inputs(tmp_path):
+    with pytest.raises(RecordingError, match="no such file"):
+        read_recording(tmp_path / "missing.csv")
+    with pytest.raises(RecordingError, match="unknown recording format"):
+        (tmp_path / "x.txt").write_text("t\n")
+        read_recording(tmp_path / "x.txt")
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(RecordingError, match="cannot read recording"):
+        read_recording(tmp_path / "bad.npz")
+    (tmp_path / "bad.csv.gz").write_bytes(b"not gzip")
+    with pytest.raises(RecordingError, match="cannot read recording"):
+        read_recording(tmp_path / "bad.csv.gz")
+
+
+def test_window_selects_half_open_interval():
+    rec = make_recording(n=512)
+    win = rec.window(0.5, 1.0)
+    assert win.t[0] == pytest.approx(0.5) and win.t[-1] < 1.0
+    assert len(win) == 128
+    with pytest.raises(RecordingError, match="holds no samples"):
+        rec.window(10.0, 11.0)
+
+
+def test_writing_into_missing_directory_is_a_user_error(tmp_path):
+    with pytest.raises(RecordingError, match="does not exist"):
+        write_recording(tmp_path / "nope" / "r.csv", make_recording(n=4))
+
+
+def test_reading_a_large_csv_is_not_pathological(tmp_path):
+    """One simulated hour at 256 Hz must be readable (size check, not a timing assertion)."""
+    rec = make_recording(n=921_600, with_seq=True)
+    path = write_recording(tmp_path / "hour.npz", rec)
+    assert len(read_recording(path)) == 921_600
+
+
+def test_cli_never_shows_a_traceback_for_a_bad_subcommand():
+    proc = subprocess.run([sys.executable, "-m", "fdi_daemon", "no-such-command"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr

@@ -1,0 +1,1 @@
+"""Speed measurements behind `fdi bench` (one module per measured component)."""

@@ -35,17 +35,25 @@ def reflection_from_poly(a: np.ndarray) -> np.ndarray:
     return k
 
 
-def eta_from_poly(a: np.ndarray) -> np.ndarray:
-    """Unconstrained parameters eta = artanh(k) of a stable monic polynomial."""
-    return np.arctanh(reflection_from_poly(a))
+def _scale(a: np.ndarray, radius: float) -> np.ndarray:
+    """a_k -> a_k·radius^k: the roots are multiplied by radius."""
+    return np.asarray(a, dtype=float) * radius ** np.arange(len(a))
 
 
-def poly_from_eta(eta: np.ndarray) -> np.ndarray:
-    """Monic polynomial with all roots inside the unit circle, from eta = artanh(k)."""
-    return poly_from_reflection(np.tanh(eta))
+def eta_from_poly(a: np.ndarray, radius: float = 1.0) -> np.ndarray:
+    """Unconstrained parameters eta = artanh(k) of a monic polynomial with roots inside `radius`."""
+    return np.arctanh(reflection_from_poly(_scale(a, 1.0 / radius)))
 
 
-def poly_eta_jacobian(eta: np.ndarray, step: float = 1e-7) -> np.ndarray:
+def poly_from_eta(eta: np.ndarray, radius: float = 1.0) -> np.ndarray:
+    """Monic polynomial with all roots strictly inside |z| < radius, from eta = artanh(k).
+
+    a_k = radius^k · a'_k with a' Schur-stable, so the roots of a are radius × those of a'.
+    """
+    return _scale(poly_from_reflection(np.tanh(eta)), radius)
+
+
+def poly_eta_jacobian(eta: np.ndarray, radius: float = 1.0, step: float = 1e-7) -> np.ndarray:
     """d[a1..an]/d eta (n x n) by central differences of the (cheap, smooth) step-up map."""
     eta = np.asarray(eta, dtype=float)
     n = len(eta)
@@ -53,7 +61,8 @@ def poly_eta_jacobian(eta: np.ndarray, step: float = 1e-7) -> np.ndarray:
     for j in range(n):
         d = np.zeros(n)
         d[j] = step
-        jac[:, j] = (poly_from_eta(eta + d)[1:] - poly_from_eta(eta - d)[1:]) / (2 * step)
+        jac[:, j] = (poly_from_eta(eta + d, radius)[1:]
+                     - poly_from_eta(eta - d, radius)[1:]) / (2 * step)
     return jac
 
 
@@ -65,10 +74,22 @@ def is_stable(a: np.ndarray, margin: float = 0.0) -> bool:
     return bool(np.all(np.abs(np.roots(a)) < 1.0 - margin))
 
 
-def reflect_unstable(b: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-    """Reflect roots of A outside the unit circle to 1/conj(p), keeping |B/A| on the circle.
+def record_pole_radius(n_samples: int) -> float:
+    """exp(−1/N): a pole slower than this decays by less than 1/e over the whole record.
 
-    On |z| = 1, |z - p| = |p|·|z - 1/p*|, so each reflected root divides B by |p|.
+    Such a pole cannot be told from an integrator by N samples; allowing it lets a fit park
+    a near-cancelling pole/zero pair on z = 1 that drifts when the model is simulated.
+    """
+    return float(np.exp(-1.0 / max(int(n_samples), 1)))
+
+
+def reflect_unstable(b: np.ndarray, a: np.ndarray, radius: float = 1.0,
+                     ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Reflect roots of A outside |z| = radius to radius²/conj(p).
+
+    For radius 1 this keeps |B/A| on the unit circle (|z − p| = |p|·|z − 1/p*| there), so B
+    is divided by |p| for each reflected root; for radius < 1 the same gain correction is
+    applied as an approximation (the result is only a start for the refinement).
     Returns (b, a, number of reflected roots).
     """
     a = np.asarray(a, dtype=float)
@@ -76,10 +97,11 @@ def reflect_unstable(b: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarr
     if len(a) <= 1:
         return b.copy(), a.copy(), 0
     poles = np.roots(a)
-    outside = np.abs(poles) > 1.0
+    outside = np.abs(poles) >= radius
     if not outside.any():
         return b.copy(), a.copy(), 0
-    gain = float(np.prod(np.abs(poles[outside])))
-    poles = np.where(outside, 1.0 / np.conj(poles), poles)
+    gain = float(np.prod(np.abs(poles[outside]) / radius))
+    # strictly inside: a root exactly on the circle is pulled in slightly
+    poles = np.where(outside, radius ** 2 / np.conj(poles) * (1.0 - 1e-9), poles)
     a_new = np.real(np.poly(poles))
     return b / gain, a_new, int(outside.sum())

@@ -1,0 +1,180 @@
+"""`fdi signature`: friction-signature filter G_e and γ_f from a fault window (eqs. 11–13)."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "identify the friction signature (G_e, gamma_f) from a window with a friction fault"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recording", metavar="REC", help="recording with a friction fault")
+    parser.add_argument("--model", required=True, metavar="MODEL.yaml",
+                        help="model file holding the plant (from `fdi identify`)")
+    parser.add_argument("--fault-window", required=True, metavar="T0:T1",
+                        help="time window (s) in which the fault is present")
+    parser.add_argument("-o", "--output", required=True, metavar="MODEL.yaml",
+                        help="model file to write (may equal --model)")
+    parser.add_argument("--plot", metavar="FILE.png",
+                        help="residual vs filtered friction signal (Fig. 8) and the γ profile")
+    parser.add_argument("--gamma-grid", default="0:10:0.2", metavar="LO:HI:STEP",
+                        help="γ grid (default %(default)s, the paper's 51 points)")
+    parser.add_argument("--orders", default="4:3:0", metavar="NB:NF:NK",
+                        help="G_e orders as MATLAB oe (default %(default)s)")
+    parser.add_argument("--highpass-hz", type=float,
+                        help="velocity estimator high-pass cut-off (default: the model's "
+                             "velocity settings, else 1 Hz)")
+    parser.add_argument("--flat-fraction", type=float, default=0.2,
+                        help="flag the profile flat when the 99 %% interval of γ covers more "
+                             "than this fraction of the grid (default %(default)s)")
+    parser.add_argument("--prefilter-hz", type=float,
+                        help="high-pass (3rd-order Butterworth) applied alike to the residual "
+                             "and the friction signal before the fit (default: none)")
+    parser.add_argument("--min-depth", type=float, default=0.01,
+                        help="flag the profile flat when max/min cost over the grid is below "
+                             "1 + this (default %(default)s)")
+
+
+def _orders(text: str) -> tuple[int, int, int]:
+    from fdi_daemon.commands.identify import parse_range
+    from fdi_daemon.errors import UserError
+
+    values = parse_range(text, "--orders", 3)
+    nb, nf, nk = (int(v) for v in values)
+    if any(v != int(v) for v in values) or nb < 1 or nf < 0 or nk < 0:
+        raise UserError(f"--orders must be whole numbers NB>=1:NF>=0:NK>=0, got {text!r}")
+    return nb, nf, nk
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from fdi_daemon.commands.identify import load_io, parse_range
+    from fdi_daemon.core.velocity import DEFAULT_SETTINGS, VelocityEstimator
+    from fdi_daemon.errors import ConfigError, UserError
+    from fdi_daemon.ident import provenance
+    from fdi_daemon.ident import signature as sig
+    from fdi_daemon.io.model_file import FaultFilter, load_model, save_model
+
+    t0, t1 = parse_range(args.fault_window, "--fault-window")
+    if not t1 > t0:
+        raise UserError(f"--fault-window needs T0 < T1, got {args.fault_window}")
+    lo, hi, step = parse_range(args.gamma_grid, "--gamma-grid", 3)
+    try:
+        grid = sig.gamma_grid(lo, hi, step)
+    except ValueError as exc:
+        raise UserError(f"--gamma-grid: {exc}") from None
+    if len(grid) < 3:
+        raise UserError("--gamma-grid needs at least 3 points")
+    orders = _orders(args.orders)
+    if not 0 < args.flat_fraction <= 1:
+        raise UserError("--flat-fraction must lie in (0, 1]")
+    if not args.min_depth >= 0:
+        raise UserError("--min-depth must be >= 0")
+
+    model = load_model(args.model)
+    rec, v_in, accel = load_io(args.recording)
+    if abs(rec.fs - model.fs) > 1e-6 * model.fs:
+        raise UserError(f"{args.recording}: fs = {rec.fs:g} Hz but the model has "
+                        f"fs = {model.fs:g} Hz")
+    t = rec.t
+    if t0 < t[0] or t1 > t[-1] + 1.0 / rec.fs:
+        raise UserError(f"--fault-window {args.fault_window} lies outside the recording "
+                        f"({t[0]:g} to {t[-1]:g} s)")
+    inside = (t >= t0) & (t < t1)
+    needed = 2 * (sum(orders) + 10)
+    if inside.sum() < needed:
+        raise UserError(f"--fault-window {args.fault_window} holds {int(inside.sum())} "
+                        f"samples; at least {needed} are needed")
+
+    settings = {k: v for k, v in (model.velocity or DEFAULT_SETTINGS).items()}
+    if args.highpass_hz is not None:
+        settings["highpass_hz"] = args.highpass_hz
+    try:
+        estimator = VelocityEstimator.from_settings(settings, fs_hz=model.fs)
+    except ValueError as exc:
+        raise ConfigError(f"{args.model}: velocity: {exc}") from None
+
+    prefilter = None
+    if args.prefilter_hz is not None:
+        if not 0 < args.prefilter_hz < model.fs / 2:
+            raise UserError(f"--prefilter-hz must lie in (0, {model.fs / 2:g})")
+        from scipy.signal import butter
+
+        prefilter = butter(3, args.prefilter_hz, btype="high", fs=model.fs)
+
+    # residual (eq. 3) and velocity from the recording start, so that filter start-up
+    # transients have settled before the window; the fit uses the window only
+    residual = sig.plant_residual(model.plant_b, model.plant_a, v_in, accel)
+    velocity = estimator.run(accel)
+    first, end = int(np.flatnonzero(inside)[0]), int(np.flatnonzero(inside)[-1]) + 1
+    t_win = t[first:end]
+    result = _estimate(sig, residual[:end], velocity[:end], first, grid, orders, prefilter,
+                       args.flat_fraction, args.min_depth)
+
+    nb, nf, nk = orders
+    model.fault_filter = FaultFilter(b=result.fit.b, f=result.fit.f, nk=nk,
+                                     gamma_f=result.gamma_f)
+    model.velocity = estimator.settings()
+    prov = dict(model.provenance)
+    prov["signature"] = {
+        **provenance.source_entry(args.recording, provenance.command_line("signature", args)),
+        "fault_window_s": [t0, t1], "samples": int(inside.sum()),
+        "prefilter_hz": args.prefilter_hz,
+        "cost_profile": result.summary(),
+        "cost_profile_relative": [round(float(c), 6) for c in result.relative_cost()],
+        "recommendation": result.recommendation,
+    }
+    model.provenance = prov
+    save_model(args.output, model)
+    if args.plot:
+        from fdi_daemon.ident.plots import plot_signature
+
+        plot_signature(args.plot, t_win, result.residual, result)
+    _report(args, result, estimator)
+    return 0
+
+
+def _estimate(sig, residual, velocity, fit_from, grid, orders, prefilter, flat_fraction,
+              min_depth):
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from fdi_daemon.errors import UserError
+
+    with Progress(console=Console(stderr=True), transient=True) as progress:
+        task = progress.add_task("γ grid (OE fit per point, 3 sweeps)",
+                                 total=sig.sweep_fits(len(grid)))
+        try:
+            return sig.estimate_signature(residual, velocity, grid, orders,
+                                          flat_fraction=flat_fraction, min_depth=min_depth,
+                                          prefilter=prefilter, fit_from=fit_from,
+                                          on_step=lambda: progress.advance(task))
+        except ValueError as exc:
+            raise UserError(f"signature: {exc}") from None
+
+
+def _report(args, result, estimator) -> None:
+    import sys
+
+    rel = result.relative_cost()
+    lines = [
+        f"gamma_f           : {result.gamma_f:.4g} (grid {result.grid[0]:g}..{result.grid[-1]:g}"
+        f" step {result.grid[1] - result.grid[0]:g}, refined)",
+        f"99 % interval     : {result.interval[0]:.3g} .. {result.interval[1]:.3g}"
+        f" (N_eff = {result.effective_samples:.0f})",
+        f"cost profile      : SSE(γ)/SSE(γ_f) from {rel.min():.4f} to {rel.max():.4f}"
+        f" ({'FLAT' if result.flat else 'identifiable'})",
+        f"G_e fit           : {result.info['fit_percent']:.2f} % of the residual explained, "
+        f"orders [nb nf nk] = {list(result.orders)}",
+        f"G_e               : b = {[round(float(v), 6) for v in result.fit.b]}, "
+        f"f = {[round(float(v), 6) for v in result.fit.f]}",
+        f"velocity          : high-pass {estimator.highpass_hz:g} Hz, order "
+        f"{estimator.highpass_order}, {estimator.integrator} integrator",
+        f"model written     : {args.output}",
+    ]
+    print("\n".join(lines))
+    if result.flat:
+        print(f"fdi signature: warning: {result.recommendation} (G_e x_f explains "
+              f"{result.info['fit_percent']:.1f} % of the residual; 99 % interval of gamma "
+              f"{result.interval[0]:.3g}..{result.interval[1]:.3g})", file=sys.stderr)

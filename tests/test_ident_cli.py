@@ -1,0 +1,173 @@
+"""`fdi identify` and `fdi signature` end to end, in-process and as a subprocess."""
+
+import hashlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+from conftest_ident import msd_recordings, plant_recording  # noqa: F401  (fixture)
+
+from fdi_daemon.cli import main
+from fdi_daemon.io.model_file import load_model
+from fdi_daemon.io.recordings import Recording, read_recording, write_recording
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def chirps(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ident_cli")
+    return (plant_recording(out / "est.csv", 1024, seed=1),
+            plant_recording(out / "val.csv", 2048, seed=2))
+
+
+@pytest.fixture(scope="module")
+def identified(chirps, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ident_model")
+    model, plot = out / "model.yaml", out / "bode.png"
+    code = main(["identify", str(chirps[0]), "-o", str(model), "--validate", str(chirps[1]),
+                 "--plot", str(plot)])
+    assert code == 0
+    return model, plot
+
+
+def test_identify_writes_model_with_provenance(identified, chirps):
+    model_path, plot = identified
+    model = load_model(model_path)
+    assert model.fs == 256.0 and model.plant_b[0] == 0.0 and len(model.plant_a) == 5
+    assert np.all(np.abs(np.roots(model.plant_a)) < 1)
+    prov = model.provenance["identify"]
+    assert prov["source_sha256"] == hashlib.sha256(chirps[0].read_bytes()).hexdigest()
+    assert prov["date_utc"].endswith("+00:00")
+    assert prov["command"].startswith("fdi identify")
+    metrics = prov["metrics"]
+    assert metrics["fit_percent"] >= 95.0
+    assert "validation" in metrics["fit_percent_on"]
+    assert prov["choices"]["lag_samples"] >= 16 and len(prov["choices"]["band_hz"]) == 2
+    assert plot.read_bytes()[:8] == PNG
+
+
+def test_identify_order_option(chirps, tmp_path):
+    out = tmp_path / "m2.yaml"
+    assert main(["identify", str(chirps[0]), "-o", str(out), "--order", "2",
+                 "--band", "1:15", "--method", "welch"]) == 0
+    model = load_model(out)
+    assert len(model.plant_a) == 3 and len(model.plant_b) == 3
+    assert model.provenance["identify"]["choices"]["band_rule"] == "given"
+
+
+def test_signature_end_to_end_on_the_papers_model(msd_recordings, tmp_path):  # noqa: F811
+    """§V model (mass-spring-damper, Coulomb 0.5 N + viscous 1 N·s/m): γ_f = 2 within ±0.3."""
+    model = tmp_path / "msd.yaml"
+    assert main(["identify", str(msd_recordings["chirp"]), "-o", str(model),
+                 "--validate", str(msd_recordings["chirp_val"])]) == 0
+    assert load_model(model).provenance["identify"]["metrics"]["fit_percent"] >= 90
+    out, plot = tmp_path / "msd_sig.yaml", tmp_path / "sig.png"
+    assert main(["signature", str(msd_recordings["amp_steps"]), "--model", str(model),
+                 "--fault-window", "1.5:6", "-o", str(out), "--plot", str(plot)]) == 0
+    result = load_model(out)
+    ff = result.fault_filter
+    assert abs(ff.gamma_f - msd_recordings["gamma_true"]) <= 0.3
+    assert len(ff.b) == 4 and len(ff.f) == 4 and ff.nk == 0
+    assert np.all(np.abs(np.roots(ff.f)) < 1)
+    np.testing.assert_allclose(result.plant_a, load_model(model).plant_a)
+    assert result.velocity["highpass_hz"] == 1.0 and result.velocity["highpass_order"] == 3
+    prov = result.provenance
+    assert "identify" in prov and prov["signature"]["cost_profile"]["flat"] is False
+    assert prov["signature"]["fault_window_s"] == [1.5, 6.0]
+    assert plot.read_bytes()[:8] == PNG
+
+
+def test_signature_flags_a_single_sine(identified, tmp_path, capsys):
+    """A sine-driven fault window on the known plant: the γ profile is flat."""
+    model_path, _ = identified
+    model = load_model(model_path)
+    from conftest_ident import FS, OE_B, OE_F
+    from scipy import signal
+
+    from fdi_daemon.core.velocity import VelocityEstimator
+
+    t = np.arange(1536) / FS
+    v_in = 1.4 * np.sin(2 * np.pi * 8 * t)
+    accel = signal.lfilter(model.plant_b, model.plant_a, v_in)
+    velocity = VelocityEstimator(FS).run(accel)
+    friction = np.where(t > 2.0, np.sign(velocity) + 1.5 * velocity, 0.0)
+    rng = np.random.default_rng(3)
+    effect = signal.lfilter(OE_B, OE_F, friction)
+    accel = accel + effect + 0.1 * np.std(effect) * rng.standard_normal(len(t))
+    rec = tmp_path / "sine.csv"
+    write_recording(rec, Recording({"t": t, "v_in": v_in, "accel": accel}, {"fs": "256"}))
+    out = tmp_path / "sig.yaml"
+    assert main(["signature", str(rec), "--model", str(model_path), "--fault-window", "2.5:6",
+                 "-o", str(out), "--gamma-grid", "0:10:0.5"]) == 0
+    err = capsys.readouterr().err
+    assert "not identifiable" in err
+    assert load_model(out).provenance["signature"]["cost_profile"]["flat"] is True
+
+
+def _bad(args, capsys):
+    code = main(args)
+    err = capsys.readouterr().err
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_bad_inputs_exit_2_with_one_line(identified, chirps, tmp_path, capsys):
+    model, _ = identified
+    rec = str(chirps[0])
+    out = str(tmp_path / "o.yaml")
+    assert "no such file" in _bad(["identify", str(tmp_path / "nope.csv"), "-o", out], capsys)
+    data = read_recording(rec)
+    no_accel = tmp_path / "no_accel.csv"
+    write_recording(no_accel, Recording({"t": data.t, "v_in": data.v_in}, {"fs": "256"}))
+    assert "accel" in _bad(["identify", str(no_accel), "-o", out], capsys)
+    assert "--band" in _bad(["identify", rec, "-o", out, "--band", "x:y"], capsys)
+    for window in ("abc", "5:3", "1:2:3"):
+        assert "--fault-window" in _bad(["signature", rec, "--model", str(model),
+                                         "--fault-window", window, "-o", out], capsys)
+    assert "outside" in _bad(["signature", rec, "--model", str(model),
+                              "--fault-window", "2:50", "-o", out], capsys)
+    no_plant = tmp_path / "no_plant.yaml"
+    no_plant.write_text(yaml.safe_dump({"fs": 256.0}))
+    assert "plant" in _bad(["signature", rec, "--model", str(no_plant),
+                            "--fault-window", "1:3", "-o", out], capsys)
+    assert "no such model" in _bad(["signature", rec, "--model", str(tmp_path / "x.yaml"),
+                                    "--fault-window", "1:3", "-o", out], capsys)
+    assert not (tmp_path / "o.yaml").exists()
+
+
+def test_subprocess_runs_and_bad_input(chirps, tmp_path):
+    out = tmp_path / "m.yaml"
+    ok = subprocess.run([sys.executable, "-m", "fdi_daemon", "identify", str(chirps[0]),
+                         "-o", str(out)], capture_output=True, text=True, timeout=120)
+    assert ok.returncode == 0, ok.stderr
+    assert "simulation fit" in ok.stdout and out.exists()
+    bad = subprocess.run([sys.executable, "-m", "fdi_daemon", "signature", str(chirps[0]),
+                          "--model", str(out), "--fault-window", "9:1", "-o", str(out)],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2
+    assert bad.stderr.count("\n") == 1 and "Traceback" not in bad.stderr
+
+
+def test_identify_on_another_rig_with_a_multisine(tmp_path):
+    """An independent rig (stiffer §V model, 12 Hz input filter) excited by a log-spaced
+    multisine, in .mat and .npz files without fs metadata: the automatic lag window and band
+    must still give a model that simulates unseen data."""
+    from hil_sim import msd
+
+    params = msd.MsdParams(stiffness_n_per_m=3000.0, damping_n_s_per_m=30.0,
+                           input_filter_hz=12.0, accel_noise_width=0.05)
+    paths = []
+    for seed, name in ((1, "est.mat"), (2, "val.npz")):
+        rec = msd.simulate_recording(params, msd.multisine(8.0, 256.0, 0.5, 30.0, 0.5, seed),
+                                     seed)
+        path = tmp_path / name
+        write_recording(path, Recording({k: rec.columns[k] for k in ("t", "v_in", "accel")}))
+        paths.append(path)
+    out = tmp_path / "m.yaml"
+    assert main(["identify", str(paths[0]), "--validate", str(paths[1]), "-o", str(out)]) == 0
+    assert load_model(out).provenance["identify"]["metrics"]["fit_percent"] >= 95.0

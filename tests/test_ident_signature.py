@@ -1,0 +1,80 @@
+"""Friction signature, eqs. (11)–(13): γ grid, OE fit of G_e, refinement, flatness."""
+
+import numpy as np
+import pytest
+from conftest_ident import OE_B, OE_F, signature_data
+from scipy import signal
+
+from fdi_daemon.ident import signature as sig
+
+
+def test_gamma_grid_is_the_papers():
+    grid = sig.gamma_grid()
+    assert len(grid) == 51 and grid[0] == 0.0 and grid[-1] == pytest.approx(10.0)
+    assert np.allclose(np.diff(grid), 0.2)
+    with pytest.raises(ValueError):
+        sig.gamma_grid(1.0, 0.0, 0.2)
+
+
+def test_friction_signal_and_residual():
+    v = np.array([-2.0, 0.0, 0.5])
+    np.testing.assert_allclose(sig.friction_signal(v, 2.0), [-5.0, 0.0, 2.0])
+    b, a = [0.0, 0.5], [1.0, -0.5]
+    u = np.arange(5.0)
+    np.testing.assert_allclose(sig.plant_residual(b, a, u, np.ones(5)),
+                               1.0 - signal.lfilter(b, a, u))
+
+
+@pytest.mark.parametrize("gamma", [0.0, 3.0, 6.0])
+def test_recovers_gamma_from_an_identifying_excitation(gamma):
+    residual, velocity = signature_data(gamma, "sweep", noise_fraction=0.05)
+    result = sig.estimate_signature(residual, velocity)
+    assert abs(result.gamma_f - gamma) <= 0.3
+    assert not result.flat and result.recommendation is None
+    assert result.interval[0] <= result.gamma_f <= result.interval[1] + 1e-9
+    # G_e is the filter that made the data, up to the noise
+    w = np.linspace(0.05, np.pi, 100)
+    true = signal.freqz(OE_B, OE_F, worN=w)[1]
+    est = signal.freqz(result.fit.b, result.fit.f, worN=w)[1]
+    assert np.max(np.abs(est - true)) / np.max(np.abs(true)) < 0.05
+
+
+def test_refinement_lands_between_grid_points():
+    residual, velocity = signature_data(3.1, "sweep", noise_fraction=0.0)
+    result = sig.estimate_signature(residual, velocity)
+    assert result.gamma_f == pytest.approx(3.1, abs=0.02)
+    assert result.sse_min <= result.sse.min()
+
+
+def test_single_sine_is_flagged_flat():
+    residual, velocity = signature_data(3.0, "sine", noise_fraction=0.1)
+    result = sig.estimate_signature(residual, velocity)
+    assert result.flat
+    assert "not identifiable" in result.recommendation
+    summary = result.summary()
+    assert summary["flat"] is True and summary["interval_99"][1] - summary["interval_99"][0] > 2
+
+
+def test_progress_callback_counts_every_fit():
+    residual, velocity = signature_data(1.0, "sweep", noise_fraction=0.05, n_samples=400)
+    calls = []
+    grid = sig.gamma_grid(0, 2, 0.5)
+    sig.estimate_signature(residual, velocity, grid, on_step=lambda: calls.append(1))
+    assert len(calls) == sig.sweep_fits(len(grid)) == 3 * len(grid) - 1
+
+
+def test_zero_velocity_is_an_error():
+    with pytest.raises(ValueError, match="velocity is zero"):
+        sig.estimate_signature(np.ones(300), np.zeros(300))
+
+
+def test_window_after_a_lead_in_and_prefilter_keep_gamma():
+    """Samples before fit_from only run the prefilter in; L r = G_e L x_f keeps γ."""
+    from scipy.signal import butter
+
+    residual, velocity = signature_data(3.0, "sweep", noise_fraction=0.02, n_samples=1400)
+    result = sig.estimate_signature(residual, velocity, sig.gamma_grid(0, 10, 0.5),
+                                    prefilter=butter(3, 1.0, btype="high", fs=256.0),
+                                    fit_from=376)
+    assert abs(result.gamma_f - 3.0) <= 0.3
+    assert len(result.residual) == 1024 and len(result.fit.y_sim) == 1024

@@ -1,0 +1,30 @@
+"""`fdi run`: the daemon next to the rig (link -> monitor -> alarms, status, recordings)."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "run the monitoring daemon (default: the built-in simulated rig with a friction fault)"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", metavar="RIG.yaml",
+                        help="rig config (default: the embedded simulated rig over a real "
+                             "Modbus TCP link, a friction fault after 20 s)")
+    parser.add_argument("--duration", type=float, metavar="S",
+                        help="stop after S seconds of wall-clock time (default: run until "
+                             "SIGTERM or Ctrl-C)")
+    parser.add_argument("--log-level", choices=("debug", "info", "warning", "error"),
+                        default="info", help="daemon log level on stderr (default %(default)s)")
+
+
+def run(args: argparse.Namespace) -> int:
+    import logging
+
+    from fdi_daemon.errors import UserError
+    from fdi_daemon.service.daemon import Daemon, setup_logging
+
+    if args.duration is not None and not args.duration > 0:
+        raise UserError(f"--duration must be a positive number of seconds (got {args.duration:g})")
+    setup_logging(getattr(logging, args.log_level.upper()))
+    return Daemon(args.config, echo=lambda text: print(text, flush=True)).run(args.duration)

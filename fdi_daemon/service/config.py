@@ -1,0 +1,385 @@
+"""The rig config of `fdi run` (YAML), validated key by key.
+
+Every key is checked: an unknown key, a wrong type or a value out of range is a
+`ConfigError` naming the key path (``sinks.modbus_status.port``). Defaults are listed in
+`SCHEMA` below and in ``docs/service.md``.
+
+Paths. ``model.path`` is relative to the config file's folder. Output paths (event log,
+recorder folder, status socket) are relative to ``service.state_dir``, whose default is
+``$STATE_DIRECTORY`` (set by systemd's ``StateDirectory=``) or else ``./fdi-state``.
+
+Sections::
+
+    link:              # passed to fdi_daemon.io.links.make_link (its keys are the link's)
+      kind: modbus-tcp # serial | modbus-tcp | modbus-rtu | replay | sim
+      ...
+    simulated_device:  # optional: serve the simulated rig in-process and link to it
+      transport: modbus-tcp     # modbus-tcp | modbus-rtu | serial
+      scenario: null            # excitation program (configs/scenarios/*.yaml)
+      seed: 0
+      faults: [{at_s: 20.0, bearing_supply: 0.35}]
+    model: {path: model.yaml}
+    monitor: {detector: {...}, velocity: {...}}   # override the model's sections
+    sinks: {event_log, stdout, status_socket, modbus_status: {enabled, host, port, device_id}}
+    recorder: {enabled, dir, rotate_seconds, rotate_bytes, fsync_period_s, keep_files}
+    service: {fs, deadline_s, status_period_s, queue_size, read_timeout_s, state_dir}
+
+Reconnect backoff is the link's: ``link.reconnect: {backoff_initial_s, backoff_max_s,
+stall_timeout_s}`` (see `fdi_daemon.io.links.base`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from fdi_daemon.errors import ConfigError
+
+__all__ = ["RigConfig", "load_config", "config_from_dict", "default_config_path", "SCHEMA"]
+
+LINK_KINDS = ("serial", "modbus-tcp", "modbus-rtu", "replay", "sim")
+SIM_TRANSPORTS = ("modbus-tcp", "modbus-rtu", "serial")
+SIM_FAULT_KEYS = ("bearing_supply", "accel_bias", "valve_gain", "supply_pressure",
+                  "accel_dropout", "accel_saturation")
+
+
+@dataclass(frozen=True)
+class Field:
+    """One scalar key: accepted types, default, optional range check and its doc line."""
+
+    types: tuple[type, ...]
+    default: Any
+    doc: str
+    check: Callable[[Any], str | None] | None = None
+    nullable: bool = False
+
+
+def _positive(v: Any) -> str | None:
+    return None if v > 0 and math.isfinite(v) else "must be a positive number"
+
+
+def _non_negative(v: Any) -> str | None:
+    return None if v >= 0 and math.isfinite(v) else "must be >= 0"
+
+
+def _port(v: Any) -> str | None:
+    return None if 0 <= v <= 65535 else "must be a TCP port 0..65535 (0 = any free port)"
+
+
+def _device_id(v: Any) -> str | None:
+    return None if 0 <= v <= 247 else "must be a Modbus device id 0..247"
+
+
+def _fsync_period(v: Any) -> str | None:
+    return None if 0 < v <= 1.0 else "must be in (0, 1] s (a SIGKILL may lose at most 1 s)"
+
+
+def _fraction(v: Any) -> str | None:
+    return None if 0 <= v <= 1 else "must be a fraction in [0, 1]"
+
+
+def _one_of(*choices: str) -> Callable[[Any], str | None]:
+    def check(v: Any) -> str | None:
+        return None if v in choices else f"must be one of {', '.join(choices)}"
+    return check
+
+
+NUM = (int, float)
+STR = (str,)
+BOOL = (bool,)
+INT = (int,)
+
+#: section -> key -> Field, or section -> key -> nested dict of Fields
+SCHEMA: dict[str, dict[str, Any]] = {
+    "model": {
+        "path": Field(STR, None, "model file (YAML) from `fdi identify` + `fdi signature`; "
+                                 "relative to the config file"),
+    },
+    "sinks": {
+        "event_log": Field(STR, "events.jsonl", "JSON Lines event log (append; fsync on "
+                                                "alarms); null disables", nullable=True),
+        "stdout": Field(BOOL, True, "one log line per event on stdout (journald priorities)"),
+        "status_socket": Field(STR, "status.sock", "Unix socket serving the JSON status "
+                                                   "snapshot; null disables", nullable=True),
+        "modbus_status": {
+            "enabled": Field(BOOL, False, "serve the status registers over Modbus TCP"),
+            "host": Field(STR, "127.0.0.1", "address to bind (loopback unless configured)"),
+            "port": Field(INT, 5020, "TCP port (0 = any free port, logged at start)",
+                          _port),
+            "device_id": Field(INT, 1, "Modbus device id (unit) answered", _device_id),
+        },
+    },
+    "recorder": {
+        "enabled": Field(BOOL, True, "write the raw samples as rotating CSV recordings"),
+        "dir": Field(STR, "recordings", "folder for the recordings"),
+        "rotate_seconds": Field(NUM, 3600.0, "start a new file after this many s of samples",
+                                _positive),
+        "rotate_bytes": Field(INT, 200_000_000, "or after this many bytes", _positive),
+        "fsync_period_s": Field(NUM, 1.0, "flush + fsync period, <= 1 s", _fsync_period),
+        "keep_files": Field(INT, 0, "delete the oldest recordings beyond this many "
+                                    "(0 keeps all)", _non_negative),
+    },
+    "service": {
+        "fs": Field(NUM, None, "sampling rate in Hz; null = the model's fs", _positive,
+                    nullable=True),
+        "deadline_s": Field(NUM, 0.05, "a tick finished later than this after its sample "
+                                       "time (paced by the device counter) is a deadline miss",
+                            _positive),
+        "status_period_s": Field(NUM, 0.1, "how often the status snapshot is refreshed",
+                                 _positive),
+        "queue_size": Field(INT, 4096, "bound of the queue to the sink thread (non-critical "
+                                       "items beyond it are dropped and counted)", _positive),
+        "read_timeout_s": Field(NUM, 0.05, "longest wait in one link read", _positive),
+        "state_dir": Field(STR, None, "base of relative output paths; null = "
+                                      "$STATE_DIRECTORY or ./fdi-state", nullable=True),
+    },
+    "simulated_device": {
+        "transport": Field(STR, "modbus-tcp", "fake device protocol: modbus-tcp | "
+                                              "modbus-rtu | serial (pty)",
+                           _one_of(*SIM_TRANSPORTS)),
+        "scenario": Field(STR, None, "scenario YAML played by the rig (relative to the config "
+                                     "file); null = the fake device's default", nullable=True),
+        "seed": Field(INT, 0, "seed of the simulated rig's noise"),
+    },
+}
+
+TOP_LEVEL = ("link", "simulated_device", "model", "monitor", "sinks", "recorder", "service")
+
+
+@dataclass
+class RigConfig:
+    """A validated config: plain mappings with every default filled in."""
+
+    source: str
+    base_dir: Path
+    link: dict[str, Any]
+    simulated_device: dict[str, Any] | None
+    model_path: Path
+    monitor: dict[str, dict[str, Any]]
+    sinks: dict[str, Any]
+    recorder: dict[str, Any]
+    service: dict[str, Any]
+
+    @property
+    def state_dir(self) -> Path:
+        configured = self.service["state_dir"]
+        if configured:
+            return Path(configured)
+        return Path(os.environ.get("STATE_DIRECTORY", "").split(":")[0] or "fdi-state")
+
+    def output_path(self, value: str | None) -> Path | None:
+        """An output path from the config, relative ones under ``state_dir``."""
+        if value is None:
+            return None
+        path = Path(value).expanduser()
+        return path if path.is_absolute() else self.state_dir / path
+
+
+def default_config_path() -> Path:
+    """The embedded default: the simulated rig over a real link with a friction fault."""
+    return Path(__file__).resolve().parents[1] / "data" / "default_config.yaml"
+
+
+def load_config(path: str | Path | None = None) -> RigConfig:
+    """Read and validate a rig config (the embedded default when path is None)."""
+    path = Path(path) if path is not None else default_config_path()
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such config file") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, not a config file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read config: {exc}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{path}: not valid YAML{where}") from None
+    return config_from_dict(data, str(path), path.resolve().parent)
+
+
+def config_from_dict(data: Any, source: str = "config",
+                     base_dir: Path | None = None) -> RigConfig:
+    """Validate a parsed config mapping; errors name ``source`` and the key path."""
+    base_dir = base_dir or Path.cwd()
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: a rig config must be a mapping with sections "
+                          f"{', '.join(TOP_LEVEL)}")
+    _no_unknown(data, TOP_LEVEL, "", source)
+    sim = _resolve_scenario(_simulated_device(data, source), base_dir)
+    link = _resolve_replay_path(_link(data.get("link"), sim is not None, source), base_dir)
+    model = _section(data, "model", source)
+    if model["path"] is None:
+        raise ConfigError(f"{source}: model.path is required (the model file to monitor with)")
+    model_path = Path(model["path"]).expanduser()
+    if not model_path.is_absolute():
+        model_path = base_dir / model_path
+    return RigConfig(
+        source=source, base_dir=base_dir, link=link, simulated_device=sim,
+        model_path=model_path, monitor=_monitor(data.get("monitor"), source),
+        sinks=_section(data, "sinks", source), recorder=_section(data, "recorder", source),
+        service=_section(data, "service", source))
+
+
+def _no_unknown(data: Mapping, known: tuple[str, ...] | Mapping, prefix: str,
+                source: str) -> None:
+    for key in data:
+        if key not in known:
+            raise ConfigError(f"{source}: {prefix}{key}: unknown key "
+                              f"(known: {', '.join(known)})")
+
+
+def _section(data: Mapping, name: str, source: str) -> dict[str, Any]:
+    value = data.get(name)
+    if value is None:
+        value = {}
+    if not isinstance(value, dict):
+        raise ConfigError(f"{source}: {name} must be a mapping")
+    return _fill(value, SCHEMA[name], f"{name}.", source)
+
+
+def _fill(value: Mapping, schema: Mapping[str, Any], prefix: str,
+          source: str) -> dict[str, Any]:
+    _no_unknown(value, schema, prefix, source)
+    out: dict[str, Any] = {}
+    for key, spec in schema.items():
+        path = f"{prefix}{key}"
+        given = value.get(key)
+        if isinstance(spec, dict):
+            if given is None:
+                given = {}
+            if not isinstance(given, dict):
+                raise ConfigError(f"{source}: {path} must be a mapping")
+            out[key] = _fill(given, spec, f"{path}.", source)
+        else:
+            out[key] = _scalar(given, spec, path, source, key in value)
+    return out
+
+
+def _scalar(value: Any, spec: Field, path: str, source: str, present: bool) -> Any:
+    if value is None:
+        if not present:
+            return spec.default
+        if spec.nullable:
+            return None
+        if spec.default is not None:
+            raise ConfigError(f"{source}: {path} may not be null (default {spec.default!r})")
+        return None
+    if isinstance(value, bool) and bool not in spec.types:
+        raise ConfigError(f"{source}: {path} must be {_type_names(spec.types)}, "
+                          f"not {value!r}")
+    if not isinstance(value, spec.types):
+        raise ConfigError(f"{source}: {path} must be {_type_names(spec.types)}, "
+                          f"not {value!r}")
+    if spec.types == NUM:
+        value = float(value)
+    if spec.check is not None and (problem := spec.check(value)):
+        raise ConfigError(f"{source}: {path} {problem} (got {value!r})")
+    return value
+
+
+def _type_names(types: tuple[type, ...]) -> str:
+    names = {int: "a whole number", float: "a number", str: "a string", bool: "true or false"}
+    if types == NUM:
+        return "a number"
+    return " or ".join(names[t] for t in types)
+
+
+def _link(value: Any, simulated: bool, source: str) -> dict[str, Any]:
+    if value is None:
+        if simulated:
+            return {}
+        raise ConfigError(f"{source}: link is required (a mapping with kind: "
+                          f"{' | '.join(LINK_KINDS)}), or a simulated_device section")
+    if not isinstance(value, dict):
+        raise ConfigError(f"{source}: link must be a mapping with a kind")
+    if simulated:
+        if "kind" in value:
+            raise ConfigError(f"{source}: link.kind: set by simulated_device.transport; "
+                              "leave it out when simulated_device is given")
+        return dict(value)
+    kind = value.get("kind")
+    if kind not in LINK_KINDS:
+        raise ConfigError(f"{source}: link.kind must be one of {', '.join(LINK_KINDS)} "
+                          f"(got {kind!r})")
+    check_link(value, source)
+    return dict(value)
+
+
+def _resolve_replay_path(link: dict[str, Any], base_dir: Path) -> dict[str, Any]:
+    """A replay link's relative ``path`` is relative to the config file, like model.path."""
+    if link.get("kind") == "replay" and isinstance(link.get("path"), str):
+        path = Path(link["path"]).expanduser()
+        link = {**link, "path": str(path if path.is_absolute() else base_dir / path)}
+    return link
+
+
+def check_link(link: Mapping[str, Any], source: str) -> None:
+    """Validate a link mapping with the links' own rules (errors name ``link.<key>``)."""
+    from fdi_daemon.io.links.base import link_settings
+
+    try:
+        link_settings(link, "link")
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def _simulated_device(data: Mapping, source: str) -> dict[str, Any] | None:
+    value = data.get("simulated_device")
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise ConfigError(f"{source}: simulated_device must be a mapping")
+    faults_given = value.get("faults", [])
+    rest = {k: v for k, v in value.items() if k != "faults"}
+    out = _fill(rest, SCHEMA["simulated_device"], "simulated_device.", source)
+    if not isinstance(faults_given, list):
+        raise ConfigError(f"{source}: simulated_device.faults must be a list of "
+                          "{at_s: s, <fault>: value}")
+    faults = []
+    for i, fault in enumerate(faults_given):
+        path = f"simulated_device.faults[{i}]"
+        if not isinstance(fault, dict):
+            raise ConfigError(f"{source}: {path} must be a mapping like "
+                              "{at_s: 20, bearing_supply: 0.35}")
+        _no_unknown(fault, ("at_s",) + SIM_FAULT_KEYS, f"{path}.", source)
+        at = _scalar(fault.get("at_s"), Field(NUM, None, "", _non_negative), f"{path}.at_s",
+                     source, True)
+        if at is None:
+            raise ConfigError(f"{source}: {path}.at_s is required (sample time of the fault)")
+        settings = {k: v for k, v in fault.items() if k != "at_s"}
+        if len(settings) != 1:
+            raise ConfigError(f"{source}: {path} must set exactly one of "
+                              f"{', '.join(SIM_FAULT_KEYS)}")
+        (name, setting), = settings.items()
+        check = _fraction if name == "bearing_supply" else None
+        setting = _scalar(setting, Field(NUM, None, "", check), f"{path}.{name}", source, True)
+        faults.append({"at_s": at, "name": name, "value": setting})
+    out["faults"] = sorted(faults, key=lambda f: f["at_s"])
+    return out
+
+
+def _resolve_scenario(sim: dict[str, Any] | None, base_dir: Path) -> dict[str, Any] | None:
+    if sim is not None and sim["scenario"] is not None:
+        path = Path(sim["scenario"]).expanduser()
+        sim = {**sim, "scenario": str(path if path.is_absolute() else base_dir / path)}
+    return sim
+
+
+def _monitor(value: Any, source: str) -> dict[str, dict[str, Any]]:
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ConfigError(f"{source}: monitor must be a mapping with detector/velocity")
+    _no_unknown(value, ("detector", "velocity"), "monitor.", source)
+    for key, section in value.items():
+        if section is not None and not isinstance(section, dict):
+            raise ConfigError(f"{source}: monitor.{key} must be a mapping")
+    return {k: dict(v) for k, v in value.items() if v}

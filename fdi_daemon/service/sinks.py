@@ -1,0 +1,522 @@
+"""Where the daemon's results go: event log, stdout/journald, status socket, Modbus status.
+
+None of these runs on the sample loop's thread. The loop hands items to a `Worker` (a
+thread with a bounded queue for non-critical items, which are dropped and counted when
+the queue is full, and an unbounded lane for alarms, which are never dropped), publishes
+status snapshots to a `StatusBoard`, and the two servers answer from the board.
+
+- `EventLog`: JSON Lines, append-only; every line is flushed, alarm lines are also
+  fsynced, and the file is fsynced at least once a second otherwise.
+- `StdoutLog`: one clear line per event; under journald (``$JOURNAL_STREAM`` set) each line
+  starts with a ``<N>`` syslog priority so that ``journalctl -p warning`` finds alarms.
+- `StatusSocketServer`: a Unix stream socket (mode 0660). On connect the server sends one
+  JSON line (the latest status snapshot, TEAM.md schema); every line the client sends
+  afterwards is answered with one more; the server closes when the client does.
+- `ModbusStatusServer`: Modbus TCP (pymodbus), bound to 127.0.0.1 unless configured;
+  registers in `STATUS_REGISTERS`, documented in ``docs/status_registers.md``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import json
+import logging
+import math
+import os
+import socket
+import struct
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TextIO
+
+from fdi_daemon.detect.events import ALARM_KINDS as EVENT_ALARM_KINDS
+
+log = logging.getLogger("fdi.sinks")
+
+#: events that are alarms: fsynced at once, never dropped, logged as warnings
+ALARM_KINDS = frozenset(EVENT_ALARM_KINDS)
+#: syslog priorities for the journald prefix
+PRIORITY = {"fault_detected": 4, "friction_isolated": 4, "other_fault": 4, "link_lost": 4,
+            "cleared": 5, "link_restored": 5, "data_gap": 5, "bad_sample": 5,
+            "calibrated": 6}
+
+
+def json_safe(value: Any) -> Any:
+    """The value with NaN/inf replaced by None and numpy scalars made plain (strict JSON)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, (str, int, bool)) or value is None:
+        return value
+    item = getattr(value, "item", None)  # numpy scalar
+    if item is not None and getattr(value, "ndim", 1) == 0:
+        return json_safe(item())
+    tolist = getattr(value, "tolist", None)  # numpy array
+    if tolist is not None:
+        return json_safe(tolist())
+    return str(value)
+
+
+def json_line(value: Any) -> str:
+    return json.dumps(json_safe(value), allow_nan=False, separators=(",", ":")) + "\n"
+
+
+# ----------------------------------------------------------------------------- worker
+
+
+class Worker:
+    """A thread that runs ``handler(item)`` for queued items, never blocking the producer.
+
+    ``put(item)``: non-critical, dropped (and counted in ``dropped``) when ``maxsize`` items
+    are waiting. ``put(item, critical=True)``: never dropped (alarms; they are rare).
+    Critical items are handled before waiting non-critical ones.
+    """
+
+    def __init__(self, name: str, handler: Callable[[Any], None], maxsize: int) -> None:
+        self.name = name
+        self.handler = handler
+        self.maxsize = maxsize
+        self.dropped = 0
+        self.handled = 0
+        self.errors = 0
+        self._normal: collections.deque = collections.deque()
+        self._critical: collections.deque = collections.deque()
+        self._cond = threading.Condition()
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, name=f"fdi-{name}", daemon=True)
+        self._thread.start()
+
+    def put(self, item: Any, critical: bool = False) -> bool:
+        with self._cond:
+            if critical:
+                self._critical.append(item)
+            elif len(self._normal) >= self.maxsize:
+                self.dropped += 1
+                return False
+            else:
+                self._normal.append(item)
+            self._cond.notify()
+        return True
+
+    def pending(self) -> int:
+        with self._cond:
+            return len(self._normal) + len(self._critical)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not (self._critical or self._normal or self._stop):
+                    self._cond.wait()
+                if self._critical:
+                    item = self._critical.popleft()
+                elif self._normal:
+                    item = self._normal.popleft()
+                else:
+                    return  # stop requested and nothing left
+            try:
+                self.handler(item)
+                self.handled += 1
+            except Exception:  # a sink failure must not kill the worker; it is logged
+                self.errors += 1
+                log.exception("%s: handling an item failed", self.name)
+
+    def close(self, timeout_s: float = 10.0) -> None:
+        """Handle what is queued, then stop the thread."""
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(timeout_s)
+        if self._thread.is_alive():
+            log.error("%s: did not finish its queue within %.0f s", self.name, timeout_s)
+
+
+# ----------------------------------------------------------------------------- event log
+
+
+class EventLog:
+    """JSON Lines event log: append, flush every line, fsync alarms (and ≥ once a second)."""
+
+    def __init__(self, path: str | Path, fsync_period_s: float = 1.0) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh = open(self.path, "a", encoding="utf-8")
+        self.fsync_period_s = fsync_period_s
+        self._last_fsync = time.monotonic()
+        self.written = 0
+
+    def write(self, event: dict) -> None:
+        self._fh.write(json_line(event))
+        self._fh.flush()
+        self.written += 1
+        now = time.monotonic()
+        if event.get("kind") in ALARM_KINDS or now - self._last_fsync >= self.fsync_period_s:
+            os.fsync(self._fh.fileno())
+            self._last_fsync = now
+
+    def close(self) -> None:
+        if not self._fh.closed:
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+            self._fh.close()
+
+
+# ----------------------------------------------------------------------------- stdout
+
+
+def journald_attached() -> bool:
+    """True when stdout is a journald stream (systemd sets ``$JOURNAL_STREAM``)."""
+    stream = os.environ.get("JOURNAL_STREAM")
+    if not stream:
+        return False
+    try:
+        st = os.fstat(sys.stdout.fileno())
+    except (OSError, ValueError):
+        return False
+    return stream == f"{st.st_dev}:{st.st_ino}"
+
+
+def format_event(event: dict) -> str:
+    """One human line for an event: sample time, kind, the numbers that matter."""
+    kind = str(event.get("kind", "?"))
+    t = event.get("t")
+    when = f"t={t:10.3f} s" if isinstance(t, (int, float)) else "t=         - s"
+    parts = [when, f"{kind.upper().replace('_', ' '):<17}"]
+    for key, label in (("theta1", "θ1"), ("theta2", "θ2")):
+        value = event.get(key)
+        if isinstance(value, (int, float)) and math.isfinite(value):
+            parts.append(f"{label}={value:+.4g}")
+    for key, value in event.items():
+        if key in ("t", "kind", "theta1", "theta2", "time") or isinstance(value, (dict, list)):
+            continue
+        if isinstance(value, float):
+            value = f"{value:.4g}"
+        parts.append(f"{key}={value}")
+    return "  ".join(parts)
+
+
+class StdoutLog:
+    """Event lines on a text stream, with ``<N>`` priority prefixes under journald."""
+
+    def __init__(self, stream: TextIO | None = None, priorities: bool | None = None) -> None:
+        self.stream = stream or sys.stdout
+        self.priorities = journald_attached() if priorities is None else priorities
+
+    def write(self, event: dict) -> None:
+        prefix = f"<{PRIORITY.get(event.get('kind'), 6)}>" if self.priorities else ""
+        try:
+            self.stream.write(prefix + format_event(event) + "\n")
+            self.stream.flush()
+        except BrokenPipeError:
+            pass  # nobody reads stdout any more; the event log still has the line
+
+
+class PriorityFormatter(logging.Formatter):
+    """Log records as ``<N>message`` (journald) or ``time level message`` (a terminal)."""
+
+    LEVELS = {logging.CRITICAL: 2, logging.ERROR: 3, logging.WARNING: 4, logging.INFO: 6,
+              logging.DEBUG: 7}
+
+    def __init__(self, priorities: bool) -> None:
+        super().__init__("%(message)s" if priorities else
+                         "%(asctime)s %(levelname)s %(name)s: %(message)s")
+        self.priorities = priorities
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = super().format(record)
+        if self.priorities:
+            return f"<{self.LEVELS.get(record.levelno, 6)}>" + text.replace("\n", " | ")
+        return text
+
+
+# ----------------------------------------------------------------------------- status board
+
+
+class StatusBoard:
+    """The latest status snapshot, readable from any thread."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._snapshot: dict[str, Any] = {"time": time.time(), "state": "starting"}
+        self._line = json_line(self._snapshot).encode()
+        self.updates = 0
+
+    def publish(self, snapshot: dict[str, Any]) -> None:
+        line = json_line(snapshot).encode()
+        with self._lock:
+            self._snapshot = snapshot
+            self._line = line
+            self.updates += 1
+
+    def snapshot(self) -> dict[str, Any]:
+        with self._lock:
+            return self._snapshot
+
+    def line(self) -> bytes:
+        with self._lock:
+            return self._line
+
+
+# ----------------------------------------------------------------------------- status socket
+
+
+class StatusSocketServer:
+    """Unix stream socket: one JSON snapshot line per request line (see module doc)."""
+
+    CLIENT_TIMEOUT_S = 30.0
+
+    def __init__(self, path: str | Path, board: StatusBoard, mode: int = 0o660) -> None:
+        self.path = Path(path)
+        self.board = board
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.path.is_socket():
+            self.path.unlink()  # a stale socket from a previous run
+        self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+        self._sock.bind(str(self.path))
+        os.chmod(self.path, mode)
+        self._sock.listen(8)
+        self._sock.settimeout(0.2)
+        self._stop = threading.Event()
+        self.requests = 0
+        self._thread = threading.Thread(target=self._serve, name="fdi-status-socket",
+                                        daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._sock.accept()
+            except TimeoutError:
+                continue
+            except OSError as exc:
+                if not self._stop.is_set():
+                    log.error("status socket %s: accept failed: %s", self.path, exc)
+                    time.sleep(0.2)
+                continue
+            threading.Thread(target=self._client, args=(conn,), name="fdi-status-client",
+                             daemon=True).start()
+
+    def _client(self, conn: socket.socket) -> None:
+        conn.settimeout(self.CLIENT_TIMEOUT_S)
+        buffer = b""
+        try:
+            with conn:
+                conn.sendall(self.board.line())
+                self.requests += 1
+                while not self._stop.is_set():
+                    chunk = conn.recv(4096)
+                    if not chunk:
+                        return
+                    buffer += chunk
+                    while b"\n" in buffer:
+                        _, buffer = buffer.split(b"\n", 1)
+                        conn.sendall(self.board.line())
+                        self.requests += 1
+                    if len(buffer) > 65536:
+                        return  # not a status client
+        except (TimeoutError, ConnectionError, BrokenPipeError):
+            return
+        except OSError as exc:
+            log.warning("status socket client: %s", exc)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self._sock.close()
+        try:
+            self.path.unlink()
+        except FileNotFoundError:
+            pass
+
+
+# ----------------------------------------------------------------------------- Modbus status
+
+#: state name -> code in register `state`
+STATE_CODES = {"starting": 0, "calibrating": 1, "monitoring": 2, "fault_detected": 3,
+               "friction_isolated": 4, "other_fault": 5}
+
+#: (name, first register, type, meaning). Types: u16; u32/f32 in 2 registers and f64 in 4,
+#: high word first; bytes within a register big endian (Modbus). NaN: value not available.
+STATUS_REGISTERS: tuple[tuple[str, int, str, str], ...] = (
+    ("map_version", 0, "u16", "version of this register map (1)"),
+    ("state", 1, "u16", "0 starting, 1 calibrating, 2 monitoring, 3 fault_detected, "
+                        "4 friction_isolated, 5 other_fault"),
+    ("link_connected", 2, "u16", "1 while the data link is up"),
+    ("heartbeat", 3, "u16", "+1 at every status refresh (10 Hz by default), wraps at 65536"),
+    ("alarm_active", 4, "u16", "1 in states fault_detected, friction_isolated, other_fault"),
+    ("theta1", 5, "f32", "θ1 estimate (Coulomb term, eq. 15)"),
+    ("theta2", 7, "f32", "θ2 estimate (viscous term, eq. 15)"),
+    ("friction_level", 9, "f32", "friction level from the monitor"),
+    ("statistic", 11, "f32", "detection statistic"),
+    ("threshold", 13, "f32", "detection threshold"),
+    ("residual_rms", 15, "f32", "RMS of the model residual, m/s²"),
+    ("t", 17, "f64", "sample time of the last sample, s"),
+    ("samples", 21, "u32", "samples received"),
+    ("gaps", 23, "u32", "data gaps (sequence jumps)"),
+    ("crc_errors", 25, "u32", "frames rejected by the link (CRC)"),
+    ("bad_samples", 27, "u32", "samples rejected as bad"),
+    ("deadline_misses", 29, "u32", "ticks finished later than service.deadline_s"),
+    ("tick_latency_p99_us", 31, "u32", "p99 of the per-tick latency, µs"),
+    ("fault_detected_count", 33, "u32", "fault_detected events since start"),
+    ("friction_isolated_count", 35, "u32", "friction_isolated events since start"),
+    ("other_fault_count", 37, "u32", "other_fault events since start"),
+    ("link_lost_count", 39, "u32", "link_lost events since start"),
+    ("uptime_s", 41, "u32", "seconds since the daemon started"),
+    ("dropped_outputs", 43, "u32", "non-critical sink items dropped (queue full)"),
+)
+STATUS_REGISTER_COUNT = 45
+_SIZES = {"u16": 1, "u32": 2, "f32": 2, "f64": 4}
+_FORMATS = {"u16": ">H", "u32": ">I", "f32": ">f", "f64": ">d"}
+
+
+def status_values(snapshot: dict[str, Any], heartbeat: int) -> dict[str, float | int]:
+    """The register values from a status snapshot (TEAM.md schema)."""
+    link = snapshot.get("link") or {}
+    monitor = snapshot.get("monitor") or {}
+    counters = snapshot.get("counters") or {}
+    state = snapshot.get("state", "starting")
+    latency = link.get("tick_latency_us") or {}
+    return {
+        "map_version": 1,
+        "state": STATE_CODES.get(state, 0),
+        "link_connected": int(bool(link.get("connected"))),
+        "heartbeat": heartbeat,
+        "alarm_active": int(state in ("fault_detected", "friction_isolated", "other_fault")),
+        "theta1": monitor.get("theta1"),
+        "theta2": monitor.get("theta2"),
+        "friction_level": monitor.get("friction_level"),
+        "statistic": monitor.get("statistic"),
+        "threshold": monitor.get("threshold"),
+        "residual_rms": monitor.get("residual_rms"),
+        "t": snapshot.get("t"),
+        "samples": link.get("samples", 0),
+        "gaps": link.get("gaps", 0),
+        "crc_errors": link.get("crc_errors", 0),
+        "bad_samples": link.get("bad_samples", 0),
+        "deadline_misses": link.get("deadline_misses", 0),
+        "tick_latency_p99_us": latency.get("p99"),
+        "fault_detected_count": counters.get("fault_detected", 0),
+        "friction_isolated_count": counters.get("friction_isolated", 0),
+        "other_fault_count": counters.get("other_fault", 0),
+        "link_lost_count": counters.get("link_lost", 0),
+        "uptime_s": snapshot.get("uptime_s", 0),
+        "dropped_outputs": snapshot.get("dropped_outputs", 0),
+    }
+
+
+def encode_status(values: dict[str, Any]) -> list[int]:
+    """The register block (STATUS_REGISTER_COUNT words) for `status_values` output."""
+    regs = [0] * STATUS_REGISTER_COUNT
+    for name, address, kind, _ in STATUS_REGISTERS:
+        value = values.get(name)
+        if kind in ("f32", "f64"):
+            value = math.nan if not isinstance(value, (int, float)) else float(value)
+        else:
+            value = 0 if not isinstance(value, (int, float)) or not math.isfinite(value) else value
+            value = min(max(int(value), 0), (1 << (16 * _SIZES[kind])) - 1)
+        raw = struct.pack(_FORMATS[kind], value)
+        regs[address:address + _SIZES[kind]] = struct.unpack(f">{_SIZES[kind]}H", raw)
+    return regs
+
+
+def decode_status(regs: list[int]) -> dict[str, float | int]:
+    """Inverse of `encode_status` (what an independent client does with the map)."""
+    out: dict[str, float | int] = {}
+    for name, address, kind, _ in STATUS_REGISTERS:
+        words = regs[address:address + _SIZES[kind]]
+        out[name] = struct.unpack(_FORMATS[kind], struct.pack(f">{len(words)}H", *words))[0]
+    return out
+
+
+class ModbusStatusServer:
+    """Modbus TCP server of the status registers (holding and input registers alike).
+
+    Every read refreshes the block from the status board, so a client always sees the
+    latest snapshot. Writes are refused (read-only registers).
+    """
+
+    def __init__(self, board: StatusBoard, host: str = "127.0.0.1", port: int = 5020,
+                 device_id: int = 1) -> None:
+        self.board = board
+        self.host = host
+        self.device_id = device_id
+        self.port = port
+        self.reads = 0
+        self._loop = asyncio.new_event_loop()
+        self._server = None
+        self._started = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="fdi-modbus-status",
+                                        daemon=True)
+        self._thread.start()
+        self._started.wait(15.0)
+        if self._error is not None:
+            raise OSError(f"Modbus status server on {host}:{port}: {self._error}")
+        if self._server is None:
+            raise OSError(f"Modbus status server on {host}:{port} did not start")
+
+    @staticmethod
+    async def _other_device(function_code, start_address, address, count, registers,
+                            set_values):
+        """Requests to any other device id: 'gateway target failed to respond'."""
+        from pymodbus.constants import ExcCodes
+
+        return ExcCodes.GATEWAY_NO_RESPONSE
+
+    async def _refresh(self, function_code, start_address, address, count, registers,
+                       set_values):
+        from pymodbus.constants import ExcCodes
+
+        if set_values is not None:
+            return ExcCodes.ILLEGAL_FUNCTION
+        values = status_values(self.board.snapshot(), self.board.updates & 0xFFFF)
+        registers[:STATUS_REGISTER_COUNT] = encode_status(values)
+        self.reads += 1
+        return None
+
+    def _run(self) -> None:
+        asyncio.set_event_loop(self._loop)
+        try:
+            self._loop.run_until_complete(self._start())
+        except BaseException as exc:  # reported to the constructor
+            self._error = exc
+            self._started.set()
+            return
+        self._started.set()
+        self._loop.run_forever()
+        self._loop.run_until_complete(self._loop.shutdown_asyncgens())
+        self._loop.close()
+
+    async def _start(self) -> None:
+        from pymodbus.server import ModbusTcpServer
+        from pymodbus.simulator import DataType, SimData, SimDevice
+
+        def block() -> list:
+            return [SimData(0, count=STATUS_REGISTER_COUNT, values=0,
+                            datatype=DataType.REGISTERS)]
+
+        devices = [SimDevice(id=self.device_id, simdata=block(), action=self._refresh)]
+        if self.device_id != 0:
+            devices.append(SimDevice(id=0, simdata=block(), action=self._other_device))
+        server = ModbusTcpServer(devices, address=(self.host, self.port))
+        await server.serve_forever(background=True)
+        if server.transport is None:
+            raise OSError("cannot listen (address in use?)")
+        self.port = server.transport.sockets[0].getsockname()[1]
+        self._server = server
+
+    def close(self) -> None:
+        if self._server is not None and self._loop.is_running():
+            fut = asyncio.run_coroutine_threadsafe(self._server.shutdown(), self._loop)
+            try:
+                fut.result(5.0)
+            except Exception as exc:  # closing anyway; say why it was not clean
+                log.warning("Modbus status server shutdown: %s", exc)
+            self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(5.0)

@@ -1,0 +1,161 @@
+"""Rig config validation: defaults, every key checked, errors naming the key path."""
+
+from pathlib import Path
+
+import pytest
+
+from fdi_daemon.errors import ConfigError
+from fdi_daemon.service.config import (SCHEMA, config_from_dict, default_config_path,
+                                       load_config)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def minimal(**sections):
+    data = {"link": {"kind": "modbus-tcp", "host": "127.0.0.1", "port": 5502},
+            "model": {"path": "model.yaml"}}
+    data.update(sections)
+    return data
+
+
+def test_defaults_are_filled_in(tmp_path):
+    cfg = config_from_dict(minimal(), "rig.yaml", tmp_path)
+    assert cfg.model_path == tmp_path / "model.yaml"
+    assert cfg.sinks["modbus_status"]["host"] == "127.0.0.1"
+    assert cfg.recorder["fsync_period_s"] == 1.0
+    assert cfg.service["deadline_s"] == 0.05
+    assert cfg.link == {"kind": "modbus-tcp", "host": "127.0.0.1", "port": 5502}
+    assert cfg.simulated_device is None
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"linkk": {}}, "linkk"),
+    ({"sinks": {"modbus_status": {"prot": 1}}}, "sinks.modbus_status.prot"),
+    ({"recorder": {"rotate_minutes": 5}}, "recorder.rotate_minutes"),
+    ({"service": {"deadline": 0.1}}, "service.deadline"),
+    ({"monitor": {"detectr": {}}}, "monitor.detectr"),
+])
+def test_unknown_keys_are_errors_naming_the_path(data, key):
+    with pytest.raises(ConfigError, match=rf"{key.replace('.', '[.]')}: unknown key"):
+        config_from_dict(minimal(**data), "rig.yaml")
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"sinks": {"modbus_status": {"port": 70000}}}, "sinks.modbus_status.port"),
+    ({"sinks": {"modbus_status": {"port": "502"}}}, "sinks.modbus_status.port"),
+    ({"sinks": {"stdout": "yes"}}, "sinks.stdout"),
+    ({"recorder": {"fsync_period_s": 2.0}}, "recorder.fsync_period_s"),
+    ({"recorder": {"rotate_seconds": -1}}, "recorder.rotate_seconds"),
+    ({"recorder": {"rotate_bytes": True}}, "recorder.rotate_bytes"),
+    ({"service": {"fs": 0}}, "service.fs"),
+    ({"service": {"queue_size": 1.5}}, "service.queue_size"),
+    ({"service": {"deadline_s": None}}, "service.deadline_s"),
+    ({"sinks": "all"}, "sinks"),
+])
+def test_bad_values_are_errors_naming_the_key(data, key):
+    with pytest.raises(ConfigError) as info:
+        config_from_dict(minimal(**data), "rig.yaml")
+    message = str(info.value)
+    assert message.startswith("rig.yaml: ") and key in message and "\n" not in message
+
+
+def test_null_disables_an_output():
+    cfg = config_from_dict(minimal(sinks={"status_socket": None, "event_log": None}), "rig")
+    assert cfg.sinks["status_socket"] is None and cfg.sinks["event_log"] is None
+    assert cfg.sinks["stdout"] is True
+
+
+def test_link_and_model_are_required():
+    with pytest.raises(ConfigError, match="link is required"):
+        config_from_dict({"model": {"path": "m.yaml"}}, "rig.yaml")
+    with pytest.raises(ConfigError, match="link.kind must be one of"):
+        config_from_dict({"link": {"kind": "carrier-pigeon"}, "model": {"path": "m"}})
+    with pytest.raises(ConfigError, match="model.path is required"):
+        config_from_dict({"link": {"kind": "serial", "port": "/dev/ttyUSB0"}}, "rig.yaml")
+
+
+def test_link_settings_are_checked_by_the_links_rules():
+    with pytest.raises(ConfigError, match=r"^rig.yaml: link.port: required"):
+        config_from_dict({"link": {"kind": "serial"}, "model": {"path": "m"}}, "rig.yaml")
+    with pytest.raises(ConfigError, match=r"^rig.yaml: link.baud: unknown key"):
+        config_from_dict({"link": {"kind": "serial", "port": "/dev/ttyS0", "baud": 9600},
+                          "model": {"path": "m"}}, "rig.yaml")
+
+
+def test_simulated_device_section():
+    data = {"model": {"path": "m.yaml"},
+            "simulated_device": {"transport": "serial",
+                                 "faults": [{"at_s": 30, "accel_bias": 0.2},
+                                            {"at_s": 20, "bearing_supply": 0.3}]}}
+    cfg = config_from_dict(data, "rig.yaml")
+    assert cfg.link == {}
+    assert [f["at_s"] for f in cfg.simulated_device["faults"]] == [20.0, 30.0]
+    assert cfg.simulated_device["faults"][0] == {"at_s": 20.0, "name": "bearing_supply",
+                                                 "value": 0.3}
+    bad = {"model": {"path": "m"}, "simulated_device": {"faults": [{"at_s": 1, "rust": 1}]}}
+    with pytest.raises(ConfigError, match=r"simulated_device.faults\[0\].rust: unknown key"):
+        config_from_dict(bad, "rig.yaml")
+    bad = {"model": {"path": "m"}, "simulated_device": {"faults": [{"at_s": 1,
+                                                                    "bearing_supply": 3}]}}
+    with pytest.raises(ConfigError, match=r"faults\[0\].bearing_supply must be a fraction"):
+        config_from_dict(bad, "rig.yaml")
+    with pytest.raises(ConfigError, match="link.kind: set by simulated_device"):
+        config_from_dict({**data, "link": {"kind": "serial"}}, "rig.yaml")
+
+
+def test_output_paths_are_under_the_state_dir(tmp_path, monkeypatch):
+    monkeypatch.setenv("STATE_DIRECTORY", str(tmp_path / "state"))
+    cfg = config_from_dict(minimal(), "rig.yaml")
+    assert cfg.output_path(cfg.sinks["event_log"]) == tmp_path / "state" / "events.jsonl"
+    assert cfg.output_path("/abs/x.jsonl") == Path("/abs/x.jsonl")
+    assert cfg.output_path(None) is None
+    cfg = config_from_dict(minimal(service={"state_dir": str(tmp_path / "s2")}), "rig.yaml")
+    assert cfg.output_path("r") == tmp_path / "s2" / "r"
+
+
+def test_load_config_reports_file_problems(tmp_path):
+    with pytest.raises(ConfigError, match="no such config file"):
+        load_config(tmp_path / "missing.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("link: [\n")
+    with pytest.raises(ConfigError, match="not valid YAML at line"):
+        load_config(bad)
+    bad.write_text("- 1\n- 2\n")
+    with pytest.raises(ConfigError, match="must be a mapping"):
+        load_config(bad)
+
+
+@pytest.mark.parametrize("path", [default_config_path()] + sorted(
+    (ROOT / "configs").glob("rig_*.yaml")), ids=lambda p: p.name)
+def test_shipped_configs_are_valid(path):
+    cfg = load_config(path)
+    assert cfg.model_path.name.endswith(".yaml")
+
+
+def leaf_keys(fields, prefix=""):
+    for key, spec in fields.items():
+        if isinstance(spec, dict):
+            yield from leaf_keys(spec, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}"
+
+
+def test_schema_fields_are_documented():
+    doc = (ROOT / "docs" / "service.md").read_text()
+    for section, fields in SCHEMA.items():
+        assert f"`{section}:`" in doc
+        for key in leaf_keys(fields):
+            assert f"| `{key}` |" in doc, f"{section}.{key} is not in docs/service.md"
+
+
+def test_packaged_model_is_the_shipped_one():
+    """The default config's model (package data) is configs/model_sim_rig.yaml.
+
+    fdi_daemon/data/model_sim_rig.yaml is a symlink to it (a wheel gets the content), so the
+    two never drift apart; were it replaced by a copy, this test catches a stale one."""
+    packaged = load_config().model_path
+    shipped = ROOT / "configs" / "model_sim_rig.yaml"
+    if not (packaged.exists() and shipped.exists()):
+        pytest.skip("model_sim_rig.yaml not in both places yet")
+    assert packaged.read_bytes() == shipped.read_bytes(), \
+        "fdi_daemon/data/model_sim_rig.yaml differs from configs/model_sim_rig.yaml"

@@ -1,0 +1,35 @@
+"""`fdi run` on the command line: user mistakes give one line and exit code 2."""
+
+import subprocess
+import sys
+
+import pytest
+
+
+def fdi(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "fdi_daemon", *args], capture_output=True,
+                          text=True, timeout=120, cwd=cwd)
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("link: {kind: modbus-tcp}\nmodel: {path: m.yaml}\nsinks: {stdot: true}\n",
+     "sinks.stdot: unknown key"),
+    ("link: {kind: modbus-tcp, prot: 5}\nmodel: {path: m.yaml}\n", "link.prot: unknown key"),
+    ("link: {kind: modbus-tcp}\nmodel: {path: missing-model.yaml}\n", "no such model file"),
+    ("link: {kind: modbus-tcp}\n", "model.path is required"),
+])
+def test_config_mistakes_are_one_line_and_exit_2(tmp_path, text, expected):
+    config = tmp_path / "rig.yaml"
+    config.write_text(text)
+    result = fdi("run", "--config", str(config), cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert expected in result.stderr
+    assert "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+
+
+def test_missing_config_and_bad_duration(tmp_path):
+    result = fdi("run", "--config", str(tmp_path / "nope.yaml"))
+    assert result.returncode == 2 and "no such config file" in result.stderr
+    result = fdi("run", "--duration", "-1")
+    assert result.returncode == 2 and "--duration" in result.stderr

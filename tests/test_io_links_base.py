@@ -80,6 +80,28 @@ def test_backoff_doubles_to_the_cap_and_never_spins():
     assert restored[0]["down_s"] >= 10.0
 
 
+def test_a_device_that_accepts_connections_but_stays_silent_is_one_outage():
+    """Restored means samples flow again, not that the port reopened (a stalled device)."""
+    clock = FakeClock()
+    device = {"up": True, "seq": 0, "talking": True}
+    link = ReconnectingLink(lambda: ScriptedLink(device), 0.1, 0.4, stall_timeout_s=1.0,
+                            clock=clock, sleep=clock.sleep)
+    link.open()
+    assert link.read(0.1)
+    device["talking"] = False
+    while clock.now < 20.0:  # stalls, reconnects, stalls again ... all one outage
+        link.read(0.1)
+        clock.now += 0.1
+    assert [e["kind"] for e in link.events()] == ["link_lost"]
+    assert link.counters()["stalls"] >= 5
+    device["talking"] = True
+    while not link.read(0.1):
+        clock.now += 0.1
+    restored = link.events()
+    assert [e["kind"] for e in restored] == ["link_restored"]
+    assert restored[0]["down_s"] >= 18.0
+
+
 def test_lost_and_restored_events_carry_the_last_sample_time():
     clock = FakeClock()
     device = {"up": True, "seq": 100, "talking": True}

@@ -91,7 +91,9 @@ class ReconnectingLink(Link):
     """Wrap links made by ``factory``: reconnect with capped exponential backoff.
 
     Backoff: after a failed attempt the next waits ``backoff_initial_s``, doubling up to
-    ``backoff_max_s``; it resets once a new connection has delivered samples. A connected
+    ``backoff_max_s``; it resets once a new connection has delivered samples. An outage is one
+    ``link_lost`` and one ``link_restored``; the link counts as restored when samples arrive
+    again, not when the port reopens (a stalled device that accepts connections is still down). A connected
     link that delivers nothing for ``stall_timeout_s`` (None: never) counts as lost.
     ``read`` never raises for link trouble and never spins: while down it sleeps until the
     next attempt or ``timeout_s``, whichever is first.
@@ -169,6 +171,11 @@ class ReconnectingLink(Link):
             if not self._delivered_since_connect:
                 self._delivered_since_connect = True
                 self._delay_s = self.backoff_initial_s
+                if self._down_since is not None:  # restored only once data flow again
+                    self._event("link_restored", down_s=round(now - self._down_since, 3),
+                                attempts=self._down_attempts)
+                    self._down_since = None
+                    self._down_attempts = 0
         elif (self.stall_timeout_s is not None and not self._link.finished
               and now - self._last_data > self.stall_timeout_s):
             self._stats["stalls"] += 1
@@ -217,20 +224,16 @@ class ReconnectingLink(Link):
         self._stats["connects"] += 1
         self._last_data = self._clock()
         self._delivered_since_connect = False
-        if self._down_since is not None:
-            self._event("link_restored", down_s=round(now - self._down_since, 3),
-                        attempts=self._down_attempts)
-        self._down_since = None
-        self._down_attempts = 0
         return True
 
     def _lose(self, reason: str) -> None:
         self._drop_link()
         self._stats["disconnects"] += 1
         now = self._clock()
-        self._down_since = now
-        self._down_attempts = 0
-        self._event("link_lost", reason=reason)
+        if self._down_since is None:  # a reconnect that never delivered is the same outage
+            self._down_since = now
+            self._down_attempts = 0
+            self._event("link_lost", reason=reason)
         self._next_attempt = now + self._delay_s
         self._delay_s = min(self._delay_s * 2.0, self.backoff_max_s)
 

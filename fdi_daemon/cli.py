@@ -15,7 +15,16 @@ from fdi_daemon import __version__
 from fdi_daemon.errors import UserError
 
 #: subcommand name -> module under fdi_daemon.commands
-COMMANDS: dict[str, str] = {}
+COMMANDS: dict[str, str] = {
+    "run": "run",
+    "identify": "identify",
+    "signature": "signature",
+    "dashboard": "dashboard",
+    "sim": "sim",
+    "diagnose": "diagnose",
+    "replay": "replay",
+    "bench": "bench",
+}
 
 
 def build_parser() -> argparse.ArgumentParser:

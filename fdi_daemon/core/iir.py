@@ -87,13 +87,6 @@ class IIRFilter:
         """Zero the state."""
         self._z = [0.0] * self._n
 
-    def set_steady_state(self, x: float) -> None:
-        """The state the filter would settle to under a constant input ``x``."""
-        if self._n:
-            from scipy.signal import lfilter_zi
-
-            self.state = lfilter_zi(self._b_arr, self._a_arr) * float(x)
-
     def step(self, x: float) -> float:
         """Filter one sample; returns y[k] as a Python float."""
         z = self._z

@@ -81,7 +81,7 @@ class VelocityEstimator:
             f0 = float(lead_compensation_hz)
             if not (math.isfinite(f0) and 0 < f0 < fs_hz / 2):
                 raise ValueError(f"lead_compensation_hz must lie in (0, fs/2), got {f0!r}")
-            lead_rad = math.radians(_phase_lead_deg(b, a, fs_hz, f0, integrator))
+            lead_rad = math.radians(_phase_lead_deg(b, a, fs_hz, f0))
             if not 0 < lead_rad < math.pi:
                 raise ValueError(f"cannot compensate a lead of {math.degrees(lead_rad):.1f}° "
                                  f"at {f0:g} Hz with a first-order all-pass")
@@ -142,8 +142,7 @@ class VelocityEstimator:
 
     def phase_lead_deg(self, f_hz: float) -> float:
         """Phase of the estimator minus that of an ideal integrator (-90°) at ``f_hz``."""
-        w, h = freqz(self.b, self.a, worN=[float(f_hz)], fs=self.fs_hz)
-        return float(np.degrees(np.angle(h[0] * 1j)))
+        return _phase_lead_deg(self.b, self.a, self.fs_hz, f_hz)
 
     def gain_error(self, f_hz: float) -> float:
         """|V(e^jω)| · 2πf: 1 where the estimator integrates exactly."""
@@ -168,11 +167,7 @@ def _design(fs_hz: float, highpass_hz: float, order: int, integrator: str
     return gain * np.convolve(zeros, num_i), np.asarray(a_hp, dtype=float)
 
 
-def _phase_lead_deg(b, a, fs_hz: float, f_hz: float, integrator: str) -> float:
-    """Lead of the high-pass part alone (the integrator's own phase error excluded)."""
-    w, h = freqz(b, a, worN=[f_hz], fs=fs_hz)
-    z1 = np.exp(-2j * np.pi * f_hz / fs_hz)
-    T = 1.0 / fs_hz
-    integ = {"trapezoid": T / 2 * (1 + z1) / (1 - z1), "backward_euler": T / (1 - z1),
-             "forward_euler": T * z1 / (1 - z1)}[integrator]
-    return float(np.degrees(np.angle(h[0] / integ)))
+def _phase_lead_deg(b, a, fs_hz: float, f_hz: float) -> float:
+    """Phase of B/A minus that of an ideal integrator 1/(jω), in degrees."""
+    w, h = freqz(b, a, worN=[float(f_hz)], fs=fs_hz)
+    return float(np.degrees(np.angle(h[0] * 1j)))

@@ -1,0 +1,102 @@
+"""`fdi bench`: speed of the monitor against plain baselines, of the simulator and of the
+identification; a table on screen and JSON."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "measure the monitor (per tick, batch, against baselines), the simulator and identification"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", metavar="FILE", help="also write the numbers as JSON")
+    parser.add_argument("--quick", action="store_true",
+                        help="smaller samples (a rough figure in a few seconds)")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    import platform
+    import time
+
+    from rich.console import Console
+
+    from fdi_daemon.bench.ident import bench_ident
+    from fdi_daemon.bench.monitor import bench_monitor
+    from fdi_daemon.bench.sim import bench_sim
+    from fdi_daemon.errors import UserError
+
+    console = Console()
+    results: dict = {"machine": {"python": platform.python_version(),
+                                 "processor": platform.processor() or platform.machine(),
+                                 "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}}
+    with console.status("monitor: per-tick step, batch replay and baselines ..."):
+        results["monitor"] = (bench_monitor(step_samples=5_000, batch_samples=200_000,
+                                            baseline_samples=1_500)
+                              if args.quick else bench_monitor())
+    with console.status("simulator ..."):
+        results["sim"] = bench_sim(duration_s=30.0) if args.quick else bench_sim()
+    with console.status("identification ..."):
+        results["ident"] = bench_ident(repeats=1 if args.quick else 3)
+    console.print(_monitor_table(results["monitor"]))
+    console.print(_sim_table(results["sim"]))
+    console.print(_ident_table(results["ident"]))
+    if args.json:
+        try:
+            with open(args.json, "w", encoding="utf-8") as fh:
+                json.dump(results, fh, indent=2)
+                fh.write("\n")
+        except OSError as exc:
+            raise UserError(f"{args.json}: cannot write: {exc.strerror or exc}") from None
+    return 0
+
+
+def _monitor_table(m: dict):
+    from rich.table import Table
+
+    table = Table(title="monitor (256 Hz tick budget: %.0f µs)" % m["tick_budget_us"])
+    for col in ("measure", "fdi", "baseline", "ratio", "target"):
+        table.add_column(col, justify="right" if col != "measure" else "left")
+    s, b = m["step_us"], m["baseline_step_us"]
+    table.add_row("per-tick step p50 (µs)", f"{s['p50']:.1f}", f"{b['p50']:.1f}",
+                  f"{m['step_speedup_p50']:.1f}x", f"<= {m['targets']['step_p50_us']:.0f}")
+    table.add_row("per-tick step p99 (µs)", f"{s['p99']:.1f}", f"{b['p99']:.1f}",
+                  f"{b['p99'] / s['p99']:.1f}x", "")
+    table.add_row("per-tick step max (µs)", f"{s['max']:.1f}", f"{b['max']:.1f}", "", "")
+    table.add_row("per-tick step CPU p50 (µs)", f"{m['step_cpu_us_p50']:.1f}",
+                  f"{m['baseline_step_cpu_us_p50']:.1f}",
+                  f"{m['baseline_step_cpu_us_p50'] / m['step_cpu_us_p50']:.1f}x", "")
+    table.add_row("batch replay (samples/s)", f"{m['batch_samples_per_s']:,.0f}",
+                  f"{m['baseline_samples_per_s']:,.0f}", f"{m['batch_speedup']:.0f}x",
+                  f">= {m['targets']['batch_samples_per_s']:,.0f}")
+    table.add_row("batch replay CPU (samples/CPU-s)", f"{m['batch_samples_per_cpu_s']:,.0f}",
+                  "", "", "")
+    return table
+
+
+def _sim_table(sim: dict):
+    from rich.table import Table
+
+    table = Table(title="simulated rig")
+    table.add_column("measure")
+    table.add_column("value", justify="right")
+    table.add_row("simulated s per wall s", f"{sim['sim_s_per_wall_s']:.1f}")
+    table.add_row("one simulated hour (wall s)", f"{sim['hour_wall_s']:.1f}")
+    table.add_row("bare kernel (simulated s per wall s)", f"{sim['kernel_sim_s_per_wall_s']:.1f}")
+    table.add_row("numba JIT", str(sim["jit"]))
+    return table
+
+
+def _ident_table(ident: dict):
+    from rich.table import Table
+
+    table = Table(title="identification")
+    table.add_column("measure")
+    table.add_column("value", justify="right")
+    table.add_column("target", justify="right")
+    table.add_row("identify, 1024 samples (s)", f"{ident['identify_1024_samples_s']:.2f}",
+                  f"< {ident['identify_target_s']:g}")
+    table.add_row(f"signature grid, {ident['signature_grid_points']} points (s)",
+                  f"{ident['signature_grid_1024_samples_s']:.2f}",
+                  f"< {ident['signature_target_s']:g}")
+    return table

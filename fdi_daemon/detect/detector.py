@@ -1,0 +1,444 @@
+"""The detector: from the pipeline's signals to events (docs/detector.md has the equations).
+
+Two methods share one state machine (calibrating -> monitoring -> fault_detected ->
+friction_isolated | other_fault -> cleared -> monitoring):
+
+``band`` (the paper, §IV-C): θ = (θ1, θ2) of eq. (17) leaves the band mean ± k·σ of a
+fault-free calibration period -> fault_detected; θ tracks the signature (1, γ_f) within
+``track_tolerance`` -> friction_isolated, else other_fault after ``isolation_timeout_s``;
+back inside the band -> cleared.
+
+``sequential`` (default): a reference fit of the residual on φ = (g1, g2, x̂̈, 1) over a
+window that ends ``reference_lag_s`` ago absorbs the operating-point dependent part
+(pre-fault seal friction, the plant model's gain/phase error, a sensor offset). The
+innovation e = r - φᵀθ_ref, standardised by the reference residual σ, gives the statistic
+T = mean over the test window of (e/σ)² (≈ 1 without a fault); T > threshold for
+``persistence_samples`` ticks -> fault_detected, unless the valve command just changed its
+character: the same test on an AR(4) model of v_in (the operating-point guard) holds
+alarms for ``guard_hold_s`` after it fires. Isolation fits φ again on the data since the
+reference ended: an increase of the Coulomb coefficient by ``friction_min_level`` (units of
+the calibrated signature) is friction; gain (x̂̈) or offset (1) changes without it, or no
+friction evidence within ``isolation_timeout_s``, are another fault. A slow path catches
+friction that creeps in (wear) or starts while the guard holds: the reference's Coulomb
+coefficient above its calibrated value by ``friction_min_level`` for ``slow_persistence_s``
+-> fault_detected, isolated against the calibrated value.
+
+Per tick (``step``) and batch (``run``) give the same events and statistics: the
+monitoring path of ``run`` is vectorised with the same arithmetic (bit-equal), and the
+rare alarm episodes run through ``step``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fdi_daemon.core.innovation_test import InnovationTest, innovation, packed_row
+from fdi_daemon.core.normal_equations import packed_width, solve_packed
+from fdi_daemon.core.sliding_sums import SlidingSums
+from fdi_daemon.detect.events import make_event
+from fdi_daemon.detect.settings import DetectorSettings
+
+__all__ = ["Detector", "STATES", "N_REGRESSORS"]
+
+STATES = ("starting", "calibrating", "monitoring", "fault_detected", "friction_isolated",
+          "other_fault")
+_STATE_CODE = {name: i for i, name in enumerate(STATES)}
+_EPISODE = ("fault_detected", "friction_isolated", "other_fault")
+
+#: regressors of the reference fit: g1, g2, x̂̈, 1
+N_REGRESSORS = 4
+#: order of the autoregressive model of the valve command (the operating-point guard)
+COMMAND_ORDER = 4
+_WIDTH = packed_width(N_REGRESSORS)
+_CHUNK = 16384
+
+
+@dataclass
+class DetectorTrace:
+    """Per-sample outputs of the detector (batch): statistic and state code."""
+
+    statistic: np.ndarray
+    state: np.ndarray  # int8 codes into STATES
+
+
+class Detector:
+    """Decides on every tick from the pipeline's signals; see the module docstring."""
+
+    def __init__(self, settings: DetectorSettings, fs_hz: float, gamma_f: float) -> None:
+        self.settings = settings
+        self.fs_hz = float(fs_hz)
+        self.gamma_f = float(gamma_f)
+        s = settings
+        self.window_samples = s.samples(s.window_s, fs_hz, minimum=8)
+        self.lag_samples = s.samples(s.reference_lag_s, fs_hz, minimum=0)
+        self.test_samples = s.samples(s.test_window_s, fs_hz)
+        self.calibration_samples = s.samples(s.calibration_s, fs_hz)
+        self.warmup_samples = self.window_samples + self.lag_samples + self.test_samples
+        hold = s.guard_hold_s if s.guard_hold_s is not None else (
+            s.window_s + s.reference_lag_s + s.test_window_s)
+        self.hold_samples = s.samples(hold, fs_hz)
+        self.iso_samples = s.samples(s.isolation_window_s, fs_hz)
+        self.timeout_samples = max(self.iso_samples, s.samples(s.isolation_timeout_s, fs_hz))
+        self.clear_samples = s.samples(s.clear_s, fs_hz)
+        # the residual test (φ = g1, g2, x̂̈, 1) and the command test (AR(4) of v_in)
+        self.residual_test = InnovationTest(N_REGRESSORS, self.window_samples, self.lag_samples,
+                                            self.test_samples, s.reference_every_samples,
+                                            s.min_sigma_mps2)
+        self.command_test = InnovationTest(COMMAND_ORDER, self.window_samples,
+                                           self.lag_samples, self.test_samples,
+                                           s.reference_every_samples, s.guard_min_sigma_v)
+        self.band: dict[str, list[float]] | None = None
+        self.state = "calibrating"
+        self._episode: _Episode | None = None
+        self._calibration: list[tuple[float, float, float]] = []
+        self.slow_samples = s.samples(s.slow_persistence_s, fs_hz)
+        self.coulomb_base = math.nan  # θ_c of the reference fit during calibration
+        self.restart()
+
+    # ------------------------------------------------------------------ state
+    def restart(self) -> None:
+        """Forget every window (start-up, data gap); the band and an episode are kept."""
+        self._tick = 0
+        self.residual_test.reset()
+        self.command_test.reset()
+        self._v_hist = [0.0] * COMMAND_ORDER  # v[k-1], v[k-2], ...
+        self._guard_until = 0
+        self._above = 0
+        self._slow_above = 0
+        self._hold_until = self.warmup_samples
+        if self.state == "calibrating":
+            self._calibration = []
+        if self._episode is not None:
+            self._episode.restart(self)
+
+    @property
+    def threshold(self) -> float:
+        return self.settings.threshold
+
+    @property
+    def statistic(self) -> float:
+        return self.residual_test.statistic
+
+    def _snapshot_state(self) -> dict[str, Any]:
+        return {"tick": self._tick, "res": self.residual_test.get_state(),
+                "cmd": self.command_test.get_state(), "v": list(self._v_hist),
+                "guard": self._guard_until, "above": self._above,
+                "slow": self._slow_above, "calibration": list(self._calibration)}
+
+    def _restore_state(self, st: dict[str, Any]) -> None:
+        self._tick = st["tick"]
+        self.residual_test.set_state(st["res"])
+        self.command_test.set_state(st["cmd"])
+        self._v_hist = list(st["v"])
+        self._guard_until = st["guard"]
+        self._above = st["above"]
+        self._slow_above = st["slow"]
+        self._calibration = list(st["calibration"])
+
+    # ------------------------------------------------------------------ per tick
+    def step(self, t: float, v_in: float, xhat: float, r: float, g1: float, g2: float,
+             theta1: float, theta2: float) -> list[dict[str, Any]]:
+        """One tick; returns the events it raised (usually none)."""
+        tick = self._tick
+        phi = (g1, g2, xhat, 1.0)
+        row = packed_row(phi, r)
+        self.residual_test.step(phi, r, row)
+        hist = self._v_hist
+        guard_stat = self.command_test.step(hist, v_in)
+        self._v_hist = [v_in] + hist[:-1]
+        if guard_stat > self.settings.guard_threshold:
+            self._guard_until = tick + self.hold_samples
+        self._tick = tick + 1
+        return self._decide(tick, t, phi, row, r, theta1, theta2)
+
+    def _decide(self, tick, t, phi, row, r, theta1, theta2) -> list[dict[str, Any]]:
+        if self._episode is not None:
+            return self._episode.step(self, tick, t, phi, row, r, theta1, theta2)
+        if tick < self._hold_until:
+            self._above = self._slow_above = 0
+            return []
+        if self.state == "calibrating":
+            return self._calibrate(t, theta1, theta2)
+        self._above = self._above + 1 if self._alarm_condition(tick, theta1, theta2) else 0
+        self._slow_above = self._slow_above + 1 if self._slow_condition() else 0
+        fast = self._above >= self.settings.persistence_samples
+        if fast or self._slow_above >= self.slow_samples:
+            self._above = self._slow_above = 0
+            self._episode = _Episode(self, tick, slow=not fast)
+            self.state = "fault_detected"
+            return [self._event(t, "fault_detected", theta1, theta2,
+                                path="fast" if fast else "slow")]
+        return []
+
+    def _slow_condition(self) -> bool:
+        test = self.residual_test
+        return (self.settings.method == "sequential" and test.ok
+                and test.theta[0] - self.coulomb_base >= self.settings.friction_min_level)
+
+    def _alarm_condition(self, tick, theta1, theta2) -> bool:
+        if self.settings.method == "band":
+            return _outside_band(theta1, theta2, self.band)
+        return (self.residual_test.ok and tick >= self._guard_until
+                and self.residual_test.statistic > self.threshold)
+
+    def _calibrate(self, t, theta1, theta2) -> list[dict[str, Any]]:
+        test = self.residual_test
+        self._calibration.append((theta1, theta2, test.theta[0] if test.ok else math.nan))
+        if len(self._calibration) < self.calibration_samples:
+            return []
+        cal = np.array(self._calibration, dtype=float)
+        valid = cal[np.all(np.isfinite(cal[:, :2]), axis=1), :2]
+        coulomb = cal[np.isfinite(cal[:, 2]), 2]
+        if valid.shape[0] < max(2, self.calibration_samples // 4):
+            # the rig was mostly at rest: keep calibrating on the newest samples
+            self._calibration = self._calibration[-(self.calibration_samples - 1):]
+            return []
+        mean = valid.mean(axis=0)
+        std = valid.std(axis=0, ddof=1)
+        k = self.settings.band_k
+        self.band = {"theta1": [float(mean[0] - k * std[0]), float(mean[0] + k * std[0])],
+                     "theta2": [float(mean[1] - k * std[1]), float(mean[1] + k * std[1])]}
+        self.coulomb_base = float(np.median(coulomb)) if coulomb.size else math.nan
+        self._calibration = []
+        self.state = "monitoring"
+        return [self._event(t, "calibrated", theta1, theta2, band=self.band,
+                            samples=int(valid.shape[0]))]
+
+    def _event(self, t, kind, theta1, theta2, **extra) -> dict[str, Any]:
+        return make_event(t, kind, theta1, theta2, statistic=float(self.statistic),
+                          threshold=float(self.threshold), friction_level=float(theta1),
+                          method=self.settings.method, **extra)
+
+    # ------------------------------------------------------------------ batch
+    def run(self, t: np.ndarray, v_in: np.ndarray, xhat: np.ndarray, r: np.ndarray,
+            g1: np.ndarray, g2: np.ndarray, theta1: np.ndarray, theta2: np.ndarray
+            ) -> tuple[list[dict[str, Any]], DetectorTrace]:
+        """Batch ``step`` over arrays: the same events, statistic and states."""
+        n = len(t)
+        stat = np.empty(n)
+        codes = np.empty(n, dtype=np.int8)
+        events: list[dict[str, Any]] = []
+        pos = 0
+        while pos < n:
+            if self._episode is None:
+                stop = min(n, pos + _CHUNK)
+                done = self._run_quiet(pos, stop, t, v_in, xhat, r, g1, g2, theta1, theta2,
+                                       stat, codes)
+                pos += done
+                if pos == stop:
+                    continue
+            # per tick: the tick that raises an event, then an episode until it ends
+            while pos < n:
+                events.extend(self.step(t[pos], v_in[pos], xhat[pos], r[pos], g1[pos], g2[pos],
+                                        theta1[pos], theta2[pos]))
+                stat[pos] = self.statistic
+                codes[pos] = _STATE_CODE[self.state]
+                pos += 1
+                if self._episode is None:
+                    break
+        return events, DetectorTrace(statistic=stat, state=codes)
+
+    def _run_quiet(self, pos, stop, t, v_in, xhat, r, g1, g2, theta1, theta2, stat, codes
+                   ) -> int:
+        """Vectorised ticks [pos, stop) up to the first one that raises an event (which is
+        left to ``step``); returns how many ticks it took."""
+        saved = self._snapshot_state()
+        sl = slice(pos, stop)
+        arrays = self._vector_stats(v_in[sl], xhat[sl], r[sl], g1[sl], g2[sl])
+        first = self._first_event(arrays, theta1[sl], theta2[sl])
+        count = stop - pos
+        if first is not None:
+            self._restore_state(saved)
+            if first == 0:
+                return 0
+            sl = slice(pos, pos + first)
+            arrays = self._vector_stats(v_in[sl], xhat[sl], r[sl], g1[sl], g2[sl])
+            count = first
+        self._commit_quiet(arrays, theta1[pos:pos + count], theta2[pos:pos + count])
+        stat[pos:pos + count] = arrays["stat"]
+        codes[pos:pos + count] = _STATE_CODE[self.state]
+        return count
+
+    def _vector_stats(self, v_in, xhat, r, g1, g2) -> dict[str, np.ndarray]:
+        """The per-tick quantities of ``step`` for arrays (advances the tests)."""
+        n = len(r)
+        ticks = self._tick + np.arange(n)
+        stat, ok, theta_ref = self.residual_test.run(np.column_stack([g1, g2, xhat, np.ones(n)]),
+                                                     r)
+        hist = np.concatenate([self._v_hist[::-1], v_in])  # oldest first
+        m = COMMAND_ORDER
+        phi_v = np.column_stack([hist[m - 1 - i:m - 1 - i + n] for i in range(m)])
+        guard_stat = self.command_test.run(phi_v, v_in)[0]
+        self._v_hist = hist[-1:-m - 1:-1].tolist()
+        trig = guard_stat > self.settings.guard_threshold
+        until = np.where(trig, ticks + self.hold_samples, -1)
+        until = np.maximum(np.maximum.accumulate(until), self._guard_until)
+        self._guard_until = int(until[-1])
+        self._tick += n
+        return {"ticks": ticks, "stat": stat, "ok": ok, "guard_until": until,
+                "coulomb": theta_ref[0]}
+
+    def _quiet_condition(self, arrays, theta1, theta2) -> tuple[np.ndarray, np.ndarray]:
+        """Per tick: the fast alarm condition and the slow-path condition."""
+        ticks = arrays["ticks"]
+        active = ticks >= self._hold_until
+        if self.settings.method == "band":
+            fast = _outside_band(theta1, theta2, self.band)
+            slow = np.zeros(ticks.size, dtype=bool)
+        else:
+            fast = arrays["ok"] & (ticks >= arrays["guard_until"]) & (
+                arrays["stat"] > self.threshold)
+            with np.errstate(invalid="ignore"):
+                slow = arrays["ok"] & (arrays["coulomb"] - self.coulomb_base
+                                       >= self.settings.friction_min_level)
+        return fast & active, slow & active
+
+    def _first_event(self, arrays, theta1, theta2) -> int | None:
+        """Index of the first tick that raises an event, or None."""
+        if self.state == "calibrating":
+            active = np.flatnonzero(arrays["ticks"] >= self._hold_until)
+            need = self.calibration_samples - len(self._calibration)
+            return int(active[need - 1]) if active.size >= need else None
+        fast, slow = self._quiet_condition(arrays, theta1, theta2)
+        hits = np.flatnonzero(
+            (_run_lengths(fast, self._above) >= self.settings.persistence_samples)
+            | (_run_lengths(slow, self._slow_above) >= self.slow_samples))
+        return int(hits[0]) if hits.size else None
+
+    def _commit_quiet(self, arrays, theta1, theta2) -> None:
+        if self.state == "calibrating":
+            sel = np.flatnonzero(arrays["ticks"] >= self._hold_until)
+            coulomb = np.where(arrays["ok"], arrays["coulomb"], np.nan)
+            self._calibration.extend(zip(theta1[sel].tolist(), theta2[sel].tolist(),
+                                         coulomb[sel].tolist()))
+            return
+        fast, slow = self._quiet_condition(arrays, theta1, theta2)
+        if fast.size:
+            self._above = int(_run_lengths(fast, self._above)[-1])
+            self._slow_above = int(_run_lengths(slow, self._slow_above)[-1])
+
+
+class _Episode:
+    """One alarm episode: from fault_detected until cleared (always run per tick)."""
+
+    def __init__(self, det: Detector, tick: int, slow: bool = False) -> None:
+        test = det.residual_test
+        self.theta_ref = list(test.theta)
+        # the Coulomb coefficient friction is measured from: just before the change (fast
+        # path), or at calibration (slow path: the reference already holds the friction)
+        self.coulomb_base = det.coulomb_base if slow else self.theta_ref[0]
+        self.sigma2_ref = test.sigma2
+        self.post = SlidingSums(det.window_samples, _WIDTH)
+        for row in test.recent_rows:  # data since the reference window ended, newest included
+            self.post.push(row)
+        self.frozen_test = SlidingSums(det.test_samples, 1)
+        self.ticks = 0
+        self.quiet = 0
+        self.track = 0
+        self.level_change = math.nan
+        self.hold_until = 0
+
+    def restart(self, det: Detector) -> None:
+        """After a data gap: the windows restart, the episode goes on."""
+        self.post.reset()
+        self.frozen_test.reset()
+        self.quiet = 0
+        self.track = 0
+        self.hold_until = det.warmup_samples
+
+    def step(self, det: Detector, tick, t, phi, row, r, theta1, theta2):
+        s = det.settings
+        self.ticks += 1
+        self.post.push(row)
+        e = innovation(r, phi, self.theta_ref)
+        frozen_stat = self.frozen_test.push((e * e / self.sigma2_ref,))[0] / det.test_samples
+        if tick < self.hold_until:
+            return []
+        if s.method == "band":
+            return self._step_band(det, t, theta1, theta2)
+        friction = False
+        if self.post.count >= det.iso_samples:
+            theta, _, ok = solve_packed(self.post.sliding, N_REGRESSORS)
+            if ok:
+                self.level_change = theta[0] - self.coulomb_base
+                friction = self.level_change >= s.friction_min_level
+        if det.state == "fault_detected":
+            self.track = self.track + 1 if friction else 0
+            if self.track >= s.track_samples:
+                return self._to(det, "friction_isolated", t, theta1, theta2)
+            if self.ticks >= det.timeout_samples:
+                return self._to(det, "other_fault", t, theta1, theta2)
+        if det.state == "friction_isolated":
+            # gone when the moving reference (which follows the operating point) no longer
+            # holds the friction
+            test = det.residual_test
+            normal = (self.ticks >= det.window_samples + det.lag_samples and test.ok
+                      and test.theta[0] - self.coulomb_base < 0.5 * s.friction_min_level
+                      and _moves_freely(test.reference_sums))
+        else:
+            normal = frozen_stat <= det.threshold
+        self.quiet = self.quiet + 1 if normal else 0
+        if self.quiet >= det.clear_samples:
+            return self._clear(det, t, theta1, theta2)
+        return []
+
+    def _step_band(self, det, t, theta1, theta2):
+        s = det.settings
+        if det.state == "fault_detected":
+            tol1 = s.track_tolerance
+            tol2 = s.track_tolerance * max(abs(det.gamma_f), 1.0)
+            tracking = abs(theta1 - 1.0) <= tol1 and abs(theta2 - det.gamma_f) <= tol2
+            self.track = self.track + 1 if tracking else 0
+            if self.track >= s.track_samples:
+                return self._to(det, "friction_isolated", t, theta1, theta2)
+            if self.ticks >= det.timeout_samples:
+                return self._to(det, "other_fault", t, theta1, theta2)
+        inside = math.isfinite(theta1) and not _outside_band(theta1, theta2, det.band)
+        self.quiet = self.quiet + 1 if inside else 0
+        if self.quiet >= det.clear_samples:
+            return self._clear(det, t, theta1, theta2)
+        return []
+
+    def _to(self, det, state, t, theta1, theta2):
+        det.state = state
+        self.quiet = 0
+        return [det._event(t, state, theta1, theta2, coulomb_change=float(self.level_change))]
+
+    def _clear(self, det, t, theta1, theta2):
+        det.state = "monitoring"
+        det._episode = None
+        det._above = 0
+        # the moving reference still holds fault data: wait until it has passed
+        det._guard_until = max(det._guard_until, det._tick + det.hold_samples)
+        return [det._event(t, "cleared", theta1, theta2)]
+
+
+def _moves_freely(sums) -> bool:
+    """Over the reference window the measured acceleration has at least half the energy the
+    model predicts: Σẍ² = Σr² + 2Σx̂̈r + Σx̂̈² >= Σx̂̈²/2 (a load stuck by friction does not)."""
+    s_xx, s_xr, s_rr = sums[7], sums[12], sums[14]
+    return s_xx > 0.0 and s_rr + 2.0 * s_xr + s_xx >= 0.5 * s_xx
+
+
+def _outside_band(theta1, theta2, band):
+    """θ outside the calibrated band (floats or arrays; NaN θ is never outside)."""
+    if band is None:
+        return np.zeros(np.shape(theta1), dtype=bool) if np.ndim(theta1) else False
+    lo1, hi1 = band["theta1"]
+    lo2, hi2 = band["theta2"]
+    return (theta1 < lo1) | (theta1 > hi1) | (theta2 < lo2) | (theta2 > hi2)
+
+
+def _run_lengths(cond: np.ndarray, carry: int) -> np.ndarray:
+    """Length of the run of True ending at every index (a run at index 0 continues carry)."""
+    n = cond.size
+    idx = np.arange(n)
+    last_false = np.maximum.accumulate(np.where(~cond, idx, -1))
+    run = idx - last_false
+    head = last_false < 0
+    run[head] += carry
+    return np.where(cond, run, 0)

@@ -1,0 +1,321 @@
+"""The monitor: samples in, events out; one object for the daemon (``step``) and replay (``run``).
+
+Per sample: the link's checks (sequence, finite values, saturation), the signal chain
+(`Pipeline`: x̂̈, residual, velocity, g1, g2, θ of eq. 17) and the `Detector`.
+
+Bad samples. A sample whose ``v_in`` is not finite keeps the last good valve voltage; a
+sample whose ``accel`` is not finite or at/above ``accel_limit_mps2`` (when the model sets
+one) is replaced by the model's prediction x̂̈, so its residual is 0 (no evidence either
+way) and the velocity estimator integrates a plausible value. A sample whose ``seq`` does
+not advance (duplicate, going backwards) is dropped. Each run of bad samples gives one
+``bad_sample`` event (at the first one's time, with ``count`` and ``reason``) when the run
+ends or reaches one second.
+
+Gaps. A ``seq`` jump (or, without ``seq``, a time step over 1.5 sample periods) gives a
+``data_gap`` event with ``missing_samples``; every filter and window restarts and the
+detector holds its decisions until its windows are full again (an ongoing alarm episode
+and the calibrated band are kept).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fdi_daemon.detect.detector import STATES, Detector
+from fdi_daemon.detect.events import make_event
+from fdi_daemon.detect.pipeline import Pipeline
+from fdi_daemon.detect.settings import DetectorSettings
+from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.model_file import FdiModel
+from fdi_daemon.io.recordings import Recording
+from fdi_daemon.io.sample import Sample
+
+__all__ = ["Monitor", "MonitorTrace"]
+
+HISTORY_S = 30.0
+HISTORY_POINTS = 300
+_CHUNK = 16384
+
+
+@dataclass
+class MonitorTrace:
+    """Per-sample signals of a batch run (every ``every``-th sample)."""
+
+    every: int
+    t: np.ndarray
+    accel: np.ndarray
+    residual: np.ndarray
+    theta1: np.ndarray
+    theta2: np.ndarray
+    statistic: np.ndarray
+    state: np.ndarray  # int8 codes into detect.detector.STATES
+
+
+class Monitor:
+    """Friction FDI monitor of one rig (see the module docstring)."""
+
+    def __init__(self, model: FdiModel) -> None:
+        if model.fault_filter is None:
+            raise ConfigError("the model has no fault_filter (G_e, γ_f): run `fdi signature` "
+                              "first")
+        detector_map = dict(model.detector or {})
+        self.accel_limit_mps2 = detector_map.pop("accel_limit_mps2", None)
+        if self.accel_limit_mps2 is not None and (
+                isinstance(self.accel_limit_mps2, bool)
+                or not isinstance(self.accel_limit_mps2, (int, float))
+                or not self.accel_limit_mps2 > 0):
+            raise ConfigError("detector.accel_limit_mps2 must be a positive number")
+        _check_stable(model.fault_filter.f, "fault_filter.f")
+        _check_stable(model.plant_a, "plant.a")
+        self.model = model
+        self.settings = DetectorSettings.from_mapping(detector_map)
+        self.fs_hz = float(model.fs)
+        self.gamma_f = float(model.fault_filter.gamma_f)
+        self.detector = Detector(self.settings, self.fs_hz, self.gamma_f)
+        self.pipeline = Pipeline(model, self.detector.window_samples,
+                                 min_velocity_rms_mps=self.settings.min_velocity_rms_mps)
+        self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))
+        self._history: deque = deque(maxlen=HISTORY_POINTS)
+        self._samples = 0
+        self._last_seq: int | None = None
+        self._last_t = math.nan
+        self._v_in = 0.0
+        self._bad_run = 0
+        self._bad_t = math.nan
+        self._bad_reason = ""
+
+    # ------------------------------------------------------------------ per tick
+    def step(self, sample: Sample) -> list[dict[str, Any]]:
+        """One link tick; returns the events it raised."""
+        events: list[dict[str, Any]] = []
+        seq = int(sample.seq)
+        if self._last_seq is not None:
+            if seq <= self._last_seq:
+                reason = "duplicate" if seq == self._last_seq else "backwards"
+                return self._bad(sample.t, reason, events)
+            if seq > self._last_seq + 1:
+                events.extend(self._flush_bad())
+                events.append(self._gap(sample.t, seq - self._last_seq - 1))
+        self._last_seq = seq
+        v_in = sample.v_in
+        accel: float | None = sample.accel
+        reason = ""
+        if not math.isfinite(v_in):
+            v_in = self._v_in
+            reason = "v_in not finite"
+        if not math.isfinite(accel):
+            accel = None
+            reason = reason or "accel not finite"
+        elif self.accel_limit_mps2 is not None and abs(accel) >= self.accel_limit_mps2:
+            accel = None
+            reason = reason or "accel saturated"
+        t = sample.t if math.isfinite(sample.t) else self._last_t + 1.0 / self.fs_hz
+        if reason:
+            self._bad(t, reason, events)
+        elif self._bad_run:
+            events.extend(self._flush_bad())
+        self._v_in = v_in
+        self._last_t = t
+        pl = self.pipeline
+        pl.step(v_in, accel)
+        events.extend(self.detector.step(t, v_in, pl.xhat, pl.residual, pl.g1, pl.g2,
+                                         pl.theta1, pl.theta2))
+        if self._samples % self._history_every == 0:
+            self._history.append((t, pl.theta1, pl.theta2))
+        self._samples += 1
+        return events
+
+    def _bad(self, t: float, reason: str, events: list) -> list[dict[str, Any]]:
+        if not self._bad_run:
+            self._bad_t = t
+            self._bad_reason = reason
+        self._bad_run += 1
+        if self._bad_run >= int(self.fs_hz):
+            events.extend(self._flush_bad())
+        return events
+
+    def _flush_bad(self) -> list[dict[str, Any]]:
+        if not self._bad_run:
+            return []
+        ev = make_event(self._bad_t, "bad_sample", count=self._bad_run, reason=self._bad_reason)
+        self._bad_run = 0
+        return [ev]
+
+    def _gap(self, t: float, missing: int) -> dict[str, Any]:
+        self.pipeline.reset()
+        self.detector.restart()
+        return make_event(t, "data_gap", missing_samples=int(missing))
+
+    def finish(self) -> list[dict[str, Any]]:
+        """Events still pending at the end of a stream (an unfinished run of bad samples)."""
+        return self._flush_bad()
+
+    # ------------------------------------------------------------------ batch
+    def run(self, rec: Recording, trace_every: int = 1, progress=None
+            ) -> tuple[list[dict[str, Any]], MonitorTrace]:
+        """Replay a recording through the batch path; same events as ``step`` per sample.
+
+        trace_every: keep every n-th sample in the trace (1: all). progress(done, total) is
+        called after every chunk.
+        """
+        cols = rec.columns
+        n = len(cols["t"])
+        t = np.asarray(cols["t"], dtype=float)
+        v_in = np.asarray(cols["v_in"], dtype=float)
+        accel = np.asarray(cols["accel"], dtype=float)
+        seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
+               else self.sample_numbers(t))
+        events: list[dict[str, Any]] = []
+        parts: dict[str, list[np.ndarray]] = {k: [] for k in (
+            "t", "accel", "residual", "theta1", "theta2", "statistic", "state")}
+        start = 0
+        while start < n:
+            stop = min(n, start + _CHUNK)
+            events.extend(self._run_chunk(t[start:stop], v_in[start:stop], accel[start:stop],
+                                          seq[start:stop], parts, trace_every))
+            start = stop
+            if progress is not None:
+                progress(stop, n)
+        events.extend(self.finish())
+        trace = MonitorTrace(every=trace_every, **{
+            k: (np.concatenate(v) if v else np.empty(0)) for k, v in parts.items()})
+        return events, trace
+
+    def sample_numbers(self, t: np.ndarray) -> np.ndarray:
+        """Sample numbers from the time column (recordings without ``seq``)."""
+        if t.size == 0:
+            return np.zeros(0, dtype=np.int64)
+        with np.errstate(invalid="ignore"):
+            steps = np.rint(np.diff(t) * self.fs_hz)
+        steps = np.where(np.isfinite(steps), steps, 1).astype(np.int64)
+        base = 0 if self._last_seq is None else self._last_seq + 1
+        return base + np.concatenate([[0], np.cumsum(steps)])
+
+    def _run_chunk(self, t, v_in, accel, seq, parts, trace_every) -> list[dict[str, Any]]:
+        events: list[dict[str, Any]] = []
+        # split where seq does not advance by exactly one: gaps and dropped samples
+        prev = np.concatenate([[self._last_seq if self._last_seq is not None else seq[0] - 1],
+                               seq[:-1]]) if seq.size else seq
+        step = seq - prev
+        cuts = np.flatnonzero(step != 1)
+        bounds = np.concatenate([[0], cuts, [seq.size]])
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            if a == b:
+                continue
+            if step[a] != 1 and self._last_seq is not None:
+                if seq[a] <= self._last_seq:
+                    # duplicates / going backwards: drop them one at a time (rare)
+                    for k in range(a, b):
+                        events.extend(self.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]),
+                                                       float(accel[k]))))
+                    continue
+                events.extend(self._flush_bad())
+                events.append(self._gap(float(t[a]), int(seq[a] - self._last_seq - 1)))
+            if step[a] != 1:
+                self._last_seq = int(seq[a]) - 1
+            events.extend(self._run_contiguous(t[a:b], v_in[a:b], accel[a:b], parts,
+                                               trace_every))
+            self._last_seq = int(seq[b - 1])
+        return events
+
+    def _run_contiguous(self, t, v_in, accel, parts, trace_every) -> list[dict[str, Any]]:
+        """Samples with consecutive seq: good runs batched, bad samples through ``step``."""
+        events: list[dict[str, Any]] = []
+        bad = ~np.isfinite(v_in) | ~np.isfinite(accel) | ~np.isfinite(t)
+        if self.accel_limit_mps2 is not None:
+            with np.errstate(invalid="ignore"):
+                bad |= np.abs(accel) >= self.accel_limit_mps2
+        edges = np.flatnonzero(np.diff(bad.astype(np.int8))) + 1
+        bounds = np.concatenate([[0], edges, [len(t)]])
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            if bad[a] or self._bad_run:
+                # bad samples, and the good one that ends their run, go through step()
+                last = b if bad[a] else a + 1
+                for k in range(a, last):
+                    seq = self._last_seq + 1 if self._last_seq is not None else 0
+                    events.extend(self.step(Sample(seq, float(t[k]), float(v_in[k]),
+                                                   float(accel[k]))))
+                    self._trace_one(parts, trace_every)
+                a = last
+            if a < b:
+                events.extend(self._run_good(t[a:b], v_in[a:b], accel[a:b], parts,
+                                             trace_every))
+        return events
+
+    def _run_good(self, t, v_in, accel, parts, trace_every) -> list[dict[str, Any]]:
+        pl = self.pipeline
+        batch = pl.run(v_in, accel)
+        sol_t1, sol_t2 = pl.thetas(batch)
+        events, det_trace = self.detector.run(t, v_in, batch.xhat, batch.residual, batch.g1,
+                                              batch.g2, sol_t1, sol_t2)
+        n = len(t)
+        ticks = self._samples + np.arange(n)
+        hist = np.flatnonzero(ticks % self._history_every == 0)
+        for k in hist[-HISTORY_POINTS:]:
+            self._history.append((float(t[k]), float(sol_t1[k]), float(sol_t2[k])))
+        keep = np.flatnonzero(ticks % trace_every == 0)
+        for name, values in (("t", t), ("accel", accel), ("residual", batch.residual),
+                             ("theta1", sol_t1), ("theta2", sol_t2),
+                             ("statistic", det_trace.statistic), ("state", det_trace.state)):
+            parts[name].append(np.asarray(values)[keep])
+        self._samples += n
+        self._v_in = float(v_in[-1])
+        self._last_t = float(t[-1])
+        if self._last_seq is not None:
+            self._last_seq += n
+        else:
+            self._last_seq = n - 1
+        return events
+
+    def _trace_one(self, parts, trace_every) -> None:
+        if (self._samples - 1) % trace_every:
+            return
+        pl = self.pipeline
+        values = {"t": self._last_t, "accel": pl.residual + pl.xhat, "residual": pl.residual,
+                  "theta1": pl.theta1, "theta2": pl.theta2,
+                  "statistic": self.detector.statistic,
+                  "state": STATES.index(self.detector.state)}
+        for name, value in values.items():
+            parts[name].append(np.array([value], dtype=np.int8 if name == "state" else float))
+
+    # ------------------------------------------------------------------ status
+    def snapshot(self) -> dict[str, Any]:
+        """The ``monitor`` part of the status snapshot (TEAM.md schema)."""
+        pl = self.pipeline
+        wls = pl.wls
+        det = self.detector
+        syy = wls.sums[5]
+        count = wls.count
+        hist = list(self._history)
+        return {
+            "state": det.state if self._samples else "starting",
+            "theta1": _finite(pl.theta1),
+            "theta2": _finite(pl.theta2),
+            "friction_level": _finite(pl.theta1),
+            "band": det.band,
+            "signature": [1.0, self.gamma_f],
+            "residual_rms": _finite(math.sqrt(syy / count)) if count and syy >= 0 else None,
+            "statistic": _finite(det.statistic),
+            "threshold": float(det.threshold),
+            "history": {"t": [h[0] for h in hist], "theta1": [_finite(h[1]) for h in hist],
+                        "theta2": [_finite(h[2]) for h in hist]},
+        }
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if value is not None and math.isfinite(value) else None
+
+
+def _check_stable(a: np.ndarray, name: str) -> None:
+    """A monitor built on an unstable (or marginally stable) filter would drift: refuse it."""
+    a = np.asarray(a, dtype=float)
+    if a.size > 1:
+        radius = float(np.max(np.abs(np.roots(a))))
+        if not radius < 1.0:
+            raise ConfigError(f"model {name} has a pole at |z| = {radius:.9g} (>= 1): the "
+                              f"filter is not stable; re-run the identification")

@@ -1,0 +1,114 @@
+"""Detector settings: the model file's ``detector`` mapping, validated, with defaults.
+
+Every setting has a unit in its name; docs/detector.md explains each one and the
+false-alarm/detection trade-off it moves.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+from fdi_daemon.errors import ConfigError
+
+__all__ = ["DetectorSettings", "METHODS"]
+
+METHODS = ("sequential", "band")
+
+
+@dataclass(frozen=True)
+class DetectorSettings:
+    """What the detector does; times in seconds, converted to samples with ``fs``."""
+
+    method: str = "sequential"
+    """"sequential" (χ² test of the innovations, the default) or "band" (the paper's)."""
+    window_s: float = 1.0
+    """Sliding window of the least squares, both θ (eq. 17) and the reference fit."""
+    calibration_s: float = 1.0
+    """Fault-free period after the windows fill whose θ sets the band (mean ± band_k σ)."""
+    band_k: float = 3.0
+    """Band half-width in standard deviations (the paper uses 3)."""
+    min_velocity_rms_mps: float = 0.0015
+    """Below this velocity RMS over the window the rig is at rest: θ is not estimated
+    (NaN) and the band method holds."""
+    reference_lag_s: float = 0.0625
+    """The reference fit ends this long before the newest sample (a fault must not leak in)."""
+    reference_every_samples: int = 4
+    """The reference fit is re-solved every this many ticks."""
+    test_window_s: float = 0.0625
+    """Window of the χ² statistic (mean squared standardised innovation)."""
+    threshold: float = 30.0
+    """Alarm when the statistic exceeds this (it is ≈ 1 without a fault)."""
+    persistence_samples: int = 2
+    """Consecutive ticks above the threshold before an alarm."""
+    min_sigma_mps2: float = 0.01
+    """Floor of the reference residual standard deviation (m/s²)."""
+    guard_threshold: float = 20.0
+    """The operating-point guard: the same test on the valve command (an AR(4) model of
+    v_in over the reference window) above this value marks an operating-point change ..."""
+    guard_min_sigma_v: float = 0.005
+    """... with the command's innovation σ floored at this (V; about the ADC noise)."""
+    guard_hold_s: float | None = None
+    """Alarms are held this long after an operating-point change (default: window + lag +
+    test window, the time the reference needs to describe the new operating point)."""
+    isolation_window_s: float = 0.25
+    """Data after the detection that the isolation fit needs before it decides."""
+    isolation_timeout_s: float = 2.0
+    """No friction evidence this long after the detection: other_fault."""
+    friction_min_level: float = 0.3
+    """Increase of the Coulomb coefficient (units of the calibrated signature) that counts
+    as friction."""
+    slow_persistence_s: float = 2.0
+    """Slow path: the reference fit's Coulomb coefficient at least friction_min_level above
+    its calibrated value for this long is a fault (friction that creeps in, or that starts
+    while the guard holds)."""
+    track_tolerance: float = 0.15
+    """band method: |θ - (1, γ_f)| within this fraction of the signature counts as tracking."""
+    track_samples: int = 8
+    """Consecutive ticks of friction evidence (sequential: the Coulomb increase above
+    friction_min_level; band: θ tracking the signature) before friction is isolated."""
+    clear_s: float = 1.0
+    """Back to normal for this long before ``cleared``."""
+
+    @classmethod
+    def from_mapping(cls, mapping: Mapping[str, Any] | None,
+                     source: str = "detector") -> "DetectorSettings":
+        """Validate a ``detector`` mapping; unknown keys and bad values raise ConfigError."""
+        mapping = dict(mapping or {})
+        known = {f.name: f for f in fields(cls)}
+        unknown = sorted(set(mapping) - set(known))
+        if unknown:
+            raise ConfigError(f"{source}: unknown setting(s) {', '.join(unknown)} "
+                              f"(known: {', '.join(known)})")
+        values: dict[str, Any] = {}
+        for name, value in mapping.items():
+            default = known[name].default
+            if name == "method":
+                if value not in METHODS:
+                    raise ConfigError(f"{source}.method must be one of {', '.join(METHODS)}")
+            elif name == "guard_hold_s" and value is None:
+                pass
+            elif isinstance(default, int) and not isinstance(default, bool):
+                if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                    raise ConfigError(f"{source}.{name} must be a whole number >= 1")
+            else:
+                if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                        or not math.isfinite(value) or value < 0:
+                    raise ConfigError(f"{source}.{name} must be a finite number >= 0")
+                value = float(value)
+            values[name] = value
+        settings = cls(**values)
+        for name in ("window_s", "test_window_s", "threshold", "isolation_window_s",
+                     "clear_s", "band_k", "guard_threshold"):
+            if getattr(settings, name) <= 0:
+                raise ConfigError(f"{source}.{name} must be > 0")
+        return settings
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def samples(self, seconds: float, fs_hz: float, minimum: int = 1) -> int:
+        """A duration in ticks (rounded, at least ``minimum``)."""
+        return max(minimum, int(round(seconds * fs_hz)))

@@ -1,0 +1,62 @@
+"""The replay summary (DESIGN.md): what a replay found, as one JSON object."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from fdi_daemon.errors import UserError
+
+__all__ = ["replay_summary", "write_summary"]
+
+
+def _first(events: list[dict[str, Any]], kind: str) -> float | None:
+    return next((e["t"] for e in events if e["kind"] == kind), None)
+
+
+def _finite_or_none(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, method: str,
+                   theta_final: tuple[float | None, float | None]) -> dict[str, Any]:
+    """``{"samples", "fs", "first_detection_t", "isolated_t", "classification",
+    "theta_final", "alarm_episodes", ...}`` (DESIGN.md keys first)."""
+    kinds = [e["kind"] for e in events]
+    first_detection = _first(events, "fault_detected")
+    isolated = _first(events, "friction_isolated")
+    other = _first(events, "other_fault")
+    classification = None
+    if first_detection is not None:
+        decided = [e for e in events if e["kind"] in ("friction_isolated", "other_fault")]
+        if decided:
+            classification = "friction" if decided[0]["kind"] == "friction_isolated" else "other"
+    theta_final = [None if v is None else _finite_or_none(v) for v in theta_final]
+    counts = {kind: kinds.count(kind) for kind in dict.fromkeys(kinds)}
+    return {
+        "samples": int(samples),
+        "fs": float(fs_hz),
+        "first_detection_t": first_detection,
+        "isolated_t": isolated,
+        "classification": classification,
+        "theta_final": theta_final,
+        "alarm_episodes": kinds.count("fault_detected"),
+        "other_fault_t": other,
+        "method": method,
+        "friction_level_final": theta_final[0],
+        "event_counts": counts,
+        "bad_samples": sum(int(e.get("count", 1)) for e in events if e["kind"] == "bad_sample"),
+        "missing_samples": sum(int(e.get("missing_samples", 0)) for e in events
+                               if e["kind"] == "data_gap"),
+    }
+
+
+def write_summary(path: str | Path, summary: dict[str, Any]) -> None:
+    path = Path(path)
+    try:
+        path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"{path}: cannot write the summary: {exc.strerror or exc}") from None

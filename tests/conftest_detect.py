@@ -1,0 +1,76 @@
+"""Shared, expensive data for the monitor tests (cached per session).
+
+The model is the one shipped for the simulated rig, configs/model_sim_rig.yaml (made with
+`fdi identify` and `fdi signature`); the scenarios are those of configs/scenarios.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIOS = REPO / "configs" / "scenarios"
+MODEL = REPO / "configs" / "model_sim_rig.yaml"
+FS_HZ = 256.0
+
+
+@functools.lru_cache(maxsize=None)
+def scenario_recording(name: str, seed: int = 0, duration_s: float | None = None):
+    """A scenario of configs/scenarios simulated once per session."""
+    from hil_sim.scenarios import load_scenario, simulate
+
+    return simulate(load_scenario(SCENARIOS / f"{name}.yaml"), seed=seed, duration_s=duration_s)
+
+
+@functools.lru_cache(maxsize=None)
+def sim_rig_model():
+    """FdiModel of the simulated rig (configs/model_sim_rig.yaml)."""
+    from fdi_daemon.io.model_file import load_model
+
+    return load_model(MODEL)
+
+
+def model_copy(**changes):
+    """A fresh copy of the sim-rig model with some fields replaced (e.g. detector={...})."""
+    import copy
+
+    model = copy.deepcopy(sim_rig_model())
+    for key, value in changes.items():
+        setattr(model, key, value)
+    return model
+
+
+def msd_system(fault_time_s: float = float("inf"), duration_s: float = 8.0, seed: int = 0,
+               coulomb_n: float = 0.5, viscous: float = 2.0):
+    """The paper's §V system with exact Ĝ and G_e: (model, recording)."""
+    from scipy.signal import cont2discrete, ss2tf
+
+    from fdi_daemon.io.model_file import FaultFilter, FdiModel
+    from fdi_daemon.io.recordings import Recording
+    from hil_sim.msd import MsdParams, MsdSimulator, nominal_tf, state_space
+
+    params = MsdParams(fault_time_s=fault_time_s, coulomb_n=coulomb_n,
+                       viscous_n_s_per_m=viscous, accel_noise_width=0.02)
+    a, _, bf, ca, _ = state_space(params)
+    ad, bd, cd, dd, _ = cont2discrete((a, bf[:, None], ca[None, :],
+                                       np.array([[1.0 / params.mass_kg]])), 1.0 / FS_HZ,
+                                      method="zoh")
+    num, den = ss2tf(ad, bd, cd, dd)
+    plant_b, plant_a = nominal_tf(params)
+    model = FdiModel(fs=FS_HZ, plant_b=plant_b, plant_a=plant_a,
+                     fault_filter=FaultFilter(b=-coulomb_n * np.asarray(num[0]),
+                                              f=np.asarray(den), nk=0,
+                                              gamma_f=viscous / coulomb_n),
+                     velocity={"lead_compensation_hz": 8.0})
+    t = np.arange(int(duration_s * FS_HZ)) / FS_HZ
+    out = MsdSimulator(params, seed).run(1.4 * np.sin(2 * np.pi * 8.0 * t))
+    cols = {k: out[k] for k in ("t", "v_in", "accel", "fault_active")}
+    cols["seq"] = np.arange(t.size, dtype=np.int64)
+    return model, Recording(cols, {"fs": str(FS_HZ)})
+
+
+def first_event(events, kind):
+    return next((e for e in events if e["kind"] == kind), None)

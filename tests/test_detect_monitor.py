@@ -1,0 +1,166 @@
+"""Monitor: per-tick step and batch run agree; bad samples, gaps, snapshot, events."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from conftest_detect import first_event, model_copy, scenario_recording, sim_rig_model
+from fdi_daemon.detect.detector import STATES
+from fdi_daemon.detect.monitor import Monitor
+from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.recordings import Recording
+from fdi_daemon.io.sample import Sample
+
+
+def _samples(rec):
+    seq = rec.columns.get("seq", np.arange(len(rec)))
+    return [Sample(int(s), float(t), float(v), float(a))
+            for s, t, v, a in zip(seq, rec.t, rec.v_in, rec.accel)]
+
+
+def _stepped(monitor, rec):
+    events, stat, state = [], [], []
+    for sample in _samples(rec):
+        events.extend(monitor.step(sample))
+        stat.append(monitor.detector.statistic)
+        state.append(STATES.index(monitor.detector.state))
+    events.extend(monitor.finish())
+    return events, np.array(stat), np.array(state)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario,method", [("test_case_2", "sequential"),
+                                             ("fault_valve_gain", "sequential"),
+                                             ("test_case_1", "band")])
+def test_step_and_batch_give_the_same_events_and_statistic(scenario, method):
+    rec = scenario_recording(scenario)
+    model = model_copy(detector={"method": method})
+    ev_step, stat_step, state_step = _stepped(Monitor(model), rec)
+    ev_batch, trace = Monitor(model).run(rec)
+    assert ev_batch == ev_step
+    assert any(e["kind"] == "fault_detected" for e in ev_batch)
+    np.testing.assert_array_equal(trace.statistic, stat_step)
+    np.testing.assert_array_equal(trace.state, state_step)
+    # batch in pieces (continuing from the same state) gives the same again
+    mon = Monitor(model)
+    n = len(rec)
+    pieces = []
+    for a, b in ((0, 700), (700, 701), (701, 1300), (1300, n)):
+        part = Recording({k: v[a:b] for k, v in rec.columns.items()}, dict(rec.meta))
+        pieces.extend(mon.run(part)[0])
+    pieces.extend(mon.finish())
+    assert pieces == ev_batch
+
+
+def test_bad_samples_and_gaps():
+    rec = scenario_recording("test_case_2")
+    cols = {k: v.copy() for k, v in rec.columns.items()}
+    cols["accel"][[300, 301, 302]] = np.nan
+    cols["v_in"][400] = np.inf
+    keep = np.ones(len(rec), dtype=bool)
+    keep[100:110] = False  # a gap of 10 samples (the windows refill before the fault)
+    cols = {k: v[keep] for k, v in cols.items()}
+    gappy = Recording(cols, dict(rec.meta))
+    model = sim_rig_model()
+    events, _ = Monitor(model).run(gappy)
+    ev_step, _, _ = _stepped(Monitor(model), gappy)
+    assert events == ev_step
+    bad = [e for e in events if e["kind"] == "bad_sample"]
+    assert [(e["count"], e["reason"]) for e in bad] == [(3, "accel not finite"),
+                                                        (1, "v_in not finite")]
+    assert bad[0]["t"] == pytest.approx(rec.t[300])
+    gaps = [e for e in events if e["kind"] == "data_gap"]
+    assert len(gaps) == 1 and gaps[0]["missing_samples"] == 10
+    assert gaps[0]["t"] == pytest.approx(rec.t[110])
+    # the fault at 2.9 s is still detected after the restart
+    assert first_event(events, "fault_detected") is not None
+
+
+def test_duplicates_and_backwards_samples_are_dropped():
+    model = sim_rig_model()
+    mon = Monitor(model)
+    rec = scenario_recording("test_case_2")
+    samples = _samples(rec)[:50]
+    events = []
+    for s in samples[:20] + [samples[19], samples[10]] + samples[20:]:
+        events.extend(mon.step(s))
+    events.extend(mon.finish())
+    bad = [e for e in events if e["kind"] == "bad_sample"]
+    assert [(e["count"], e["reason"]) for e in bad] == [(2, "duplicate")]
+    assert mon._samples == 50
+
+
+def test_saturated_accel_with_a_configured_limit():
+    model = model_copy(detector={"accel_limit_mps2": 50.0})
+    rec = scenario_recording("test_case_2")
+    cols = {k: v.copy() for k, v in rec.columns.items()}
+    cols["accel"][[200, 201, 700]] = [50.0, -50.0, 51.0]  # at or beyond full scale
+    events, _ = Monitor(model).run(Recording(cols, dict(rec.meta)))
+    bad = [(e["count"], e["reason"]) for e in events if e["kind"] == "bad_sample"]
+    assert bad == [(2, "accel saturated"), (1, "accel saturated")]
+
+
+def test_snapshot_schema():
+    model = sim_rig_model()
+    mon = Monitor(model)
+    assert mon.snapshot()["state"] == "starting"
+    rec = scenario_recording("test_case_2")
+    mon.run(rec)
+    snap = mon.snapshot()
+    assert set(snap) == {"state", "theta1", "theta2", "friction_level", "band", "signature",
+                         "residual_rms", "statistic", "threshold", "history"}
+    assert snap["state"] in STATES
+    assert snap["signature"] == [1.0, model.fault_filter.gamma_f]
+    assert set(snap["band"]) == {"theta1", "theta2"}
+    hist = snap["history"]
+    assert 0 < len(hist["t"]) <= 300 and len(hist["t"]) == len(hist["theta1"])
+    assert hist["t"][-1] - hist["t"][0] <= 30.0
+    json.dumps(snap, allow_nan=False)  # strict JSON
+    # the per-tick path keeps the same history
+    mon2 = Monitor(model)
+    for s in _samples(rec):
+        mon2.step(s)
+    assert mon2.snapshot()["history"] == hist
+
+
+def test_events_are_strict_json():
+    events, _ = Monitor(sim_rig_model()).run(scenario_recording("test_case_2"))
+    for e in events:
+        line = json.dumps(e, allow_nan=False)
+        assert {"t", "kind", "theta1", "theta2"} <= set(json.loads(line))
+
+
+def test_bad_settings_and_unstable_filters_are_refused():
+    with pytest.raises(ConfigError, match="unknown setting"):
+        Monitor(model_copy(detector={"treshold": 3}))
+    with pytest.raises(ConfigError, match="method"):
+        Monitor(model_copy(detector={"method": "magic"}))
+    with pytest.raises(ConfigError, match="whole number"):
+        Monitor(model_copy(detector={"persistence_samples": 0}))
+    model = model_copy()
+    model.fault_filter.f = np.array([1.0, -2.0, 1.0])  # double pole at z = 1
+    with pytest.raises(ConfigError, match="not stable"):
+        Monitor(model)
+
+
+def test_quiet_on_a_fault_free_recording():
+    rec = scenario_recording("ident_chirp_long")
+    events, trace = Monitor(sim_rig_model()).run(rec)
+    assert [e["kind"] for e in events] == ["calibrated"]
+    assert math.isfinite(float(np.nanmax(trace.statistic)))
+
+
+def test_rig_at_rest_then_moving_raises_no_alarm():
+    from hil_sim.scenarios import scenario_from_dict, simulate
+
+    rec = simulate(scenario_from_dict({
+        "name": "rest_then_sine", "duration_s": 20.0,
+        "excitation": [{"kind": "zero", "duration_s": 8.0},
+                       {"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0, "duration_s": 6.0},
+                       {"kind": "zero"}]}), seed=3)
+    events, trace = Monitor(sim_rig_model()).run(rec)
+    assert [e["kind"] for e in events] == ["calibrated"]
+    at_rest = trace.t < 8.0
+    assert np.isnan(trace.theta1[at_rest]).mean() > 0.5  # invalid windows, no estimate

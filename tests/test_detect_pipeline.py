@@ -1,0 +1,104 @@
+"""Pipeline: eqs. (1), (3), (15)–(17) per tick and batch, against independent references."""
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from conftest_detect import msd_system
+from fdi_daemon.core.velocity import VelocityEstimator
+from fdi_daemon.core.window_ls import solve_sums
+from fdi_daemon.detect.pipeline import Pipeline
+from fdi_daemon.errors import ConfigError
+
+N = 128
+
+
+@pytest.fixture(scope="module")
+def system():
+    return msd_system(fault_time_s=3.0, duration_s=6.0)
+
+
+def test_batch_matches_references(system):
+    model, rec = system
+    pl = Pipeline(model, N)
+    out = pl.run(rec.v_in, rec.accel)
+    xhat = lfilter(model.plant_b, model.plant_a, rec.v_in)
+    v = VelocityEstimator.from_settings(model.velocity, model.fs).run(rec.accel)
+    ff = model.fault_filter
+    np.testing.assert_allclose(out.xhat, xhat, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(out.residual, rec.accel - xhat, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(out.velocity, v, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(out.g1, lfilter(ff.b, ff.f, np.sign(v)), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(out.g2, lfilter(ff.b, ff.f, v), rtol=1e-12, atol=1e-14)
+    sol = solve_sums(out.sums, out.counts, N, 1e-6, (0.0, 0.0))
+    for k in (N - 1, 700, 1000, 1535):
+        sl = slice(k - N + 1, k + 1)
+        ref = np.linalg.lstsq(np.column_stack([out.g1[sl], out.g2[sl]]), out.residual[sl],
+                              rcond=None)[0]
+        np.testing.assert_allclose([sol.theta1[k], sol.theta2[k]], ref, rtol=1e-8)
+
+
+def test_friction_fault_gives_the_signature(system):
+    """Exact Ĝ and G_e, lead-compensated velocity: θ -> (1, γ_f) once the window is faulty."""
+    model, rec = system
+    pl = Pipeline(model, N)
+    out = pl.run(rec.v_in, rec.accel)
+    sol = solve_sums(out.sums, out.counts, N, 1e-6, (0.0, 0.0))
+    before = int(2.9 * 256)
+    after = slice(int(4.0 * 256), None)
+    assert abs(sol.theta1[before]) < 0.05 and abs(sol.theta2[before]) < 0.2
+    np.testing.assert_allclose(np.median(sol.theta1[after]), 1.0, rtol=0.1)
+    np.testing.assert_allclose(np.median(sol.theta2[after]), model.fault_filter.gamma_f, rtol=0.1)
+
+
+def test_step_run_and_chunks_agree(system):
+    model, rec = system
+    v_in, accel = rec.v_in, rec.accel
+    whole = Pipeline(model, N)
+    ref = whole.run(v_in, accel)
+    ref_theta = solve_sums(ref.sums, ref.counts, N, 1e-6, (0.0, 0.0))
+    one = Pipeline(model, N)
+    got = []
+    for v, a in zip(v_in.tolist(), accel.tolist()):
+        one.step(v, a)
+        got.append((one.xhat, one.residual, one.v, one.g1, one.g2, one.wls.theta1,
+                    one.wls.theta2))
+    got = np.array(got)
+    for col, name in enumerate(("xhat", "residual", "velocity", "g1", "g2")):
+        np.testing.assert_allclose(got[:, col], getattr(ref, name), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(got[:, 5], ref_theta.theta1, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(got[:, 6], ref_theta.theta2, rtol=1e-9, atol=1e-12)
+    rng = np.random.default_rng(0)
+    cuts = np.sort(rng.choice(np.arange(1, v_in.size), 30, replace=False))
+    chunked = Pipeline(model, N)
+    parts = [chunked.run(v_in[idx], accel[idx]) for idx in np.split(np.arange(v_in.size), cuts)]
+    np.testing.assert_allclose(np.concatenate([p.g1 for p in parts]), ref.g1, rtol=1e-12,
+                               atol=1e-13)
+    np.testing.assert_array_equal(np.concatenate([p.sums for p in parts]), ref.sums)
+
+
+def test_bad_accel_is_replaced_by_the_prediction(system):
+    model, rec = system
+    bad = np.zeros(rec.t.size, dtype=bool)
+    bad[[100, 101, 500]] = True
+    pl = Pipeline(model, N)
+    out = pl.run(rec.v_in, np.where(bad, np.nan, rec.accel), bad_accel=bad)
+    assert np.all(np.isfinite(out.residual)) and np.all(out.residual[bad] == 0.0)
+    one = Pipeline(model, N)
+    for k, (v, a) in enumerate(zip(rec.v_in.tolist(), rec.accel.tolist())):
+        one.step(v, None if bad[k] else a)
+    assert one.residual == pytest.approx(out.residual[-1], rel=1e-12, abs=1e-13)
+
+
+def test_model_without_signature_is_refused(system):
+    model, _ = system
+    import copy
+
+    broken = copy.deepcopy(model)
+    broken.fault_filter = None
+    with pytest.raises(ConfigError, match="fault_filter"):
+        Pipeline(broken, N)
+    broken = copy.deepcopy(model)
+    broken.velocity = {"highpass_hz": -1}
+    with pytest.raises(ConfigError, match="velocity"):
+        Pipeline(broken, N)

@@ -1,0 +1,136 @@
+"""Issue 4 targets on the simulated rig (hil_sim): the paper's test cases, the other faults,
+and fault-free changing operation."""
+
+import numpy as np
+import pytest
+
+from conftest_detect import SCENARIOS, first_event, scenario_recording, sim_rig_model
+from fdi_daemon.detect.monitor import Monitor
+
+#: (scenario, fault time in the scenario (s), detection target (s), isolation target (s))
+TEST_CASES = [("test_case_1", 3.05, 0.015, 1.5), ("test_case_2", 2.9, 0.035, 0.7)]
+OTHER_FAULTS = ["fault_accel_bias", "fault_valve_gain", "fault_supply_pressure",
+                "fault_accel_dropout", "fault_accel_saturation"]
+
+
+def _replay(name, **kwargs):
+    return Monitor(sim_rig_model()).run(scenario_recording(name, **kwargs))
+
+
+@pytest.mark.parametrize("name,fault_s,_detect,isolate_s", TEST_CASES)
+def test_test_cases_are_detected_and_isolated_as_friction(name, fault_s, _detect, isolate_s):
+    events, _ = _replay(name)
+    kinds = [e["kind"] for e in events]
+    assert kinds == ["calibrated", "fault_detected", "friction_isolated"]
+    detected = first_event(events, "fault_detected")["t"]
+    isolated = first_event(events, "friction_isolated")
+    assert fault_s <= detected  # nothing before the fault
+    assert isolated["t"] - fault_s <= isolate_s
+    assert isolated["coulomb_change"] >= 0.3
+
+
+def test_test_case_2_detected_within_35_ms():
+    events, _ = _replay("test_case_2")
+    assert first_event(events, "fault_detected")["t"] - 2.9 <= 0.035
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured 63 ms after the 3.05 s event (47 ms after the simulated contact at 3.066 s): "
+    "the bearing pocket pressure needs ~16 ms to fall below lift-off, and the small friction "
+    "force then needs ~12 samples to lift the statistic above its threshold"))
+def test_test_case_1_detected_within_15_ms():
+    events, _ = _replay("test_case_1")
+    assert first_event(events, "fault_detected")["t"] - 3.05 <= 0.015
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "θ of eq. (17) does not settle within ±15 % of (1, γ_f): the test-case faults are not the "
+    "calibrated fault (bearing supply 65 % and 0 % against 45 %), and under a single 8 Hz sine "
+    "g1 and g2 are nearly collinear, so θ2 is ill-determined (measured θ at +1.5 s / +0.7 s in "
+    "docs/detector.md)"))
+@pytest.mark.parametrize("name,fault_s,_detect,isolate_s", TEST_CASES)
+def test_theta_tracks_the_signature_within_15_percent(name, fault_s, _detect, isolate_s):
+    _, trace = _replay(name)
+    gamma = sim_rig_model().fault_filter.gamma_f
+    k = np.searchsorted(trace.t, fault_s + isolate_s)
+    assert abs(trace.theta1[k] - 1.0) <= 0.15
+    assert abs(trace.theta2[k] - gamma) <= 0.15 * abs(gamma)
+
+
+@pytest.mark.parametrize("name", OTHER_FAULTS)
+def test_other_faults_are_detected_and_not_called_friction(name):
+    events, _ = _replay(name)
+    kinds = [e["kind"] for e in events]
+    assert "fault_detected" in kinds
+    assert "friction_isolated" not in kinds
+    assert "other_fault" in kinds
+    assert first_event(events, "fault_detected")["t"] >= 4.0
+
+
+@pytest.mark.slow
+def test_fault_free_hour_has_no_alarm():
+    events, trace = _replay("fault_free_hour")
+    assert len(trace.t) == 3600 * 256
+    assert [e["kind"] for e in events] == ["calibrated"]
+
+
+@pytest.mark.soak
+def test_fault_free_day_has_no_alarm():
+    """24 simulated hours (24 seeds of the changing-operation hour), one monitor each."""
+    from hil_sim.scenarios import load_scenario, simulate
+
+    scenario = load_scenario(SCENARIOS / "fault_free_hour.yaml")
+    alarms = []
+    for hour in range(24):
+        rec = simulate(scenario, seed=100 + hour)
+        events, _ = Monitor(sim_rig_model()).run(rec, trace_every=len(rec))
+        alarms.extend((hour, e["t"]) for e in events if e["kind"] == "fault_detected")
+    assert alarms == []
+
+
+def _scenario(spec, seed=4):
+    from hil_sim.scenarios import scenario_from_dict, simulate
+
+    return Monitor(sim_rig_model()).run(simulate(scenario_from_dict(spec), seed=seed))[0]
+
+
+def _kinds(events):
+    return [e["kind"] for e in events if e["kind"] != "calibrated"]
+
+
+SINE = {"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0}
+
+
+def test_friction_that_starts_while_the_guard_holds_is_found_by_the_slow_path():
+    events = _scenario({"name": "guard", "duration_s": 14.0, "excitation": [
+        {"kind": "sine", "amplitude_v": 1.0, "frequency_hz": 6.0, "duration_s": 6.0}, SINE],
+        "events": [{"t_s": 6.3, "bearing_supply": 0.45}]})
+    assert _kinds(events) == ["fault_detected", "friction_isolated"]
+    assert events[1]["path"] == "slow" and 6.3 < events[1]["t"] < 6.3 + 2.0 + 1.5
+
+
+def test_creeping_friction_is_found_by_the_slow_path():
+    events = _scenario({"name": "creep", "duration_s": 90.0, "excitation": [SINE],
+                        "drift": {"bearing_supply": {"times_s": [0, 10, 80, 90],
+                                                     "values": [1.0, 1.0, 0.3, 0.3]}}})
+    assert _kinds(events) == ["fault_detected", "friction_isolated"]
+    assert events[1]["path"] == "slow"
+
+
+@pytest.mark.slow
+def test_persistent_friction_under_changing_operation_is_one_episode():
+    events = _scenario({"name": "changing", "duration_s": 200.0, "excitation": [
+        {"kind": "random", "amplitude_v": [0.3, 1.6], "frequency_hz": [1.0, 12.0],
+         "segment_s": [5.0, 60.0]}], "events": [{"t_s": 120.0, "bearing_supply": 0.3}]})
+    assert _kinds(events) == ["fault_detected", "friction_isolated"]
+    assert 120.0 <= events[1]["t"] < 120.2
+
+
+@pytest.mark.parametrize("fault,kind", [({"bearing_supply": 0.0}, "friction_isolated"),
+                                        ({"fault": "valve_gain", "value": 0.6}, "other_fault")])
+def test_cleared_when_the_fault_goes_away(fault, kind):
+    off = {"bearing_supply": 1.0} if "bearing_supply" in fault else {**fault, "value": 1.0}
+    events = _scenario({"name": "onoff", "duration_s": 14.0, "excitation": [SINE],
+                        "events": [{"t_s": 4.0, **fault}, {"t_s": 8.0, **off}]})
+    assert _kinds(events) == ["fault_detected", kind, "cleared"]
+    assert 8.0 < events[-1]["t"] < 8.0 + 3.5

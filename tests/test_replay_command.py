@@ -1,0 +1,82 @@
+"""`fdi replay`: files written, summary contract, user mistakes give exit code 2."""
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest_detect import scenario_recording, sim_rig_model
+from fdi_daemon.cli import main
+from fdi_daemon.detect.events import read_events
+from fdi_daemon.io.model_file import save_model
+from fdi_daemon.io.recordings import Recording, write_recording
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    root = tmp_path_factory.mktemp("replay")
+    model = save_model(root / "model.yaml", sim_rig_model())
+    rec = write_recording(root / "tc2.csv", scenario_recording("test_case_2"))
+    return root, model, rec
+
+
+def test_replay_writes_events_summary_and_plot(files, capsys):
+    root, model, rec = files
+    code = main(["replay", str(rec), "--model", str(model), "--events", str(root / "ev.jsonl"),
+                 "--summary", str(root / "sum.json"), "--plot", str(root / "fig.png")])
+    assert code == 0
+    summary = json.loads((root / "sum.json").read_text())
+    for key in ("samples", "fs", "first_detection_t", "isolated_t", "classification",
+                "theta_final", "alarm_episodes"):
+        assert key in summary
+    assert summary["samples"] == 1536 and summary["fs"] == 256.0
+    assert summary["classification"] == "friction" and summary["alarm_episodes"] == 1
+    assert 2.9 <= summary["first_detection_t"] <= summary["isolated_t"]
+    events = read_events(root / "ev.jsonl")
+    assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "friction_isolated"]
+    assert (root / "fig.png").stat().st_size > 10_000
+    assert "classification friction" in capsys.readouterr().out
+
+
+def test_replay_of_a_recording_with_a_gap(files):
+    root, model, _ = files
+    rec = scenario_recording("test_case_2")
+    keep = np.ones(len(rec), dtype=bool)
+    keep[1000:1003] = False
+    gappy = write_recording(root / "gap.csv",
+                            Recording({k: v[keep] for k, v in rec.columns.items()},
+                                      dict(rec.meta)))
+    assert main(["replay", str(gappy), "--model", str(model), "--events",
+                 str(root / "gap.jsonl")]) == 0
+    gaps = [e for e in read_events(root / "gap.jsonl") if e["kind"] == "data_gap"]
+    assert [g["missing_samples"] for g in gaps] == [3]
+
+
+def test_realtime_replay_uses_the_per_tick_path(files):
+    root, model, _ = files
+    rec = scenario_recording("test_case_2")
+    short = write_recording(root / "short.csv",
+                            Recording({k: v[:300] for k, v in rec.columns.items()},
+                                      dict(rec.meta)))
+    assert main(["replay", str(short), "--model", str(model), "--realtime",
+                 "--summary", str(root / "rt.json")]) == 0
+    assert json.loads((root / "rt.json").read_text())["samples"] == 300
+
+
+@pytest.mark.parametrize("case", ["no_model", "bad_rec", "fs"])
+def test_user_mistakes_exit_2(files, tmp_path, capsys, case):
+    root, model, rec = files
+    if case == "no_model":
+        argv = ["replay", str(rec), "--model", str(tmp_path / "missing.yaml")]
+    elif case == "bad_rec":
+        bad = tmp_path / "bad.csv"
+        bad.write_text("t,v_in\n0,1\n")
+        argv = ["replay", str(bad), "--model", str(model)]
+    else:
+        other = scenario_recording("test_case_2")
+        meta = dict(other.meta, fs="512")
+        path = write_recording(tmp_path / "fs.csv", Recording(dict(other.columns), meta))
+        argv = ["replay", str(path), "--model", str(model)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("fdi replay: error:") and err.count("\n") == 1

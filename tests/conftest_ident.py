@@ -80,8 +80,8 @@ def match_roots(estimated: np.ndarray, true: np.ndarray) -> float:
 
 # ---------------------------------------------------------------- session recordings
 
-SIM_SCENARIOS = ("ident_chirp", "ident_chirp_long", "signature_calibration", "test_case_1",
-                 "test_case_2")
+SIM_SCENARIOS = ("ident_chirp", "ident_chirp_long", "signature_calibration_paired",
+                 "test_case_1", "test_case_2")
 
 
 @pytest.fixture(scope="session")

@@ -78,3 +78,54 @@ def test_window_after_a_lead_in_and_prefilter_keep_gamma():
                                     fit_from=376)
     assert abs(result.gamma_f - 3.0) <= 0.3
     assert len(result.residual) == 1024 and len(result.fit.y_sim) == 1024
+
+
+def test_reference_difference_cancels_an_input_driven_model_error():
+    """A plant-model error that grows with the input amplitude looks like viscous friction
+    (here exactly: G_e·0.8v); the same excitation played fault-free and subtracted removes it."""
+    gamma, error_gain = 3.0, 0.8
+    residual, velocity = signature_data(gamma, "sweep", noise_fraction=0.02)
+    model_error = signal.lfilter(OE_B, OE_F, error_gain * velocity)
+    rng = np.random.default_rng(7)
+    reference = model_error + 0.02 * np.std(residual) * rng.standard_normal(len(residual))
+    both = np.concatenate([reference, residual + model_error])
+    v_both = np.concatenate([velocity, velocity])
+    n = len(residual)
+    grid = sig.gamma_grid(0, 6, 0.2)
+    biased = sig.estimate_signature(both, v_both, grid, fit_from=n)
+    assert abs(biased.gamma_f - (gamma + error_gain)) <= 0.3
+    cancelled = sig.estimate_signature(sig.reference_difference(both, n), v_both, grid,
+                                       fit_from=n)
+    assert abs(cancelled.gamma_f - gamma) <= 0.3 and not cancelled.flat
+    with pytest.raises(ValueError):
+        sig.reference_difference(both, 0)
+
+
+def test_lowpass_prefilter_and_pole_bound_keep_gamma():
+    residual, velocity = signature_data(3.0, "sweep", noise_fraction=0.02)
+    sos = sig.lowpass_prefilter(12.0, 256.0)
+    assert sos.shape == (4, 6)
+    result = sig.estimate_signature(residual, velocity, sig.gamma_grid(0, 6, 0.2),
+                                    prefilter=sos, max_pole_radius=0.95)
+    assert abs(result.gamma_f - 3.0) <= 0.3 and not result.flat
+    assert np.max(np.abs(np.roots(result.fit.f))) <= 0.95 + 1e-9
+    with pytest.raises(ValueError):
+        sig.lowpass_prefilter(200.0, 256.0)
+
+
+def test_pole_bound_is_respected_and_derived_from_the_plant():
+    assert sig.plant_pole_bound(np.real(np.poly([0.81, 0.5]))) == pytest.approx(0.9)
+    residual, velocity = signature_data(2.0, "sweep", noise_fraction=0.02, n_samples=600)
+    result = sig.estimate_signature(residual, velocity, sig.gamma_grid(0, 4, 0.5),
+                                    max_pole_radius=0.8)
+    assert np.max(np.abs(np.roots(result.fit.f))) <= 0.8 + 1e-9  # OE_F has a pole at 0.9
+
+
+def test_fault_filter_refit_at_gamma_recovers_g_e():
+    residual, velocity = signature_data(3.0, "sweep", noise_fraction=0.0)
+    fit = sig.fit_fault_filter(residual, velocity, 3.0)
+    w = np.linspace(0.05, np.pi, 100)
+    true = signal.freqz(OE_B, OE_F, worN=w)[1]
+    est = signal.freqz(fit.b, fit.f, worN=w)[1]
+    assert np.max(np.abs(est - true)) / np.max(np.abs(true)) < 0.01
+    assert sig.fit_percent(residual, fit.y_sim) > 99

@@ -30,6 +30,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--prefilter-hz", type=float,
                         help="high-pass (3rd-order Butterworth) applied alike to the residual "
                              "and the friction signal before the fit (default: none)")
+    parser.add_argument("--reference-window", metavar="R0:R1",
+                        help="fault-free pass of the SAME excitation (same length as the fault "
+                             "window, earlier in the recording): fit the differential residual "
+                             "r(t) - r(t - lag), so the plant model's error cancels")
+    parser.add_argument("--lowpass-hz", type=float,
+                        help="choose gamma on the excitation's fundamentals: an 8th-order "
+                             "Butterworth low-pass applied alike to the residual and the "
+                             "friction signal (e.g. 1.5x the excitation frequency); G_e is then "
+                             "refitted on the full band at gamma_f (default: none)")
+    parser.add_argument("--max-pole-radius", type=float,
+                        help="bound on G_e's poles (default: sqrt of the plant's largest pole "
+                             "radius, i.e. G_e's memory at most twice the plant's slowest mode)")
     parser.add_argument("--min-depth", type=float, default=0.01,
                         help="flag the profile flat when max/min cost over the grid is below "
                              "1 + this (default %(default)s)")
@@ -95,32 +107,45 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(f"{args.model}: velocity: {exc}") from None
 
-    prefilter = None
-    if args.prefilter_hz is not None:
-        if not 0 < args.prefilter_hz < model.fs / 2:
-            raise UserError(f"--prefilter-hz must lie in (0, {model.fs / 2:g})")
-        from scipy.signal import butter
-
-        prefilter = butter(3, args.prefilter_hz, btype="high", fs=model.fs)
+    prefilter = _prefilter(args, model.fs)
+    radius = args.max_pole_radius
+    if radius is None:
+        radius = sig.plant_pole_bound(model.plant_a)
+    elif not 0 < radius <= 1:
+        raise UserError("--max-pole-radius must lie in (0, 1]")
 
     # residual (eq. 3) and velocity from the recording start, so that filter start-up
     # transients have settled before the window; the fit uses the window only
     residual = sig.plant_residual(model.plant_b, model.plant_a, v_in, accel)
     velocity = estimator.run(accel)
     first, end = int(np.flatnonzero(inside)[0]), int(np.flatnonzero(inside)[-1]) + 1
+    start = 0
+    if args.reference_window is not None:
+        lag = _reference_lag(args, t, v_in, first, end, rec.fs)
+        residual = sig.reference_difference(residual, lag)
+        start = lag  # the difference exists from one lag on
     t_win = t[first:end]
-    result = _estimate(sig, residual[:end], velocity[:end], first, grid, orders, prefilter,
-                       args.flat_fraction, args.min_depth)
+    result = _estimate(sig, residual[start:end], velocity[start:end], first - start, grid,
+                       orders, prefilter, args.flat_fraction, args.min_depth, radius)
+    fault_fit = result.fit
+    if args.lowpass_hz is not None:  # G_e for the monitor: full band, at gamma_f
+        fault_fit = sig.fit_fault_filter(residual[start:end], velocity[start:end],
+                                         result.gamma_f, orders, first - start, radius)
+    full_band_pct = sig.fit_percent(residual[first:end], fault_fit.y_sim)
 
     nb, nf, nk = orders
-    model.fault_filter = FaultFilter(b=result.fit.b, f=result.fit.f, nk=nk,
+    model.fault_filter = FaultFilter(b=fault_fit.b, f=fault_fit.f, nk=nk,
                                      gamma_f=result.gamma_f)
     model.velocity = estimator.settings()
     prov = dict(model.provenance)
     prov["signature"] = {
         **provenance.source_entry(args.recording, provenance.command_line("signature", args)),
         "fault_window_s": [t0, t1], "samples": int(inside.sum()),
-        "prefilter_hz": args.prefilter_hz,
+        "reference_window_s": (None if args.reference_window is None else
+                               list(parse_range(args.reference_window, "--reference-window"))),
+        "prefilter_hz": args.prefilter_hz, "lowpass_hz": args.lowpass_hz,
+        "max_pole_radius": float(radius),
+        "fault_filter_fit_percent_full_band": float(full_band_pct),
         "cost_profile": result.summary(),
         "cost_profile_relative": [round(float(c), 6) for c in result.relative_cost()],
         "recommendation": result.recommendation,
@@ -131,12 +156,61 @@ def run(args: argparse.Namespace) -> int:
         from fdi_daemon.ident.plots import plot_signature
 
         plot_signature(args.plot, t_win, result.residual, result)
-    _report(args, result, estimator)
+    _report(args, result, estimator, fault_fit, full_band_pct)
     return 0
 
 
+def _prefilter(args, fs):
+    """L applied alike to r and x_f: optional high-pass, optional low-pass (cascaded SOS)."""
+    import numpy as np
+    from scipy.signal import butter
+
+    from fdi_daemon.errors import UserError
+    from fdi_daemon.ident.signature import lowpass_prefilter
+
+    sections = []
+    if args.prefilter_hz is not None:
+        if not 0 < args.prefilter_hz < fs / 2:
+            raise UserError(f"--prefilter-hz must lie in (0, {fs / 2:g})")
+        sections.append(butter(3, args.prefilter_hz, btype="high", fs=fs, output="sos"))
+    if args.lowpass_hz is not None:
+        if not 0 < args.lowpass_hz < fs / 2:
+            raise UserError(f"--lowpass-hz must lie in (0, {fs / 2:g})")
+        if args.prefilter_hz is not None and not args.lowpass_hz > args.prefilter_hz:
+            raise UserError("--lowpass-hz must lie above --prefilter-hz")
+        sections.append(lowpass_prefilter(args.lowpass_hz, fs))
+    return np.vstack(sections) if sections else None
+
+
+def _reference_lag(args, t, v_in, first, end, fs) -> int:
+    """Samples between the reference window and the fault window; checks that the reference
+    holds the same excitation (the recorded valve voltage agrees to 10 % rms)."""
+    import numpy as np
+
+    from fdi_daemon.commands.identify import parse_range
+    from fdi_daemon.errors import UserError
+
+    r0, r1 = parse_range(args.reference_window, "--reference-window")
+    length = (end - first) / fs
+    if abs((r1 - r0) - length) > 1.5 / fs:
+        raise UserError(f"--reference-window {args.reference_window} must be as long as the "
+                        f"fault window ({length:g} s)")
+    ref_first = int(np.searchsorted(t, r0 - 0.5 / fs))
+    lag = first - ref_first
+    if r0 < t[0] or lag < end - first:
+        raise UserError(f"--reference-window {args.reference_window} must lie in the recording "
+                        "and end before the fault window starts")
+    ref, win = v_in[first - lag:end - lag], v_in[first:end]
+    mismatch = float(np.sqrt(np.mean((win - ref) ** 2) / max(np.mean(win ** 2), 1e-300)))
+    if mismatch > 0.1:
+        raise UserError(f"--reference-window {args.reference_window}: the valve voltage differs "
+                        f"from the fault window's by {100 * mismatch:.0f} % rms; play the same "
+                        "excitation in both")
+    return lag
+
+
 def _estimate(sig, residual, velocity, fit_from, grid, orders, prefilter, flat_fraction,
-              min_depth):
+              min_depth, radius):
     from rich.console import Console
     from rich.progress import Progress
 
@@ -149,12 +223,13 @@ def _estimate(sig, residual, velocity, fit_from, grid, orders, prefilter, flat_f
             return sig.estimate_signature(residual, velocity, grid, orders,
                                           flat_fraction=flat_fraction, min_depth=min_depth,
                                           prefilter=prefilter, fit_from=fit_from,
+                                          max_pole_radius=radius,
                                           on_step=lambda: progress.advance(task))
         except ValueError as exc:
             raise UserError(f"signature: {exc}") from None
 
 
-def _report(args, result, estimator) -> None:
+def _report(args, result, estimator, fault_fit, full_band_pct) -> None:
     import sys
 
     rel = result.relative_cost()
@@ -167,8 +242,9 @@ def _report(args, result, estimator) -> None:
         f" ({'FLAT' if result.flat else 'identifiable'})",
         f"G_e fit           : {result.info['fit_percent']:.2f} % of the residual explained, "
         f"orders [nb nf nk] = {list(result.orders)}",
-        f"G_e               : b = {[round(float(v), 6) for v in result.fit.b]}, "
-        f"f = {[round(float(v), 6) for v in result.fit.f]}",
+        f"G_e (model file)  : b = {[round(float(v), 6) for v in fault_fit.b]}, "
+        f"f = {[round(float(v), 6) for v in fault_fit.f]}; {full_band_pct:.2f} % of the "
+        f"unfiltered residual explained",
         f"velocity          : high-pass {estimator.highpass_hz:g} Hz, order "
         f"{estimator.highpass_order}, {estimator.integrator} integrator",
         f"model written     : {args.output}",

@@ -147,17 +147,23 @@ class _Problem:
 
 def fit_output_error(u: np.ndarray, y: np.ndarray, nb: int = 4, nf: int = 3, nk: int = 0,
                      start: tuple[np.ndarray, np.ndarray] | None = None,
-                     max_evaluations: int = 100) -> OEFit:
+                     max_evaluations: int = 100, max_pole_radius: float | None = None) -> OEFit:
     """Prediction-error fit of y = q^-nk B/F u + e (eq. 8) on one window.
 
     start: (b, f) to warm-start from (e.g. the fit at a neighbouring γ); default ARX then
     Steiglitz–McBride. The initial-condition pulses are always re-estimated.
+    max_pole_radius: bound on the poles of 1/F (default exp(−1/N), `record_pole_radius`);
+    a smaller bound limits the filter's memory (a pole of radius ρ decays as ρ^k).
     """
     u = np.asarray(u, dtype=float)
     y = np.asarray(y, dtype=float)
     if u.shape != y.shape:
         raise ValueError("u and y must have the same length")
     radius = stable_poly.record_pole_radius(len(u))
+    if max_pole_radius is not None:
+        if not 0 < max_pole_radius <= 1:
+            raise ValueError(f"max_pole_radius must lie in (0, 1], got {max_pole_radius}")
+        radius = min(radius, float(max_pole_radius))
     if start is None:
         b0, f0 = arx_start(u, y, nb, nf, nk)
     else:

@@ -9,6 +9,16 @@ For each γ on a grid (default 0..10 step 0.2) G_e is fitted by the prediction-e
 then outwards from the best point, and the best fit kept at each point. The γ with the least ‖e‖₂ (eq. 13) is then refined by a
 bounded scalar minimisation between its grid neighbours.
 
+Calibration run (`reference_difference`, `lowpass_prefilter`, `plant_pole_bound`). The
+excitation that identifies γ varies the velocity amplitude, so the viscous part of x_f grows
+with the input amplitude, and so does any error of Ĝ: r = (ẍ_true − Ĝ v_in) + friction part,
+and a linear model error δĜ v_in is, at one frequency, collinear with γ·G_e v. Playing the same
+excitation fault-free first and taking r_fault(t) − r_ref(t − lag) cancels the deterministic
+model error (linear or not). A low-pass L applied alike to r and x_f (L r = G_e L x_f) fits γ
+on the excitation's fundamentals, where Coulomb + viscous describes the friction, rather than
+on the switching harmonics that stick, Stribeck and sub-sample reversal timing distort. A
+pole-radius bound keeps G_e from parking a slow resonance on the carrier that trades with γ.
+
 Identifiability. sign(v) and v share their fundamental, so with a single sine G_e can absorb
 γ and the cost hardly depends on it. The profile is *flat* (γ_f not identifiable) when either
 - its depth max SSE/min SSE − 1 over the whole grid is below `min_depth` (default 0.01), or
@@ -35,8 +45,9 @@ CHI2_1_99 = 6.634896601021214
 RECOMMENDATION = (
     "gamma_f is not identifiable from this window: the cost profile is flat, so G_e absorbs "
     "the viscous part. Record the fault under an excitation whose velocity amplitude varies "
-    "(a chirp, a multi-sine, or a sine swept through several amplitudes), as in "
-    "configs/scenarios/signature_calibration.yaml, and run `fdi signature` on that window.")
+    "(a sine stepped through several amplitudes), played once fault-free and once with the "
+    "fault, as in configs/scenarios/signature_calibration_paired.yaml, and run `fdi signature "
+    "--reference-window R0:R1 --lowpass-hz F` on it (docs/identification.md).")
 
 
 def gamma_grid(lo: float = 0.0, hi: float = 10.0, step: float = 0.2) -> np.ndarray:
@@ -51,6 +62,40 @@ def plant_residual(plant_b: np.ndarray, plant_a: np.ndarray, v_in: np.ndarray,
                    accel: np.ndarray) -> np.ndarray:
     """r = ẍ − Ĝ(q) v_in, eq. (3), Ĝ started at rest at the first sample (as the monitor)."""
     return np.asarray(accel, dtype=float) - signal.lfilter(plant_b, plant_a, v_in)
+
+
+def reference_difference(residual: np.ndarray, lag_samples: int) -> np.ndarray:
+    """r(t) − r(t − lag) for t >= lag (0 before): the fault pass minus the fault-free pass of
+    the same excitation played `lag_samples` earlier. Ĝ's error, a function of the input,
+    cancels; what friction changed remains."""
+    residual = np.asarray(residual, dtype=float)
+    lag = int(lag_samples)
+    if not 0 < lag < len(residual):
+        raise ValueError(f"reference lag of {lag} samples lies outside the data")
+    out = np.zeros_like(residual)
+    out[lag:] = residual[lag:] - residual[:-lag]
+    return out
+
+
+def lowpass_prefilter(cutoff_hz: float, fs_hz: float, order: int = 8) -> np.ndarray:
+    """Butterworth low-pass (second-order sections) for `estimate_signature(prefilter=)`."""
+    if not 0 < cutoff_hz < fs_hz / 2:
+        raise ValueError(f"low-pass cut-off must lie in (0, {fs_hz / 2:g}) Hz, got {cutoff_hz}")
+    return signal.butter(order, cutoff_hz, btype="low", fs=fs_hz, output="sos")
+
+
+def plant_pole_bound(plant_a: np.ndarray) -> float:
+    """√(max |pole of Ĝ|): G_e's memory at most twice the plant's slowest mode. Friction acts
+    on the acceleration through the same mechanics as the valve force does."""
+    radius = float(np.max(np.abs(np.roots(plant_a)))) if len(plant_a) > 1 else 0.0
+    return float(np.sqrt(min(max(radius, 1e-6), 1.0)))
+
+
+def apply_prefilter(prefilter, x: np.ndarray) -> np.ndarray:
+    """Filter x by L: (b, a) or second-order sections (shape (n, 6))."""
+    if isinstance(prefilter, np.ndarray) and prefilter.ndim == 2:
+        return signal.sosfilt(prefilter, x)
+    return signal.lfilter(prefilter[0], prefilter[1], x)
 
 
 def friction_signal(velocity: np.ndarray, gamma: float) -> np.ndarray:
@@ -118,17 +163,18 @@ class _FrictionSignals:
     def __init__(self, velocity, prefilter, fit_from):
         sign_v, v = np.sign(velocity), np.asarray(velocity, dtype=float)
         if prefilter is not None:
-            sign_v = signal.lfilter(prefilter[0], prefilter[1], sign_v)
-            v = signal.lfilter(prefilter[0], prefilter[1], v)
+            sign_v = apply_prefilter(prefilter, sign_v)
+            v = apply_prefilter(prefilter, v)
         self.coulomb, self.viscous = sign_v[fit_from:], v[fit_from:]
 
     def __call__(self, gamma: float) -> np.ndarray:
         return self.coulomb + gamma * self.viscous
 
 
-def _sweep(residual, signals, grid, orders, order_idx, fits, on_step, start=None):
+def _sweep(residual, signals, grid, orders, order_idx, fits, on_step, radius, start=None):
     for i in order_idx:
-        fit = fit_output_error(signals(grid[i]), residual, *orders, start=start)
+        fit = fit_output_error(signals(grid[i]), residual, *orders, start=start,
+                               max_pole_radius=radius)
         if fits[i] is None or fit.sse < fits[i].sse:
             fits[i] = fit
         start = (fits[i].b, fits[i].f)
@@ -144,15 +190,17 @@ def sweep_fits(grid_points: int) -> int:
 def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
                        grid: np.ndarray | None = None, orders: tuple[int, int, int] = (4, 3, 0),
                        refine: bool = True, flat_fraction: float = 0.2,
-                       min_depth: float = 0.01, prefilter: tuple | None = None,
-                       fit_from: int = 0,
+                       min_depth: float = 0.01, prefilter: tuple | np.ndarray | None = None,
+                       fit_from: int = 0, max_pole_radius: float | None = None,
                        on_step: Callable[[], None] | None = None) -> SignatureResult:
     """Grid search over γ with an OE fit of G_e at each point (eq. 13), then refinement.
 
     residual, velocity: r (eq. 3) and v; the fit uses samples fit_from.. (the fault window),
     earlier samples only run the prefilter in. prefilter: (b, a) of a filter L applied to r
     and to x_f alike — L r = G_e L x_f + L e keeps G_e and γ, and a high-pass L removes the
-    slow residual content that friction computed from a high-passed velocity cannot explain.
+    slow residual content that friction computed from a high-passed velocity cannot explain;
+    (b, a) or second-order sections. max_pole_radius: bound on G_e's poles (default: the
+    record's, exp(−1/N)).
     on_step is called once per OE fit of the sweeps (`sweep_fits(len(grid))` calls).
     """
     residual = np.asarray(residual, dtype=float)
@@ -166,15 +214,16 @@ def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
         raise ValueError("velocity is zero throughout the window: no friction signal")
     signals = _FrictionSignals(velocity, prefilter, fit_from)
     if prefilter is not None:
-        residual = signal.lfilter(prefilter[0], prefilter[1], residual)
+        residual = apply_prefilter(prefilter, residual)
     residual = residual[fit_from:]
     fits: list[OEFit | None] = [None] * len(grid)
-    _sweep(residual, signals, grid, orders, range(len(grid)), fits, on_step)
-    _sweep(residual, signals, grid, orders, range(len(grid) - 1, -1, -1), fits, on_step)
+    _sweep(residual, signals, grid, orders, range(len(grid)), fits, on_step, max_pole_radius)
+    _sweep(residual, signals, grid, orders, range(len(grid) - 1, -1, -1), fits, on_step,
+           max_pole_radius)
     # carry the best basin found outwards (a sweep can sit in a poorer local minimum)
     best = int(np.argmin([f.sse for f in fits]))
     for side in (range(best - 1, -1, -1), range(best + 1, len(grid))):
-        _sweep(residual, signals, grid, orders, side, fits, on_step,
+        _sweep(residual, signals, grid, orders, side, fits, on_step, max_pole_radius,
                start=(fits[best].b, fits[best].f))
     sse = np.array([f.sse for f in fits])
     evaluations = sum(f.evaluations for f in fits)
@@ -187,7 +236,8 @@ def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
         warm = (best_fit.b, best_fit.f)
 
         def cost(gamma: float) -> float:
-            fit = fit_output_error(signals(gamma), residual, *orders, start=warm)
+            fit = fit_output_error(signals(gamma), residual, *orders, start=warm,
+                                   max_pole_radius=max_pole_radius)
             cache[gamma] = fit
             return fit.sse
 
@@ -206,11 +256,28 @@ def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
     depth = float(np.max(sse) / best_fit.sse - 1.0)
     flat = span > 0 and ((interval[1] - interval[0]) > flat_fraction * span
                          or depth < min_depth)
-    spread = float(np.sum((residual - residual.mean()) ** 2))
-    fit_pct = 100.0 * (1.0 - np.sqrt(best_fit.sse / spread)) if spread > 0 else float("nan")
+    fit_pct = fit_percent(residual, best_fit.y_sim)
     return SignatureResult(
         gamma_f=gamma_f, fit=best_fit, grid=grid, sse=sse, sse_min=best_fit.sse,
         interval=interval, effective_samples=n_eff, flat=bool(flat),
         recommendation=RECOMMENDATION if flat else None, orders=tuple(orders),
         evaluations=evaluations, info={"fit_percent": float(fit_pct), "depth": depth},
         residual=residual)
+
+
+def fit_fault_filter(residual: np.ndarray, velocity: np.ndarray, gamma_f: float,
+                     orders: tuple[int, int, int] = (4, 3, 0), fit_from: int = 0,
+                     max_pole_radius: float | None = None) -> OEFit:
+    """G_e at a fixed γ_f on the unfiltered window (eq. 12): the filter the monitor runs on
+    full-band signals, after γ_f was chosen on prefiltered data."""
+    u = friction_signal(np.asarray(velocity, dtype=float), gamma_f)[fit_from:]
+    return fit_output_error(u, np.asarray(residual, dtype=float)[fit_from:], *orders,
+                            max_pole_radius=max_pole_radius)
+
+
+def fit_percent(residual: np.ndarray, y_sim: np.ndarray) -> float:
+    """100·(1 − ‖r − ŷ‖/‖r − mean r‖): % of the residual explained."""
+    r = np.asarray(residual, dtype=float)
+    spread = float(np.sum((r - r.mean()) ** 2))
+    err = float(np.sum((r - y_sim) ** 2))
+    return 100.0 * (1.0 - np.sqrt(err / spread)) if spread > 0 else float("nan")

@@ -166,3 +166,28 @@ def test_cli_never_shows_a_traceback_for_a_bad_subcommand():
                           capture_output=True, text=True)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
+
+
+def _npz_with_meta(path, meta_text):
+    np.savez(path, t=np.arange(5) / FS, v_in=np.zeros(5), accel=np.zeros(5),
+             __meta__=np.array(meta_text))
+
+
+@pytest.mark.parametrize(
+    "name, write, message",
+    [
+        ("bad.npz", lambda p: p.write_bytes(b"PK\x03\x04 not really a zip"), "cannot read"),
+        ("empty.mat", lambda p: p.write_bytes(b""), "not a MATLAB v5 file"),
+        ("zeros.mat", lambda p: p.write_bytes(bytes(200)), "not a MATLAB v5 file"),
+        ("list.npz", lambda p: _npz_with_meta(p, "[1, 2]"), "must be a JSON object"),
+        ("null.npz", lambda p: _npz_with_meta(p, "null"), "must be a JSON object"),
+        ("seq.csv", lambda p: p.write_text("t,v_in,accel,seq\n0,0,0,0\n0.00390625,0,0,1e300\n"),
+         "whole numbers below 2"),
+    ],
+)
+def test_corrupt_binary_files_and_absurd_counters_are_clear_errors(tmp_path, name, write,
+                                                                   message):
+    path = tmp_path / name
+    write(path)
+    with pytest.raises(RecordingError, match=message):
+        read_recording(path)

@@ -22,6 +22,7 @@ import gzip
 import io
 import json
 import math
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -199,7 +200,7 @@ def read_recording(path: str | Path, strict: bool = True,
     except RecordingError:
         raise
     except (OSError, EOFError, ValueError, KeyError, TypeError, UnicodeDecodeError,
-            NotImplementedError) as exc:
+            NotImplementedError, zipfile.BadZipFile) as exc:
         raise RecordingError(f"{path}: cannot read recording: {_one_line(exc)}") from None
 
     missing = [c for c in required if c not in columns]
@@ -301,39 +302,56 @@ def _locate_bad_csv_line(path: Path, lines: list[str], start: int, ncol: int) ->
     return f"{path}: malformed CSV body"
 
 
+#: largest sample counter accepted (2**53: every whole number up to it is exact in float64)
+MAX_SEQ = 2 ** 53
+
+
 def _as_counter(seq: np.ndarray, path: Path) -> np.ndarray:
-    if not np.all(np.isfinite(seq)) or np.any(seq != np.round(seq)):
-        raise RecordingError(f"{path}: column seq must hold whole numbers")
+    if (not np.all(np.isfinite(seq)) or np.any(np.abs(seq) > MAX_SEQ)
+            or np.any(seq != np.round(seq))):
+        raise RecordingError(f"{path}: column seq must hold whole numbers below 2**53")
     return seq.astype(np.int64)
 
 
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     with np.load(path, allow_pickle=False) as data:
-        meta = json.loads(str(data["__meta__"])) if "__meta__" in data.files else {}
+        meta = _meta_object(str(data["__meta__"])) if "__meta__" in data.files else {}
         columns = {}
         for name in data.files:
             if name == "__meta__":
                 continue
             columns[name] = _column(np.asarray(data[name]), name, path)
-    return columns, {str(k): str(v) for k, v in meta.items()}
+    return columns, meta
 
 
 def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
 
-    data = loadmat(str(path), squeeze_me=True, chars_as_strings=True)
+    try:
+        data = loadmat(str(path), squeeze_me=True, chars_as_strings=True)
+    except MatReadError as exc:
+        raise RecordingError(f"{path}: not a MATLAB v5 file: {_one_line(exc)}") from None
     meta: dict[str, str] = {}
     columns = {}
     for name, value in data.items():
         if name.startswith("__"):
             continue
         if name == "meta_json":
-            meta = {str(k): str(v) for k, v in json.loads(str(value)).items()}
+            meta = _meta_object(str(value))
             continue
         arr = np.asarray(value)
         if arr.dtype.kind in "biuf" and arr.ndim == 1:
             columns[name] = _column(arr, name, path)
     return columns, meta
+
+
+def _meta_object(text: str) -> dict[str, str]:
+    """Metadata stored as JSON text: it must be an object of key/value pairs."""
+    meta = json.loads(text)
+    if not isinstance(meta, dict):
+        raise ValueError(f"metadata must be a JSON object, not {type(meta).__name__}")
+    return {str(k): str(v) for k, v in meta.items()}
 
 
 def _column(arr: np.ndarray, name: str, path: Path) -> np.ndarray:

@@ -28,9 +28,9 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-import yaml
 
 from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.yaml_file import read_yaml
 from fdi_daemon.io.recordings import Recording
 from hil_sim.excitation import COMMON_KEYS, RANDOM_KINDS, SEGMENT_KEYS, build_program
 from hil_sim.excitation import piecewise_linear
@@ -70,13 +70,7 @@ class Scenario:
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML file; a mistake raises a one-line ConfigError."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: no such scenario file")
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: not valid YAML: {' '.join(str(exc).split())}") from None
-    return scenario_from_dict(data, path=path)
+    return scenario_from_dict(read_yaml(path, "scenario"), path=path)
 
 
 def scenario_from_dict(data, path: Path | None = None) -> Scenario:

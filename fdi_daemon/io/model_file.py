@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.yaml_file import read_yaml
 
 KNOWN_KEYS = ("fs", "plant", "fault_filter", "velocity", "detector", "provenance")
 
@@ -95,18 +96,7 @@ def save_model(path: str | Path, model: FdiModel) -> Path:
 
 def load_model(path: str | Path) -> FdiModel:
     """Read and validate a model file; errors name the file and the key."""
-    path = Path(path)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such model file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read model file: {exc}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}: not valid YAML{where}") from None
+    data = read_yaml(path, "model")
     return model_from_dict(data, str(path))
 
 

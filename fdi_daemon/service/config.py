@@ -37,9 +37,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 
 from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.yaml_file import read_yaml
 
 __all__ = ["RigConfig", "load_config", "config_from_dict", "default_config_path", "SCHEMA"]
 
@@ -189,19 +189,7 @@ def default_config_path() -> Path:
 def load_config(path: str | Path | None = None) -> RigConfig:
     """Read and validate a rig config (the embedded default when path is None)."""
     path = Path(path) if path is not None else default_config_path()
-    try:
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such config file") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: is a directory, not a config file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read config: {exc}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}: not valid YAML{where}") from None
+    data = read_yaml(path, "config")
     return config_from_dict(data, str(path), path.resolve().parent)
 
 

@@ -61,7 +61,12 @@ class Pipeline:
             self.velocity = VelocityEstimator.from_settings(model.velocity, model.fs)
         except ValueError as exc:
             raise ConfigError(f"model velocity settings: {exc}") from None
-        self.plant = IIRFilter(model.plant_b, model.plant_a)
+        if model.extra.get("effects"):  # Ĝ plus the effects `fdi diagnose` added (same API)
+            from fdi_daemon.diagnose.augment import nominal_plant
+
+            self.plant = nominal_plant(model)
+        else:
+            self.plant = IIRFilter(model.plant_b, model.plant_a)
         b_e = np.concatenate([np.zeros(int(ff.nk)), np.asarray(ff.b, dtype=float)])
         self.ge_sign = IIRFilter(b_e, ff.f)
         self.ge_velocity = IIRFilter(b_e, ff.f)

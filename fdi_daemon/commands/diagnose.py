@@ -1,0 +1,130 @@
+"""`fdi diagnose`: where the model and the measurement disagree, which effect is missing."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+HELP = "find where a model and a recording disagree, name the missing effect, add it"
+
+OUTPUT_COLUMNS = {"acceleration": "accel", "velocity": "velocity", "position": "position"}
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recording", metavar="REC", help="recording (.csv, .csv.gz, .npz, .mat)")
+    src = parser.add_mutually_exclusive_group(required=True)
+    src.add_argument("--model", metavar="MODEL.yaml", help="model file with the nominal Ĝ")
+    src.add_argument("--fit-linear", action="store_true",
+                     help="fit a linear output-error baseline on the first 2/3 of the recording")
+    parser.add_argument("--order", type=int, default=None,
+                        help="order of the --fit-linear baseline (default: chosen from the "
+                             "data among 2, 4, 6, 8)")
+    parser.add_argument("--input", default="v_in", metavar="COL", help="input column (v_in)")
+    parser.add_argument("--output", default=None, metavar="COL",
+                        help="output column (default: accel, velocity or position by kind)")
+    parser.add_argument("--output-kind", default="acceleration",
+                        choices=("acceleration", "velocity", "position"),
+                        help="what the output column measures (default acceleration)")
+    parser.add_argument("--json", metavar="REPORT.json", help="write the report as JSON")
+    parser.add_argument("--plot", metavar="FILE.png", help="measured vs simulated, error maps")
+    parser.add_argument("-o", "--out", metavar="AUGMENTED_MODEL.yaml",
+                        help="write the model with the added effects")
+
+
+def _column(rec, name: str, path: str):
+    import numpy as np
+
+    from fdi_daemon.errors import RecordingError
+
+    values = rec[name]
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        raise RecordingError(f"{path}: column {name} is not finite at row {int(bad[0])} "
+                             f"({bad.size} bad value(s))")
+    return np.asarray(values, dtype=float)
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from fdi_daemon.errors import UserError
+    from fdi_daemon.io.model_file import FdiModel, load_model, save_model
+    from fdi_daemon.io.recordings import read_recording
+
+    from pathlib import Path
+
+    if args.order is not None and not 1 <= args.order <= 12:
+        raise UserError(f"--order must be 1..12, got {args.order}")
+    for target in (args.json, args.plot, args.out):
+        if target and not Path(target).resolve().parent.is_dir():
+            raise UserError(f"{target}: cannot write there: directory "
+                            f"{Path(target).parent} does not exist")
+    rec = read_recording(args.recording)
+    fs = rec.fs
+    out_col = args.output or OUTPUT_COLUMNS[args.output_kind]
+    u = _column(rec, args.input, args.recording)
+    y = _column(rec, out_col, args.recording)
+    min_samples = max(256, 40 * ((args.order or 8) + 2))
+    if len(u) < min_samples:
+        raise UserError(f"{args.recording}: {len(u)} samples; diagnose needs at least "
+                        f"{min_samples} (2/3 to fit, 1/3 held out)")
+    if np.ptp(u) == 0.0:
+        raise UserError(f"{args.recording}: input column {args.input} is constant: "
+                        f"nothing excites the model")
+    if np.ptp(y) == 0.0:
+        raise UserError(f"{args.recording}: output column {out_col} is constant")
+    model = None
+    plant_b = plant_a = None
+    if args.model:
+        model = load_model(args.model)
+        if not math.isclose(model.fs, fs, rel_tol=1e-6):
+            raise UserError(f"{args.model}: model fs = {model.fs:g} Hz but {args.recording} "
+                            f"is sampled at {fs:g} Hz")
+        plant_b, plant_a = model.plant_b, model.plant_a
+
+    from fdi_daemon.diagnose.report import build_report, summary_lines
+    from fdi_daemon.diagnose.workflow import run_diagnose
+
+    from rich.console import Console
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
+                  console=Console(stderr=True), transient=True) as progress:
+        task = progress.add_task("fitting candidate effects", total=None)
+        result = run_diagnose(
+            u, y, fs, args.output_kind, plant_b, plant_a, order=args.order,
+            progress=lambda name: progress.update(task, description=f"tried {name}"))
+    report = build_report(result, source=str(args.recording))
+    for line in summary_lines(report):
+        print(line)
+    if args.json:
+        try:
+            with open(args.json, "w", encoding="utf-8") as fh:
+                json.dump(report, fh, indent=1)
+                fh.write("\n")
+        except OSError as exc:
+            raise UserError(f"{args.json}: cannot write report: {exc.strerror or exc}") from None
+    if args.plot:
+        from fdi_daemon.diagnose.plots import plot_diagnosis
+
+        plot_diagnosis(result, report, args.plot)
+    if args.out:
+        provenance = dict(model.provenance) if model is not None else {}
+        provenance["diagnose"] = {"recording": str(args.recording),
+                                  "baseline": result.info["baseline"],
+                                  "effects": result.named,
+                                  "gap_before": report["gap_before"],
+                                  "gap_after": report["gap_after"]}
+        if model is not None:
+            out = FdiModel(fs=model.fs, plant_b=model.plant_b, plant_a=model.plant_a,
+                           fault_filter=model.fault_filter, velocity=model.velocity,
+                           detector=model.detector, provenance=provenance,
+                           extra=dict(model.extra))
+        else:
+            out = FdiModel(fs=fs, plant_b=result.info["plant_b"],
+                           plant_a=result.info["plant_a"], provenance=provenance)
+        out.extra["effects"] = result.plant.to_extra()
+        save_model(args.out, out)
+        print(f"augmented model written to {args.out}")
+    return 0

@@ -1,0 +1,489 @@
+"""The library of physical effects that a nominal linear model may be missing.
+
+Each effect is a regressor φ(u, v, x, ŷ₀; p) — built from the input u, the simulated
+velocity v and position x, or the nominal simulated output ŷ₀ — with nonlinear parameters p
+(a saturation level, a dead time ...) found by search, and linear coefficients found by least
+squares. It enters the model in one of two ways:
+
+- dynamic (``source`` input or state): through a filter G_e = B_e(q)/Â(q) with Â the
+  nominal model's denominator and a free numerator of the same order. As G_e does for
+  friction in eq. (8)–(14): a force (friction, a spring) acts through the mechanics, whose
+  poles are those of Ĝ (eq. 6); an input nonlinearity acts through Ĝ itself
+  (Ĝ N(u) − Ĝ u = Ĝ [N(u) − u]), also B/Â. G_e φ = Σᵢ bᵢ q⁻ⁱ (Â⁻¹ φ), linear in bᵢ.
+- static (``source`` output): added to the output with a gain (sensor offset, clipping).
+
+| effect             | φ                                    | nonlinear parameter           |
+|--------------------|--------------------------------------|-------------------------------|
+| coulomb_friction   | sign(v)                              | —                             |
+| viscous_friction   | v                                    | —                             |
+| stribeck_friction  | sign(v), sign(v)·exp(−(v/v_s)²)       | Stribeck velocity v_s         |
+| cubic_stiffness    | x³                                   | —                             |
+| dead_time          | u(t − τ) − u(t) (linear interp.)     | dead time τ                   |
+| input_saturation   | sat_L(u) − u                         | level L                       |
+| dead_zone          | dz_w(u) − u                          | half-width w                  |
+| backlash           | play_g(u) − u                        | gap g                         |
+| output_saturation  | sat_L(ŷ₀) − ŷ₀  (static)             | level L                       |
+| sensor_offset      | 1 (static)                           | —                             |
+
+Every regressor is a streaming block (`step` per sample, `run` per array, explicit state),
+so the augmented model (`augment.AugmentedPlant`) computes exactly what was fitted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+from scipy import signal
+from scipy.optimize import minimize_scalar
+
+EFFECT_NAMES = ("coulomb_friction", "viscous_friction", "stribeck_friction", "cubic_stiffness",
+                "dead_time", "input_saturation", "output_saturation", "dead_zone", "backlash",
+                "sensor_offset")
+
+
+# ----------------------------------------------------------------------------- regressor blocks
+
+
+class Regressor:
+    """Base: stateless φ; subclasses with memory override `run`/`step` and keep ``state``."""
+
+    n_out = 1
+
+    def run(self, u, v, x, y0) -> np.ndarray:  # (n, n_out)
+        raise NotImplementedError
+
+    def step(self, u: float, v: float, x: float, y0: float) -> list[float]:
+        return [float(c) for c in self.run(np.array([u]), np.array([v]), np.array([x]),
+                                           np.array([y0]))[0]]
+
+
+class _Static(Regressor):
+    def __init__(self, fn: Callable[..., list[np.ndarray]], n_out: int = 1) -> None:
+        self.fn = fn
+        self.n_out = n_out
+
+    def run(self, u, v, x, y0):
+        return np.column_stack(self.fn(np.asarray(u, float), np.asarray(v, float),
+                                       np.asarray(x, float), np.asarray(y0, float)))
+
+
+class DeadTimeRegressor(Regressor):
+    """u(t − τ) − u(t) with τ = d + f samples, linear interpolation; history starts at 0."""
+
+    def __init__(self, delay_samples: float) -> None:
+        self.d = int(math.floor(delay_samples))
+        self.frac = float(delay_samples - self.d)
+        self.state = np.zeros(self.d + 1)  # u[k-1] .. u[k-d-1]
+
+    def run(self, u, v, x, y0):
+        u = np.asarray(u, float)
+        ext = np.concatenate([self.state[::-1], u])  # ext[j + d + 1] = u[j]
+        h = self.d + 1
+        n = len(u)
+        delayed = ((1 - self.frac) * ext[h - self.d: h - self.d + n]
+                   + self.frac * ext[h - self.d - 1: h - self.d - 1 + n])
+        self.state = ext[::-1][: self.d + 1].copy()
+        return (delayed - u)[:, None]
+
+    def step(self, u, v, x, y0):
+        s = self.state
+        delayed_d = s[self.d - 1] if self.d > 0 else u
+        delayed = (1 - self.frac) * delayed_d + self.frac * s[self.d]
+        self.state = np.concatenate([[u], s[:-1]])
+        return [float(delayed - u)]
+
+
+class BacklashRegressor(Regressor):
+    """play_g(u) − u: the output follows the input with a gap g (starts centred on u[0])."""
+
+    def __init__(self, gap: float) -> None:
+        self.half = 0.5 * float(gap)
+        self.state: float | None = None
+
+    def step(self, u, v, x, y0):
+        y = u if self.state is None else self.state
+        if u - y > self.half:
+            y = u - self.half
+        elif y - u > self.half:
+            y = u + self.half
+        self.state = y
+        return [float(y - u)]
+
+    def run(self, u, v, x, y0):
+        u = np.asarray(u, float)
+        if u.size == 0:
+            return np.zeros((0, 1))
+        half = self.half
+        y = u[0] if self.state is None else self.state
+        out = []
+        append = out.append
+        for ui in u.tolist():  # the same arithmetic as step(), without the call per sample
+            if ui - y > half:
+                y = ui - half
+            elif y - ui > half:
+                y = ui + half
+            append(y)
+        self.state = y
+        return (np.array(out) - u).reshape(-1, 1)
+
+
+def _stribeck(vs):
+    return lambda u, v, x, y0: [np.sign(v), np.sign(v) * np.exp(-(v / vs) ** 2)]
+
+
+def _saturate(level, c):
+    return lambda u, v, x, y0: [np.clip(u - c, -level, level) - (u - c)]
+
+
+def _dead_zone(width, c):
+    return lambda u, v, x, y0: [np.sign(u - c) * np.maximum(np.abs(u - c) - width, 0.0)
+                                - (u - c)]
+
+
+def _out_saturate(level, c):
+    return lambda u, v, x, y0: [np.clip(y0 - c, -level, level) - (y0 - c)]
+
+
+# ----------------------------------------------------------------------------- effect specs
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """One candidate: how its regressor is built and where its parameter is searched."""
+
+    name: str
+    source: str  # "input", "state" or "output"
+    dynamic: bool  # through B_e/Â (True) or a static gain (False)
+    param: str | None  # name of the nonlinear parameter (searched), None if none
+    unit: str  # of the searched parameter
+    build: Callable[[float | None, float], Regressor]  # (parameter, centre) -> regressor
+    grid: Callable[["Context"], np.ndarray] | None = None
+    integer_coarse: bool = False
+
+
+def _q(values: np.ndarray, qs, centre: float = 0.0) -> np.ndarray:
+    return np.unique(np.quantile(np.abs(values - centre), qs))
+
+
+def _delays(c: "Context") -> np.ndarray:
+    """Whole-sample dead times 1..max, log-spaced beyond 16 samples (at most ~40 fits)."""
+    short = np.arange(1, min(16, c.max_delay_samples) + 1)
+    long = np.geomspace(16, max(16, c.max_delay_samples), 24).round()
+    return np.unique(np.concatenate([short, long[long <= c.max_delay_samples]])).astype(float)
+
+
+SPECS: dict[str, EffectSpec] = {
+    "coulomb_friction": EffectSpec("coulomb_friction", "state", True, None, "",
+                                   lambda p, c: _Static(lambda u, v, x, y0: [np.sign(v)])),
+    "viscous_friction": EffectSpec("viscous_friction", "state", True, None, "",
+                                   lambda p, c: _Static(lambda u, v, x, y0: [v])),
+    "stribeck_friction": EffectSpec(
+        "stribeck_friction", "state", True, "stribeck_velocity", "velocity units",
+        lambda p, c: _Static(_stribeck(p), 2),
+        lambda c: _q(c.v[c.split.fit], [0.02, 0.05, 0.1, 0.2, 0.3, 0.5])),
+    "cubic_stiffness": EffectSpec("cubic_stiffness", "state", True, None, "",
+                                  lambda p, c: _Static(lambda u, v, x, y0: [x ** 3])),
+    "dead_time": EffectSpec(
+        "dead_time", "input", True, "dead_time_s", "s",
+        lambda p, c: DeadTimeRegressor(p), _delays, integer_coarse=True),
+    "input_saturation": EffectSpec(
+        "input_saturation", "input", True, "level", "input units",
+        lambda p, c: _Static(_saturate(p, c)),
+        lambda c: _q(c.u[c.split.fit], [0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.94, 0.97, 0.99,
+                                        0.995], c.u_centre)),
+    "output_saturation": EffectSpec(
+        "output_saturation", "output", False, "level", "output units",
+        lambda p, c: _Static(_out_saturate(p, c)),
+        lambda c: _q(c.y0[c.split.fit], [0.8, 0.9, 0.95, 0.97, 0.98, 0.99, 0.995, 0.999])),
+    "dead_zone": EffectSpec(
+        "dead_zone", "input", True, "half_width", "input units",
+        lambda p, c: _Static(_dead_zone(p, c)),
+        lambda c: _q(c.u[c.split.fit], [0.01, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5],
+                     c.u_centre)),
+    "backlash": EffectSpec(
+        "backlash", "input", True, "gap", "input units",
+        lambda p, c: BacklashRegressor(p),
+        lambda c: np.ptp(c.u[c.split.fit]) * np.array([0.005, 0.01, 0.02, 0.04, 0.07, 0.1,
+                                                       0.15, 0.2, 0.3])),
+    "sensor_offset": EffectSpec("sensor_offset", "output", False, None, "",
+                                lambda p, c: _Static(lambda u, v, x, y0: [np.ones_like(u)])),
+    # not a candidate: with a fitted linear baseline, the baseline's numerator is refitted
+    # together with every candidate (the baseline absorbed part of the missing effect)
+    "linear_refit": EffectSpec("linear_refit", "input", True, None, "",
+                               lambda p, c: _Static(lambda u, v, x, y0: [u])),
+}
+
+
+#: static input maps that act around the input's operating point (its training median)
+CENTRED = ("input_saturation", "dead_zone")
+
+
+@dataclass
+class Context:
+    """Everything the fits need, computed once per recording (see `simulate.prepare`)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    x: np.ndarray
+    y0: np.ndarray  # nominal simulated output (comparison domain)
+    target: np.ndarray  # measured output (comparison domain) − y0
+    a_dom: np.ndarray  # Â of the domain plant
+    b_dom: np.ndarray
+    split: Any
+    fs_hz: float
+    output_kind: str
+    ref_hz: float  # centre of the input's band, for the physical parameter report
+    max_delay_samples: int
+    u_centre: float = 0.0  # operating point of the input maps (median training input)
+    candidates: tuple[str, ...] = EFFECT_NAMES
+    cache: dict = field(default_factory=dict, repr=False)
+
+    def centre(self, spec: "EffectSpec") -> float:
+        """Input maps act around the input's operating point; a sensor clips around its 0."""
+        return self.u_centre if spec.name in CENTRED else 0.0
+
+    def regressors(self, spec: "EffectSpec", param: float | None) -> np.ndarray:
+        """φ of one effect over the record (the last few are cached: some are slow loops)."""
+        key = (spec.name, param)
+        if key not in self.cache:
+            if len(self.cache) >= 8:
+                self.cache.pop(next(iter(self.cache)))
+            self.cache[key] = spec.build(param, self.centre(spec)).run(self.u, self.v, self.x,
+                                                                       self.y0)
+        return self.cache[key]
+
+    def head(self, n: int) -> "Context":
+        """The first n samples, all of them for fitting (for parameter searches)."""
+        from dataclasses import replace
+
+        from fdi_daemon.diagnose.signals import Split
+
+        cut = slice(0, n)
+        return replace(self, u=self.u[cut], v=self.v[cut], x=self.x[cut], y0=self.y0[cut],
+                       target=self.target[cut],
+                       split=Split(warmup=self.split.warmup, train_end=n, n=n), cache={})
+
+
+# ----------------------------------------------------------------------------- fitting
+
+
+@dataclass
+class FittedEffect:
+    """An effect with its searched parameter and fitted linear coefficients."""
+
+    name: str
+    param: float | None
+    coefficients: list[np.ndarray]  # dynamic: numerators B_e (one per regressor); static: [gain]
+    n_linear: int = 0
+    physical: dict[str, Any] = field(default_factory=dict)
+    centre: float = 0.0  # operating point of a centred static map
+
+    def regressor(self) -> Regressor:
+        """A fresh streaming regressor block with this effect's parameters."""
+        return SPECS[self.name].build(self.param, self.centre)
+
+    @property
+    def n_params(self) -> int:
+        return self.n_linear + (0 if self.param is None else 1)
+
+
+def stored_param(spec: EffectSpec, param: float | None, fs_hz: float) -> float | None:
+    """The searched value in the unit of the report (dead time in s, the rest as searched)."""
+    if param is None:
+        return None
+    return param / fs_hz if spec.name == "dead_time" else param
+
+
+def regressor_param(spec: EffectSpec, value: float | None, fs_hz: float) -> float | None:
+    """Inverse of `stored_param`."""
+    if value is None:
+        return None
+    return value * fs_hz if spec.name == "dead_time" else value
+
+
+def columns(spec: EffectSpec, param: float | None, ctx: Context,
+            phi: np.ndarray | None = None) -> np.ndarray:
+    """Design-matrix columns of one effect over the whole record (φ computed if not given)."""
+    if phi is None:
+        phi = spec.build(param, ctx.centre(spec)).run(ctx.u, ctx.v, ctx.x, ctx.y0)
+    if not spec.dynamic:
+        return phi
+    order = len(ctx.a_dom) - 1
+    cols = []
+    for j in range(phi.shape[1]):
+        w = signal.lfilter([1.0], ctx.a_dom, phi[:, j])
+        for i in range(order + 1):
+            cols.append(np.concatenate([np.zeros(i), w[: len(w) - i]]) if i else w)
+    return np.column_stack(cols)
+
+
+#: at most this many training samples are used to search a nonlinear parameter
+SEARCH_SAMPLES = 65536
+
+#: eigenvalues of the scaled Gram matrix below this fraction of the largest are dropped
+GRAM_CUTOFF = 1e-13
+
+
+def least_squares(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least squares by the column-scaled normal equations, pseudo-inverse by eigh.
+
+    The filtered regressors are nearly collinear; directions with a scaled eigenvalue below
+    GRAM_CUTOFF·max carry no measurable output and are left out (minimum-norm solution).
+    Normal equations (not a tall SVD) keep each fit to two matrix products: the parameter
+    searches make hundreds of fits.
+    """
+    return solve_gram(x.T @ x, x.T @ y)
+
+
+def solve_gram(gram: np.ndarray, xty: np.ndarray) -> np.ndarray:
+    """θ from the normal equations G θ = Xᵀy, scaled to unit diagonal, pseudo-inverse."""
+    scale = np.sqrt(np.diag(gram).copy())
+    scale[scale == 0] = 1.0
+    w, vecs = np.linalg.eigh(gram / np.outer(scale, scale))
+    keep = w > GRAM_CUTOFF * w[-1]
+    vk = vecs[:, keep]
+    return (vk @ ((vk.T @ (xty / scale)) / w[keep])) / scale
+
+
+class _SearchFit:
+    """Training-part SSE of [base, new] fits with the base's Gram blocks computed once."""
+
+    def __init__(self, ctx: Context, base: np.ndarray | None) -> None:
+        fit = ctx.split.fit
+        self.fit = fit
+        self.y = ctx.target[fit]
+        self.yy = float(self.y @ self.y)
+        self.base = None if base is None else base[fit]
+        if self.base is not None:
+            self.gbb = self.base.T @ self.base
+            self.bty = self.base.T @ self.y
+
+    def sse(self, x: np.ndarray) -> float:
+        xf = x[self.fit]
+        gxx, xty = xf.T @ xf, xf.T @ self.y
+        if self.base is None:
+            gram, rhs = gxx, xty
+        else:
+            gxb = xf.T @ self.base
+            gram = np.block([[self.gbb, gxb.T], [gxb, gxx]])
+            rhs = np.concatenate([self.bty, xty])
+        theta = solve_gram(gram, rhs)
+        return max(self.yy - float(theta @ rhs), 0.0)  # Σe² at the least-squares optimum
+
+
+class NotApplicable(Exception):
+    """The data do not allow this effect (e.g. an input that never leaves its median)."""
+
+
+def search_param(spec: EffectSpec, ctx: Context, base: np.ndarray | None = None) -> float | None:
+    """Nonlinear parameter by search on the training part: grid, then bounded refinement."""
+    if spec.param is None:
+        return None
+    grid = np.asarray(spec.grid(ctx), float)
+    grid = grid[np.isfinite(grid) & (grid > 0)]
+    if grid.size == 0:
+        raise NotApplicable(f"{spec.name}: the data give no {spec.param} to search")
+    search = _SearchFit(ctx, base)
+    costs = np.array([search.sse(columns(spec, g, ctx)) for g in grid])
+    best = int(np.argmin(costs))
+    lo = grid[best - 1] if best > 0 else grid[best] * (0.5 if not spec.integer_coarse else 0.0)
+    hi = grid[best + 1] if best + 1 < grid.size else grid[best] * 1.5
+    if spec.integer_coarse:
+        lo, hi = max(lo, 0.0), hi
+    res = minimize_scalar(lambda p: search.sse(columns(spec, p, ctx)),
+                          bounds=(lo, hi), method="bounded",
+                          options={"xatol": max(1e-6, 0.01 * (hi - lo)), "maxiter": 25})
+    return float(res.x) if res.fun < costs[best] else float(grid[best])
+
+
+def fit_effect(name: str, ctx: Context, base: list[FittedEffect] | None = None,
+               base_columns: np.ndarray | None = None) -> tuple[FittedEffect, list[FittedEffect]]:
+    """Fit effect ``name`` on top of already chosen effects ``base`` (refitted jointly).
+
+    Returns the new effect and the refitted base effects.
+    """
+    spec = SPECS[name]
+    n_search = ctx.split.warmup + SEARCH_SAMPLES
+    if ctx.split.train_end > n_search:  # long records: search on the first part only
+        param = search_param(spec, ctx.head(n_search),
+                             None if base_columns is None else base_columns[:n_search])
+    else:
+        param = search_param(spec, ctx, base_columns)
+    x_new = columns(spec, param, ctx, ctx.regressors(spec, param))
+    xx = x_new if base_columns is None else np.column_stack([base_columns, x_new])
+    theta = least_squares(xx[ctx.split.fit], ctx.target[ctx.split.fit])
+    refitted = []
+    pos = 0
+    for eff in base or []:
+        k = eff.n_linear
+        refitted.append(_with_theta(eff.name, eff.param, theta[pos: pos + k], ctx))
+        pos += k
+    new = _with_theta(name, param, theta[pos:], ctx)
+    return new, refitted
+
+
+def _with_theta(name: str, param: float | None, theta: np.ndarray, ctx: Context) -> FittedEffect:
+    spec = SPECS[name]
+    if spec.dynamic:
+        width = len(ctx.a_dom)
+        coefs = [np.asarray(theta[j: j + width], float) for j in range(0, len(theta), width)]
+    else:
+        coefs = [np.asarray(theta, float)]
+    eff = FittedEffect(name, param, coefs, n_linear=len(theta), centre=ctx.centre(spec))
+    eff.physical = physical_report(eff, ctx)
+    return eff
+
+
+_LABELS = {"coulomb_friction": ["coulomb_level"],
+           "viscous_friction": ["viscous_coefficient"],
+           "stribeck_friction": ["coulomb_level", "stribeck_excess"],
+           "cubic_stiffness": ["cubic_coefficient"]}
+
+#: friction effects: reported with the sign flipped so that a force opposing motion is
+#: positive on a plant whose force path has the input's sign (the §V model)
+FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
+
+
+def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
+    """Fitted physical parameters.
+
+    The searched parameter in its unit. A dynamic effect's coefficient is referred to the
+    input: c = ⟨Ĝφ, G_eφ⟩/⟨Ĝφ, Ĝφ⟩ over the training part, the input (e.g. valve voltage)
+    per unit of φ that Ĝ would need to produce the same output (on the §V model: F_c/gain for
+    Coulomb friction, c_v/gain for viscous). Where the effect's force does not enter like the
+    input (a pneumatic actuator between valve and piston) this is only an order of magnitude.
+
+    ``plausible``: a Stribeck term must raise friction at low speed (Fs > Fc): its excess
+    and its Coulomb part, both referred to the input the same way, must have the same sign.
+    The sign of a single friction term cannot be judged without knowing how force enters.
+    """
+    spec = SPECS[eff.name]
+    out: dict[str, Any] = {}
+    if spec.param is not None:
+        out[spec.param] = stored_param(spec, eff.param, ctx.fs_hz)
+        out[f"{spec.param}_unit"] = spec.unit
+    plausible = True
+    if spec.dynamic:
+        phi = ctx.regressors(spec, eff.param)
+        fit = ctx.split.fit
+        labels = _LABELS.get(eff.name, ["input_gain"])
+        for j, (label, b) in enumerate(zip(labels, eff.coefficients)):
+            w = signal.lfilter(ctx.b_dom, ctx.a_dom, phi[:, j])[fit]
+            g = signal.lfilter(b, ctx.a_dom, phi[:, j])[fit]
+            ww = float(w @ w)
+            c = float(w @ g) / ww if ww > 0 else 0.0
+            if eff.name in _LABELS:
+                out[f"{label}_input_equivalent"] = -c if eff.name in FRICTION else c
+            else:
+                out[label] = c
+        if eff.name == "stribeck_friction":
+            plausible = (out["coulomb_level_input_equivalent"]
+                         * out["stribeck_excess_input_equivalent"]) > 0.0
+    else:
+        key = "offset" if eff.name == "sensor_offset" else "gain"
+        out[key] = float(eff.coefficients[0][0])
+    out["plausible"] = plausible
+    return out

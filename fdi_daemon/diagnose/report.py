@@ -1,0 +1,112 @@
+"""The diagnose report (`--json`, DESIGN.md) and its one-screen text summary."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from fdi_daemon.diagnose.select import ALPHA
+from fdi_daemon.diagnose.signals import nrmse
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def build_report(result, source: str = "") -> dict[str, Any]:
+    """``{effect, gap_before, gap_after, gap_metric, ranking, params, regions, ...}``."""
+    ctx = result.ctx
+    test = ctx.split.test
+    y = result.y_measured
+    named = [e for e in result.selection.chosen if e.name != "linear_refit"]
+    rounds = []
+    for candidates in result.selection.rounds:
+        rows = []
+        for c in candidates:
+            gap = nrmse(y[test], (ctx.y0 + c.prediction)[test])
+            rows.append(c.ranking_entry(gap))
+        rounds.append(rows)
+    where = result.where_before
+    report = {
+        "effect": named[0].name if named else None,
+        "gap_before": result.gap_before,
+        "gap_after": result.gap_after,
+        "gap_metric": "nrmse",
+        "ranking": rounds[0] if rounds else [],
+        "params": dict(named[0].physical) if named else {},
+        "regions": where["regions"],
+        "effects": [{"effect": e.name, "params": dict(e.physical)} for e in named],
+        "rounds": rounds,
+        "test": {"held_out_from_s": ctx.split.train_end / ctx.fs_hz,
+                 "samples": ctx.split.n - ctx.split.train_end, "alpha": ALPHA,
+                 "score": "n_eff ln(SSE1/SSE0) + k ln(n_eff) on held-out data; "
+                          "F-test p < alpha"},
+        "localization": {
+            "whiteness_before": where["whiteness"],
+            "whiteness_after": result.where_after["whiteness"],
+            "cross_correlation_before": {k: v for k, v in where["cross_correlation"].items()
+                                         if k not in ("lags", "r")},
+            "cross_correlation_after": {
+                k: v for k, v in result.where_after["cross_correlation"].items()
+                if k not in ("lags", "r")},
+        },
+        "model": {"baseline": result.info["baseline"],
+                  "baseline_refit": "numerator of the nominal model refitted with every "
+                                    "candidate (effect linear_refit in the model file)",
+                  "output_kind": ctx.output_kind,
+                  "highpass_hz": result.info["highpass_hz"], "fs": ctx.fs_hz},
+        "source": source,
+    }
+    return _plain(report)
+
+
+def summary_lines(report: dict[str, Any]) -> list[str]:
+    """A short human-readable summary for the terminal."""
+    lines = [f"baseline: {report['model']['baseline']}  "
+             f"(output {report['model']['output_kind']}, held out from "
+             f"t = {report['test']['held_out_from_s']:.3g} s)"]
+    if report["effect"] is None:
+        lines.append("no significant missing effect")
+    else:
+        for e in report["effects"]:
+            params = ", ".join(
+                f"{k}={v:.4g}" + (f" {e['params'][k + '_unit']}"
+                                  if k + "_unit" in e["params"] else "")
+                for k, v in e["params"].items()
+                if isinstance(v, (int, float)) and not isinstance(v, bool))
+            lines.append(f"missing effect: {e['effect']}  ({params})")
+    lines.append(f"gap (NRMSE, held out): {report['gap_before']:.4g} -> "
+                 f"{report['gap_after']:.4g}")
+    lines.append("ranking:")
+    for row in report["ranking"][:5]:
+        mark = "*" if row["accepted"] else " "
+        lines.append(f" {mark} {row['effect']:<18} gap {row['gap_after']:.4g}  "
+                     f"score {row['score']:.1f}  p {row['p_value']:.2g}")
+    seg = [r for r in report["regions"] if r["kind"] == "time"][:1]
+    st = [r for r in report["regions"] if r["kind"] == "state"][:1]
+    fr = [r for r in report["regions"] if r["kind"] == "frequency"][:1]
+    where = []
+    if seg:
+        where.append(f"t {seg[0]['t0']:.3g}-{seg[0]['t1']:.3g} s")
+    if st:
+        where.append(f"{st[0]['variable']} (explains {100 * st[0]['explained']:.0f} %)")
+    if fr:
+        where.append(f"{fr[0]['f0']:.3g}-{fr[0]['f1']:.3g} Hz "
+                     f"({100 * fr[0]['error_power_fraction']:.0f} % of error power)")
+    lines.append("error sat at: " + "; ".join(where))
+    return lines

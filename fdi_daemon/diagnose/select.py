@@ -1,0 +1,185 @@
+"""Score each candidate effect on held-out data, test its significance, pick the winner(s).
+
+Every candidate is fitted on the training part (its nonlinear parameter by search, its
+coefficients by least squares) and judged on the held-out part only:
+
+- effective sample size: the held-out residual e₀ that the candidates have to explain is
+  coloured, so its samples are not independent; n_eff = n / τ with τ = 1 + 2 Σ_k ρ_k
+  (integrated autocorrelation time, summed up to the first lag where ρ_k < 0.05), the same
+  for every candidate of a round (so that their scores compare like with like);
+- parsimony: Δ score = n_eff ln(SSE₁/SSE₀) + k ln(n_eff) (BIC difference against the model
+  without the candidate, k = its coefficients + its searched parameter); < 0 is better;
+- significance: F = ((SSE₀ − SSE₁)/k) / (SSE₁/(n_eff − k_total)), p = P(F_{k, n_eff−k_total} > F).
+
+A candidate is accepted when p < ALPHA, Δ score < 0, it removes at least MIN_REDUCTION of
+the held-out error energy (statistically significant but practically void improvements —
+a discretisation mismatch of a few per cent, say — are not a missing effect) and its
+physical coefficients are plausible (`effects.physical_report`); the best accepted (lowest
+score) is named — unless a candidate that contains it (Stribeck contains Coulomb) beats it
+in a nested F-test at ALPHA. Then every remaining candidate is tried on top of it (jointly
+refitted) for a second effect, with the same test. No accepted candidate: "no significant missing effect".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from fdi_daemon.diagnose.effects import (SPECS, Context, FittedEffect, NotApplicable, columns,
+                                         fit_effect)
+
+#: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
+#: effect in pure noise near 2 %
+ALPHA = 1e-3
+#: smallest share of the held-out error energy (SSE) an effect must remove to be named
+MIN_REDUCTION = 0.05
+#: effects that contain another as a special case (Stribeck with no excess is Coulomb)
+NESTS = {"stribeck_friction": "coulomb_friction"}
+#: how many effects are added at most (the first, then one more)
+MAX_EFFECTS = 2
+
+
+@dataclass
+class Candidate:
+    name: str
+    effect: FittedEffect
+    base: list[FittedEffect]
+    sse_test: float
+    sse_reference: float
+    n_eff: float
+    score: float
+    p_value: float
+    accepted: bool
+    prediction: np.ndarray = field(repr=False, default=None)  # contribution of all effects
+
+    def ranking_entry(self, gap_after: float) -> dict:
+        return {"effect": self.name, "gap_after": gap_after, "score": self.score,
+                "p_value": self.p_value, "accepted": self.accepted,
+                "params": dict(self.effect.physical)}
+
+
+def effective_samples(e: np.ndarray, max_lag: int = 200) -> float:
+    """n / τ, τ the integrated autocorrelation time of e."""
+    e = np.asarray(e, float) - np.mean(e)
+    n = len(e)
+    var = float(e @ e)
+    if var == 0.0 or n < 4:
+        return float(n)
+    spec = np.fft.rfft(e, 2 * n)
+    acf = np.fft.irfft(spec * np.conj(spec))[: min(max_lag, n - 1) + 1] / var
+    tau = 1.0
+    for rho in acf[1:]:
+        if rho < 0.05:
+            break
+        tau += 2.0 * rho
+    return n / tau
+
+
+def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.ndarray | None,
+             sse_reference: float, n_eff: float) -> Candidate:
+    """Fit ``name`` on top of ``base`` and judge it on the held-out part (n_eff: effective
+    samples of the residual it has to explain, the same for every candidate of a round)."""
+    eff, refitted = fit_effect(name, ctx, base, base_cols)
+    x_new = columns(SPECS[name], eff.param, ctx, ctx.regressors(SPECS[name], eff.param))
+    xx = x_new if base_cols is None else np.column_stack([base_cols, x_new])
+    theta = np.concatenate([np.concatenate([np.ravel(c) for c in e.coefficients])
+                            for e in refitted + [eff]])
+    prediction = xx @ theta
+    test = ctx.split.test
+    e1 = ctx.target[test] - prediction[test]
+    sse1 = float(e1 @ e1)
+    k = eff.n_params
+    k_total = k + sum(b.n_params for b in refitted)
+    dof = n_eff - k_total
+    if sse1 <= 0.0:
+        score, p = -math.inf, 0.0
+    else:
+        score = n_eff * math.log(sse1 / sse_reference) + k * math.log(max(n_eff, 2.0))
+        if dof > 1 and sse1 < sse_reference:
+            f_stat = ((sse_reference - sse1) / k) / (sse1 / dof)
+            p = float(stats.f.sf(f_stat, k, dof))
+        else:
+            p = 1.0
+    plausible = all(e.physical.get("plausible", True) for e in refitted + [eff])
+    return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, float(score), p,
+                     bool(p < ALPHA and score < 0.0 and plausible
+                          and sse1 <= (1.0 - MIN_REDUCTION) * sse_reference), prediction)
+
+
+def nested_p_value(larger: Candidate, smaller: Candidate, n_eff: float) -> float:
+    """F-test of a candidate against one it contains: do its extra parameters pay?"""
+    extra = larger.effect.n_params - smaller.effect.n_params
+    dof = n_eff - larger.effect.n_params - sum(b.n_params for b in larger.base)
+    if extra <= 0 or dof <= 1 or larger.sse_test >= smaller.sse_test:
+        return 1.0
+    f_stat = ((smaller.sse_test - larger.sse_test) / extra) / (larger.sse_test / dof)
+    return float(stats.f.sf(f_stat, extra, dof))
+
+
+def _prefer_nesting(best: Candidate, accepted: list[Candidate], n_eff: float) -> Candidate:
+    """The best-scored candidate, unless one that contains it is significantly better
+    (nested F-test at ALPHA): BIC alone under-rewards extra parameters when n_eff is small."""
+    for c in accepted:
+        if NESTS.get(c.name) == best.name and nested_p_value(c, best, n_eff) < ALPHA:
+            return c
+    return best
+
+
+@dataclass
+class Selection:
+    chosen: list[FittedEffect]
+    rounds: list[list[Candidate]]
+    prediction: np.ndarray  # Σ contributions of the chosen effects (whole record)
+
+
+def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
+                   refit_linear: bool = False) -> Selection:
+    """Rounds of candidate search; see the module docstring.
+
+    refit_linear: the nominal model's numerator is refitted jointly with every candidate
+    (``linear_refit``, part of the base: an imperfect Ĝ, or one fitted on data that hold the
+    effect, otherwise makes linear stand-ins such as a dead time look significant). It is
+    kept only when an effect is named.
+    """
+    chosen: list[FittedEffect] = []
+    base_cols = None
+    prediction = np.zeros_like(ctx.target)
+    if refit_linear:
+        linear, _ = fit_effect("linear_refit", ctx)
+        chosen = [linear]
+        base_cols = columns(SPECS["linear_refit"], None, ctx)
+        prediction = base_cols @ np.concatenate(linear.coefficients)
+    max_effects += len(chosen)
+    rounds: list[list[Candidate]] = []
+    test = ctx.split.test
+    while len(chosen) < max_effects:
+        e0 = ctx.target[test] - prediction[test]
+        sse0 = float(e0 @ e0)
+        n_eff = effective_samples(e0)
+        remaining = [c for c in ctx.candidates if c not in {e.name for e in chosen}]
+        results = []
+        for name in remaining:
+            try:
+                results.append(evaluate(name, ctx, chosen, base_cols, sse0, n_eff))
+            except NotApplicable:
+                pass
+            if progress is not None:
+                progress(name)
+        results.sort(key=lambda c: c.score)
+        rounds.append(results)
+        accepted = [c for c in results if c.accepted]
+        if not accepted:
+            break
+        best = _prefer_nesting(accepted[0], accepted, n_eff)
+        chosen = best.base + [best.effect]
+        cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
+                for e in chosen]
+        base_cols = np.column_stack(cols)
+        prediction = best.prediction
+    if refit_linear and len(chosen) == 1:
+        # nothing named: the model stays as it was (a refit alone is not a missing effect)
+        chosen, prediction = [], np.zeros_like(ctx.target)
+    return Selection(chosen, rounds, prediction)

@@ -1,0 +1,126 @@
+"""Simulate the nominal model: Ĝ from a model file, or a linear baseline fitted on the
+training part of the recording (`--fit-linear`), and set up the fitting context.
+
+The linear baseline is an output-error model (eq. 8 form, `fdi_daemon.ident.output_error`:
+ARX start, Steiglitz–McBride, Levenberg–Marquardt with stability enforced) fitted in the
+measured quantity's domain (order + n poles: the n leaky integrators of `signals`) and
+converted back to acceleration for the model file. Output error, not ARX: with noise on the
+measured output ARX is biased and the bias would show up as a spurious "missing effect".
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import signal
+
+from fdi_daemon.diagnose import signals
+from fdi_daemon.diagnose.augment import AugmentedPlant
+from fdi_daemon.diagnose.effects import EFFECT_NAMES, Context
+from fdi_daemon.errors import UserError
+
+
+def measured_in_domain(y: np.ndarray, n: int, highpass_hz: float, fs_hz: float) -> np.ndarray:
+    """Hⁿ y, started in steady state on y[0] (a position record need not start at 0)."""
+    if n == 0:
+        return np.asarray(y, float).copy()
+    b, a = signals.measured_transform(n, highpass_hz, fs_hz)
+    zi = signal.lfilter_zi(b, a) * y[0]
+    return signal.lfilter(b, a, y, zi=zi)[0]
+
+
+#: baseline orders tried when --order is not given
+ORDER_CHOICES = (2, 4, 6, 8)
+
+
+def _oe(u: np.ndarray, y: np.ndarray, order: int, n: int):
+    from fdi_daemon.ident.output_error import fit_output_error
+
+    nf = order + n
+    return fit_output_error(u, y, nb=nf + 1, nf=nf, nk=0)
+
+
+def choose_order(u: np.ndarray, y_dom: np.ndarray, n: int, split: signals.Split) -> int:
+    """Baseline order from the data: fit each of ORDER_CHOICES on the first 3/4 of the
+    training part, simulate the last 1/4 (from the fitted initial state onwards, warm-up
+    excluded), and keep the lowest order within 2 % of the best validation NRMSE."""
+    cut = int(split.train_end * 0.75)
+    errors = {}
+    for order in ORDER_CHOICES:
+        oe = _oe(u[:cut], y_dom[:cut], order, n)
+        y_sim = signal.lfilter(oe.b_delayed, oe.f, u[:split.train_end])
+        settle = signals.settle_samples(oe.f, (split.train_end - cut) // 2)
+        val = slice(cut + settle, split.train_end)
+        errors[order] = signals.nrmse(y_dom[val], y_sim[val])
+    best = min(errors.values())
+    return min(o for o, e in errors.items() if e <= 1.02 * best)
+
+
+def fit_linear(u: np.ndarray, y_dom: np.ndarray, n: int, split: signals.Split,
+               order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Output-error model (b, a in q⁻¹) of the measured quantity, from the training part."""
+    oe = _oe(u[:split.train_end], y_dom[:split.train_end], order, n)
+    return oe.b_delayed, oe.f
+
+
+def band_centre_hz(u: np.ndarray, fs_hz: float) -> float:
+    """Input-power-weighted median frequency (where the effects are referred to the input)."""
+    x = np.asarray(u, float) - np.mean(u)
+    nper = min(len(x), 1024)
+    f, pxx = signal.welch(x, fs=fs_hz, nperseg=nper)
+    if not np.any(pxx[1:] > 0):
+        return fs_hz / 20.0
+    cum = np.cumsum(pxx[1:]) / np.sum(pxx[1:])
+    return float(f[1:][np.searchsorted(cum, 0.5)])
+
+
+def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
+            plant_b: np.ndarray | None, plant_a: np.ndarray | None,
+            order: int | None = None) -> tuple[Context, AugmentedPlant, dict]:
+    """Context for the effect fits and the nominal plant; plant None -> fit a linear baseline
+    of ``order`` (None: `choose_order`)."""
+    n_kind = signals.OUTPUT_KINDS[output_kind]
+    u = np.asarray(u, float)
+    y = np.asarray(y, float)
+    hp = signals.highpass_from_input(u, fs_hz)
+    y_dom = measured_in_domain(y, n_kind, hp, fs_hz)
+    provisional = signals.make_split(len(u), 0)
+    info = {"highpass_hz": hp}
+    domain = None
+    if plant_b is None:
+        chosen = order if order is not None else choose_order(u, y_dom, n_kind, provisional)
+        domain = fit_linear(u, y_dom, n_kind, provisional, chosen)
+        plant_b, plant_a = signals.acceleration_plant(*domain, n_kind, hp, fs_hz)
+        how = "" if order is not None else " (chosen from the data)"
+        info["baseline"] = (f"output-error fit, order {chosen}{how}, on t < "
+                            f"{provisional.train_end / fs_hz:.3g} s")
+    else:
+        info["baseline"] = "model file"
+    if len(plant_a) > 1 and np.max(np.abs(np.roots(plant_a))) >= 1.0:
+        raise UserError("the model's plant is unstable (a root of plant.a on or outside the "
+                        "unit circle): it cannot be simulated")
+    nominal = AugmentedPlant(fs_hz, plant_b, plant_a, output_kind, hp, domain=domain)
+    sig = nominal.run_signals(u)
+    hp_settle = int(math.ceil(math.log(100.0) * fs_hz / (2 * math.pi * hp)))
+    limit = len(u) // 4
+    warmup = max(signals.settle_samples(nominal.a_dom, limit), min(hp_settle, limit))
+    split = signals.make_split(len(u), warmup)
+    # a DC block removes an offset; a baseline fitted here already holds the linear effects
+    skip = ({"sensor_offset"} if n_kind else set()) | (
+        {"viscous_friction", "dead_time"} if info["baseline"] != "model file" else set())
+    candidates = tuple(e for e in EFFECT_NAMES if e not in skip)
+    ref_hz = band_centre_hz(u, fs_hz)
+    # a dead time beyond a quarter period at the band centre (> 90° of phase there) is a
+    # wrong model, not a dead time
+    max_delay = int(max(1, min(round(0.25 * fs_hz / ref_hz), split.train_end // 20)))
+    ctx = Context(u=u, v=sig["v"], x=sig["x"], y0=sig["y0"], target=y_dom - sig["y0"],
+                  a_dom=nominal.a_dom, b_dom=nominal.b_dom, split=split, fs_hz=fs_hz,
+                  output_kind=output_kind, ref_hz=ref_hz,
+                  max_delay_samples=max_delay,
+                  u_centre=float(np.median(u[split.fit])), candidates=candidates)
+    info["y_dom"] = y_dom
+    info["plant_b"] = np.asarray(plant_b, float)
+    info["plant_a"] = np.asarray(plant_a, float)
+    info["domain"] = domain
+    return ctx, nominal, info

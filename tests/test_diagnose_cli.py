@@ -1,0 +1,106 @@
+"""`fdi diagnose` end to end: report contract, augmented model, plot, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from fdi_daemon.cli import main
+from fdi_daemon.diagnose.augment import AugmentedPlant
+from fdi_daemon.io.model_file import FdiModel, load_model, save_model
+from fdi_daemon.io.recordings import Recording, write_recording
+from tests.diagnose_cases import FS, nominal_model, recording
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("diag")
+    b, a = nominal_model()
+    save_model(d / "nominal.yaml", FdiModel(fs=FS, plant_b=b, plant_a=a,
+                                            provenance={"source": "test"}))
+    write_recording(d / "coulomb.csv", recording("coulomb_friction"))
+    write_recording(d / "clean.npz", recording(None))
+    return d
+
+
+def test_report_model_and_plot(files, capsys):
+    out = files / "out"
+    out.mkdir(exist_ok=True)
+    rc = main(["diagnose", str(files / "coulomb.csv"), "--model", str(files / "nominal.yaml"),
+               "--json", str(out / "r.json"), "--plot", str(out / "p.png"),
+               "-o", str(out / "aug.yaml")])
+    assert rc == 0
+    assert "coulomb_friction" in capsys.readouterr().out
+    report = json.loads((out / "r.json").read_text())
+    for key in ("effect", "gap_before", "gap_after", "gap_metric", "ranking", "params",
+                "regions"):
+        assert key in report
+    assert report["effect"] == "coulomb_friction"
+    assert report["gap_metric"] == "nrmse"
+    assert report["gap_after"] <= 0.5 * report["gap_before"]
+    assert {"effect", "gap_after", "score"} <= set(report["ranking"][0])
+    assert {r["kind"] for r in report["regions"]} == {"time", "state", "frequency"}
+    assert (out / "p.png").stat().st_size > 10_000
+    model = load_model(out / "aug.yaml")
+    assert model.provenance["source"] == "test"
+    assert "coulomb_friction" in [i["name"] for i in model.extra["effects"]["items"]]
+    rec = recording("coulomb_friction")
+    test = slice(int(round(len(rec.t) * 2 / 3)), None)
+    nominal = AugmentedPlant.from_model(load_model(files / "nominal.yaml"))
+    e_before = rec.accel - nominal.run(rec.v_in)
+    e_after = rec.accel - AugmentedPlant.from_model(model).run(rec.v_in)
+    assert np.std(e_after[test]) < 0.5 * np.std(e_before[test])
+
+
+def test_fit_linear_velocity_output_and_no_effect(files, capsys):
+    rc = main(["diagnose", str(files / "clean.npz"), "--fit-linear", "--output-kind", "velocity",
+               "--json", str(files / "v.json"), "-o", str(files / "v.yaml")])
+    assert rc == 0
+    assert "no significant missing effect" in capsys.readouterr().out
+    report = json.loads((files / "v.json").read_text())
+    assert report["effect"] is None and report["params"] == {}
+    model = load_model(files / "v.yaml")
+    assert model.extra["effects"]["output_kind"] == "velocity"
+
+
+def _bad(args, capsys):
+    rc = main(["diagnose", *args])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1, err
+    return err
+
+
+def test_bad_input_is_one_line_and_exit_2(files, tmp_path, capsys):
+    model = str(files / "nominal.yaml")
+    assert "no such file" in _bad([str(tmp_path / "none.csv"), "--model", model], capsys)
+    assert "no column" in _bad([str(files / "coulomb.csv"), "--model", model,
+                                "--output", "torque"], capsys)
+    save_model(tmp_path / "m128.yaml", FdiModel(fs=128.0, plant_b=np.array([0.0, 1.0]),
+                                                plant_a=np.array([1.0, -0.5])))
+    assert "fs" in _bad([str(files / "coulomb.csv"), "--model", str(tmp_path / "m128.yaml")],
+                        capsys)
+    rec = recording("coulomb_friction")
+    cols = {k: v.copy() for k, v in rec.columns.items()}
+    cols["accel"][100] = np.nan
+    write_recording(tmp_path / "nan.csv", Recording(cols, dict(rec.meta)))
+    assert "not finite" in _bad([str(tmp_path / "nan.csv"), "--fit-linear"], capsys)
+    short = Recording({k: v[:100] for k, v in rec.columns.items()}, dict(rec.meta))
+    write_recording(tmp_path / "short.csv", short)
+    assert "samples" in _bad([str(tmp_path / "short.csv"), "--fit-linear"], capsys)
+    flat = {k: v.copy() for k, v in rec.columns.items()}
+    flat["v_in"][:] = 0.0
+    write_recording(tmp_path / "flat.csv", Recording(flat, dict(rec.meta)))
+    assert "constant" in _bad([str(tmp_path / "flat.csv"), "--fit-linear"], capsys)
+    keep = np.ones(len(rec.t), bool)
+    keep[500:510] = False
+    write_recording(tmp_path / "gap.csv",
+                    Recording({k: v[keep] for k, v in rec.columns.items()}, dict(rec.meta)))
+    assert "irregular sampling" in _bad([str(tmp_path / "gap.csv"), "--fit-linear"], capsys)
+    (tmp_path / "broken.yaml").write_text("fs: [\n")
+    assert "YAML" in _bad([str(files / "coulomb.csv"), "--model",
+                           str(tmp_path / "broken.yaml")], capsys)
+    assert "does not exist" in _bad([str(files / "coulomb.csv"), "--model", model, "--json",
+                                   str(tmp_path / "missing_dir" / "r.json")], capsys)

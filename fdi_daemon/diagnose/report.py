@@ -2,30 +2,12 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
-import numpy as np
 
 from fdi_daemon.diagnose.select import ALPHA
+from fdi_daemon.io.plain import json_data
 from fdi_daemon.diagnose.signals import nrmse
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        v = float(value)
-        return v if math.isfinite(v) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
 
 
 def build_report(result, source: str = "") -> dict[str, Any]:
@@ -72,7 +54,7 @@ def build_report(result, source: str = "") -> dict[str, Any]:
                   "highpass_hz": result.info["highpass_hz"], "fs": ctx.fs_hz},
         "source": source,
     }
-    return _plain(report)
+    return json_data(report)
 
 
 def summary_lines(report: dict[str, Any]) -> list[str]:

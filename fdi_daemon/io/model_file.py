@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.plain import plain_data
 from fdi_daemon.io.yaml_file import read_yaml
 
 KNOWN_KEYS = ("fs", "plant", "fault_filter", "velocity", "detector", "provenance")
@@ -61,26 +62,13 @@ class FdiModel:
         for key in ("velocity", "detector", "provenance"):
             value = getattr(self, key)
             if value:
-                out[key] = _plain(value)
-        out.update(_plain(self.extra))
+                out[key] = plain_data(value)
+        out.update(plain_data(self.extra))
         return out
 
 
 def _floats(values: np.ndarray) -> list[float]:
     return [float(v) for v in np.asarray(values, dtype=float)]
-
-
-def _plain(value: Any) -> Any:
-    """Numpy scalars/arrays to plain Python so that yaml.safe_dump can write them."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
 
 
 def save_model(path: str | Path, model: FdiModel) -> Path:

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
-
 from fdi_daemon.diagnose.select import ALPHA
-from fdi_daemon.io.plain import json_data
 from fdi_daemon.diagnose.signals import nrmse
+from fdi_daemon.io.plain import json_data
 
 
 def build_report(result, source: str = "") -> dict[str, Any]:

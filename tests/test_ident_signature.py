@@ -5,6 +5,7 @@ import pytest
 from conftest_ident import OE_B, OE_F, signature_data
 from scipy import signal
 
+from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.ident import signature as sig
 
 
@@ -21,7 +22,7 @@ def test_friction_signal_and_residual():
     np.testing.assert_allclose(sig.friction_signal(v, 2.0), [-5.0, 0.0, 2.0])
     b, a = [0.0, 0.5], [1.0, -0.5]
     u = np.arange(5.0)
-    np.testing.assert_allclose(sig.plant_residual(b, a, u, np.ones(5)),
+    np.testing.assert_allclose(sig.plant_residual(IIRFilter(b, a), u, np.ones(5)),
                                1.0 - signal.lfilter(b, a, u))
 
 

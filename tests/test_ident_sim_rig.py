@@ -7,6 +7,7 @@ from conftest_ident import sim_model, sim_recordings, true_gamma  # noqa: F401  
 
 from fdi_daemon.cli import main
 from fdi_daemon.core.velocity import VelocityEstimator
+from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.ident import signature, validation
 from fdi_daemon.io.model_file import load_model
 from fdi_daemon.io.recordings import read_recording
@@ -77,7 +78,7 @@ def test_signature_command_writes_a_stable_filter_and_its_choices(
 def _signature(model_path, rec_path, t0, t1, **options):
     model = load_model(model_path)
     rec = read_recording(rec_path)
-    residual = signature.plant_residual(model.plant_b, model.plant_a, rec.v_in, rec.accel)
+    residual = signature.plant_residual(IIRFilter(model.plant_b, model.plant_a), rec.v_in, rec.accel)
     velocity = VelocityEstimator(model.fs).run(rec.accel)
     first, end = int(np.searchsorted(rec.t, t0)), int(np.searchsorted(rec.t, t1))
     return rec, signature.estimate_signature(residual[:end], velocity[:end], fit_from=first,

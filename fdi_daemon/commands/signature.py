@@ -63,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
 
     from fdi_daemon.commands.identify import load_io, parse_range
     from fdi_daemon.core.velocity import DEFAULT_SETTINGS, VelocityEstimator
+    from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.errors import ConfigError, UserError
     from fdi_daemon.ident import provenance
     from fdi_daemon.ident import signature as sig
@@ -116,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
 
     # residual (eq. 3) and velocity from the recording start, so that filter start-up
     # transients have settled before the window; the fit uses the window only
-    residual = sig.plant_residual(model.plant_b, model.plant_a, v_in, accel)
+    residual = sig.plant_residual(nominal_plant(model), v_in, accel)
     velocity = estimator.run(accel)
     first, end = int(np.flatnonzero(inside)[0]), int(np.flatnonzero(inside)[-1]) + 1
     start = 0

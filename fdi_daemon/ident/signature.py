@@ -58,10 +58,11 @@ def gamma_grid(lo: float = 0.0, hi: float = 10.0, step: float = 0.2) -> np.ndarr
     return lo + step * np.arange(count)
 
 
-def plant_residual(plant_b: np.ndarray, plant_a: np.ndarray, v_in: np.ndarray,
-                   accel: np.ndarray) -> np.ndarray:
-    """r = ẍ − Ĝ(q) v_in, eq. (3), Ĝ started at rest at the first sample (as the monitor)."""
-    return np.asarray(accel, dtype=float) - signal.lfilter(plant_b, plant_a, v_in)
+def plant_residual(plant, v_in: np.ndarray, accel: np.ndarray) -> np.ndarray:
+    """r = ẍ − Ĝ(q) v_in, eq. (3); ``plant`` is the monitor's nominal-model block (anything
+    with ``run``: the Ĝ IIR, or Ĝ plus `fdi diagnose` effects), started at rest at the first
+    sample as in the monitor."""
+    return np.asarray(accel, dtype=float) - plant.run(np.asarray(v_in, dtype=float))
 
 
 def reference_difference(residual: np.ndarray, lag_samples: int) -> np.ndarray:

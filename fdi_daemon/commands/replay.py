@@ -20,6 +20,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="acceleration, θ1/θ2 with band and signature, residual, statistic")
     parser.add_argument("--realtime", action="store_true",
                         help="pace the samples at fs through the per-tick path (as the daemon)")
+    parser.add_argument("--dashboard", action="store_true",
+                        help="with --realtime: show the live dashboard while replaying (q stops)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -31,6 +33,9 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.io.model_file import load_model
     from fdi_daemon.io.recordings import read_recording
 
+    if args.dashboard and not args.realtime:
+        raise UserError("--dashboard needs --realtime (a batch replay is over before a "
+                        "screen could show it)")
     model = load_model(args.model)
     rec = read_recording(args.recording, strict=False)
     if abs(rec.fs - model.fs) > 1e-6 * model.fs:
@@ -38,7 +43,12 @@ def run(args: argparse.Namespace) -> int:
                         f"{model.fs:g} Hz")
     monitor = Monitor(model)
     n = len(rec)
-    if args.realtime:
+    if args.realtime and args.dashboard:
+        from fdi_daemon.dashboard.replay_view import replay_with_dashboard
+
+        events, trace = replay_with_dashboard(lambda on_tick: _paced(monitor, rec, on_tick),
+                                              monitor, str(args.recording), args.model, n)
+    elif args.realtime:
         events, trace = _paced(monitor, rec)
     else:
         trace_every = max(1, -(-n // TRACE_POINTS)) if args.plot else max(1, n)

@@ -14,6 +14,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, metavar="S",
                         help="stop after S seconds of wall-clock time (default: run until "
                              "SIGTERM or Ctrl-C)")
+    parser.add_argument("--dashboard", action="store_true",
+                        help="show the live dashboard in this terminal (q stops the daemon)")
     parser.add_argument("--log-level", choices=("debug", "info", "warning", "error"),
                         default="info", help="daemon log level on stderr (default %(default)s)")
 
@@ -27,4 +29,10 @@ def run(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be a positive number of seconds (got {args.duration:g})")
     setup_logging(getattr(logging, args.log_level.upper()))
-    return Daemon(args.config, echo=lambda text: print(text, flush=True)).run(args.duration)
+    daemon = Daemon(args.config, echo=lambda text: print(text, flush=True))
+    if args.dashboard:
+        from fdi_daemon.dashboard.app import Frame, run_alongside
+
+        return run_alongside(lambda: daemon.run(args.duration),
+                             lambda: Frame(daemon.board.snapshot()))
+    return daemon.run(args.duration)

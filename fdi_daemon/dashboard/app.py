@@ -1,0 +1,238 @@
+"""The dashboard loop: a `rich.live.Live` screen redrawn at >= 10 Hz from a snapshot provider.
+
+A *snapshot provider* is any callable returning a `Frame` (the latest snapshot and an optional
+notice). The dashboard only ever calls it; it never touches the monitor, so a slow terminal
+can not slow the 256 Hz loop:
+
+- `fdi dashboard` uses `fdi_daemon.dashboard.client.SocketProvider` (the daemon's status
+  socket);
+- in-process views (`fdi run --dashboard`, `fdi replay --realtime --dashboard`) let the sample
+  loop `publish()` snapshots into a `LatestSnapshot` (a lock held only to swap a reference)
+  and run the loop with `run_alongside(work, provider)`.
+
+`q` quits (stdin in cbreak mode when it is a terminal); Ctrl-C quits too.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import select
+import signal
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator
+
+from rich.console import Console
+from rich.live import Live
+
+from fdi_daemon.dashboard.render import render
+
+DEFAULT_REFRESH_HZ = 10.0
+
+
+@dataclass(frozen=True)
+class Frame:
+    """What the dashboard draws next: the latest snapshot (None before the first one) and a
+    notice shown on top of it (e.g. "daemon not reachable, retrying")."""
+
+    snapshot: dict[str, Any] | None
+    notice: str | None = None
+
+
+SnapshotProvider = Callable[[], Frame]
+
+
+class LatestSnapshot:
+    """The in-process snapshot provider: the producer publishes, the dashboard reads.
+
+    `publish` and `__call__` only swap a reference under a lock, so neither side waits for
+    the other's work (building a snapshot, rendering a frame).
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._frame = Frame(None)
+
+    def publish(self, snapshot: dict[str, Any], notice: str | None = None) -> None:
+        frame = Frame(snapshot, notice)
+        with self._lock:
+            self._frame = frame
+
+    def __call__(self) -> Frame:
+        with self._lock:
+            return self._frame
+
+
+class KeyReader:
+    """Single key presses from stdin, without Enter, while in the `with` block.
+
+    In a terminal stdin is put in cbreak mode (signals such as Ctrl-C still work) and restored
+    on exit; otherwise no keys are read and `wait` just sleeps.
+    """
+
+    def __init__(self, stream=None):
+        self._stream = stream if stream is not None else sys.stdin
+        self._fd: int | None = None
+        self._saved: list | None = None
+
+    def __enter__(self) -> "KeyReader":
+        try:
+            fd = self._stream.fileno()
+        except (AttributeError, OSError, ValueError):
+            return self
+        if not os.isatty(fd):
+            return self
+        import termios
+        import tty
+
+        self._fd = fd
+        self._saved = termios.tcgetattr(fd)
+        tty.setcbreak(fd, termios.TCSANOW)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._fd is not None and self._saved is not None:
+            import termios
+
+            termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+        self._fd = self._saved = None
+
+    @property
+    def interactive(self) -> bool:
+        return self._fd is not None
+
+    def wait(self, timeout_s: float) -> str:
+        """Characters typed within `timeout_s` ("" if none; sleeps when not interactive)."""
+        if self._fd is None:
+            time.sleep(max(timeout_s, 0.0))
+            return ""
+        ready, _, _ = select.select([self._fd], [], [], max(timeout_s, 0.0))
+        if not ready:
+            return ""
+        return os.read(self._fd, 64).decode("utf-8", errors="replace")
+
+
+def run_dashboard(provider: SnapshotProvider, *, refresh_hz: float = DEFAULT_REFRESH_HZ,
+                  console: Console | None = None, stop: threading.Event | None = None,
+                  keys: KeyReader | None = None) -> str:
+    """Redraw at `refresh_hz` until `q`, Ctrl-C or `stop` is set; returns why it ended:
+    "quit" (q), "interrupt" (Ctrl-C) or "stopped". `keys`, if given, is already entered
+    by the caller; otherwise stdin is read while the loop runs."""
+    if keys is None:
+        with KeyReader() as own_keys:
+            return run_dashboard(provider, refresh_hz=refresh_hz, console=console, stop=stop,
+                                 keys=own_keys)
+    console = console or Console()
+    period_s = 1.0 / refresh_hz
+    try:
+        with Live(console=console, screen=console.is_terminal, auto_refresh=False,
+                  redirect_stdout=False, redirect_stderr=False) as live:
+            next_frame = time.monotonic()
+            while not (stop is not None and stop.is_set()):
+                frame = provider()
+                live.update(render(frame.snapshot, frame.notice), refresh=True)
+                next_frame += period_s
+                now = time.monotonic()
+                if next_frame < now:
+                    next_frame = now
+                if "q" in keys.wait(next_frame - now).lower():
+                    return "quit"
+            frame = provider()  # stopped: leave the final state on screen
+            live.update(render(frame.snapshot, frame.notice), refresh=True)
+    except KeyboardInterrupt:
+        return "interrupt"
+    return "stopped"
+
+
+def run_alongside(work: Callable[[], int], provider: SnapshotProvider, *,
+                  request_stop: Callable[[], None] | None = None, linger: bool = False,
+                  refresh_hz: float = DEFAULT_REFRESH_HZ,
+                  console: Console | None = None) -> int:
+    """Run `work` in this (main) thread with the dashboard drawn from a background thread.
+
+    `work` keeps the main thread so its signal handlers (SIGTERM, SIGINT) work as without a
+    dashboard. `q` calls `request_stop` (default: raise SIGINT in this process, i.e. what
+    Ctrl-C does). With `linger`, the final state stays on screen after `work` returns until
+    `q` (only when stdin is a terminal). While the dashboard owns a terminal, whatever `work`
+    prints (log lines, events) is held back and its last lines are shown afterwards
+    (`captured_output`). Returns `work`'s exit code.
+    """
+    stop = threading.Event()
+    done = threading.Event()
+
+    def frames() -> Frame:
+        frame = provider()
+        if done.is_set():
+            return Frame(frame.snapshot, frame.notice or "finished, press q to quit")
+        return frame
+
+    with contextlib.ExitStack() as stack:
+        keys = stack.enter_context(KeyReader())
+        if console is None:
+            console = stack.enter_context(captured_output())
+
+        def show() -> None:
+            ended = run_dashboard(frames, refresh_hz=refresh_hz, console=console, stop=stop,
+                                  keys=keys)
+            if ended == "quit" and not done.is_set():
+                (request_stop or (lambda: signal.raise_signal(signal.SIGINT)))()
+
+        thread = threading.Thread(target=show, name="fdi-dashboard", daemon=True)
+        thread.start()
+        try:
+            code = work()
+            done.set()
+            if linger:
+                try:
+                    while thread.is_alive() and keys.interactive:
+                        thread.join(0.1)
+                except KeyboardInterrupt:
+                    pass
+            return code
+        finally:
+            stop.set()
+            thread.join(2.0)
+
+
+@contextlib.contextmanager
+def captured_output(tail_lines: int = 40) -> Iterator[Console]:
+    """A Console on the terminal while file descriptors 1 and 2 point at a temporary file.
+
+    Everything else the process prints meanwhile (print, logging handlers, C libraries) would
+    scribble over the full-screen dashboard; it goes to the file instead and its last
+    `tail_lines` lines are printed when the block ends. Without a terminal on stdout nothing
+    is redirected and the Console writes to stdout as usual.
+    """
+    if not sys.stdout.isatty():
+        yield Console()
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    terminal = os.fdopen(os.dup(1), "w", encoding="utf-8")
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 1)
+        os.dup2(held.fileno(), 2)
+        try:
+            yield Console(file=terminal)
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            terminal.close()
+            size = held.seek(0, os.SEEK_END)
+            held.seek(max(0, size - 200 * tail_lines))
+            lines = held.read().decode("utf-8", errors="replace").splitlines()
+            if size > 200 * tail_lines:
+                lines = lines[1:]  # the first one may be cut
+            if len(lines) > tail_lines or size > 200 * tail_lines:
+                print("[earlier output not shown]")
+            for line in lines[-tail_lines:]:
+                print(line)

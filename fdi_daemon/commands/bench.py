@@ -12,6 +12,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="FILE", help="also write the numbers as JSON")
     parser.add_argument("--quick", action="store_true",
                         help="smaller samples (a rough figure in a few seconds)")
+    parser.add_argument("--skip-e2e", action="store_true",
+                        help="leave out the daemon end to end (latency, CPU, memory; runs "
+                             "fdi sim serve + fdi run for a few minutes)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,9 +41,18 @@ def run(args: argparse.Namespace) -> int:
         results["sim"] = bench_sim(duration_s=30.0) if args.quick else bench_sim()
     with console.status("identification ..."):
         results["ident"] = bench_ident(repeats=1 if args.quick else 3)
+    if not args.skip_e2e:
+        from fdi_daemon.bench.e2e import bench_e2e
+
+        with console.status("daemon end to end: fdi sim serve + fdi run ..."):
+            results["e2e"] = bench_e2e(quick=args.quick)
     console.print(_monitor_table(results["monitor"]))
     console.print(_sim_table(results["sim"]))
     console.print(_ident_table(results["ident"]))
+    if "e2e" in results:
+        from fdi_daemon.bench.e2e import e2e_table
+
+        console.print(e2e_table(results["e2e"]))
     if args.json:
         try:
             with open(args.json, "w", encoding="utf-8") as fh:

@@ -13,6 +13,8 @@ from pymodbus.client import ModbusTcpClient
 
 from fdi_daemon.io import modbus_map as mm
 from fdi_daemon.io.links.base import make_link
+from hil_sim.devices.realtime import realtime_rig
+from hil_sim.devices.serve import SimulatedDevice
 
 
 class Served:
@@ -145,3 +147,16 @@ def test_link_measurement_tool_reports_every_transport(tmp_path):
         assert figures[kind]["samples_per_s"] > 0
         assert figures[kind]["latency_ms"]["p50"] <= figures[kind]["latency_ms"]["max"]
     assert figures["serial_decoder_frames_per_s"] > 0
+
+
+
+@pytest.mark.parametrize("transport", ["modbus-tcp", "modbus-rtu"])
+def test_status_is_valid_as_soon_as_start_returns(transport):
+    """The device clock runs before start() returns: status() at once used to fail, and in
+    `fdi sim serve` that killed the stdin control loop."""
+    device = SimulatedDevice(transport, realtime_rig(seed=1))
+    device.start()
+    try:
+        assert device.status()["tick0_monotonic_s"] > 0
+    finally:
+        device.stop()

@@ -202,7 +202,6 @@ class ModbusDevice:
 
     async def _tick(self) -> None:
         rt = self.rt
-        rt.start()
         while True:
             delay = rt.next_tick_time - time.monotonic()
             if delay > 0:
@@ -212,6 +211,7 @@ class ModbusDevice:
     async def _run_until_stopped(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
+        self.rt.start()  # before "ready": status() and tick0_time are valid once start returns
         ticker = asyncio.create_task(self._tick())
         self._ready.set()
         await self._stop.wait()

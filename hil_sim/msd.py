@@ -120,11 +120,24 @@ def _zoh(a: np.ndarray, b: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray
 
 def nominal_tf(p: MsdParams) -> tuple[np.ndarray, np.ndarray]:
     """Exact ZOH discretisation (b, a in q⁻¹) of v_in -> ẍ without any effect or fault."""
+    a, bu, _, ca, da = state_space(p)
+    return _zoh_tf(a, bu, ca, da, p.fs_hz)
+
+
+def friction_tf(p: MsdParams) -> tuple[np.ndarray, np.ndarray]:
+    """Exact ZOH discretisation (b, a in q⁻¹) of a force on the mass (N) -> ẍ, eq. (6).
+
+    The §V system's exact friction filter of eq. (11) is G_e = −coulomb_n · b/a with
+    γ_f = viscous_n_s_per_m / coulomb_n (friction opposes the motion)."""
+    a, _, bf, ca, _ = state_space(p)
+    return _zoh_tf(a, bf, ca, 1.0 / p.mass_kg, p.fs_hz)
+
+
+def _zoh_tf(a, b, c, d, fs_hz) -> tuple[np.ndarray, np.ndarray]:
     from scipy.signal import cont2discrete, ss2tf
 
-    a, bu, _, ca, da = state_space(p)
-    ad, bd, cd, dd, _ = cont2discrete((a, bu[:, None], ca[None, :], np.array([[da]])),
-                                      1.0 / p.fs_hz, method="zoh")
+    ad, bd, cd, dd, _ = cont2discrete((a, b[:, None], c[None, :], np.array([[d]])),
+                                      1.0 / fs_hz, method="zoh")
     num, den = ss2tf(ad, bd, cd, dd)
     return np.asarray(num[0], dtype=float), np.asarray(den, dtype=float)
 

@@ -46,23 +46,16 @@ def model_copy(**changes):
 def msd_system(fault_time_s: float = float("inf"), duration_s: float = 8.0, seed: int = 0,
                coulomb_n: float = 0.5, viscous: float = 2.0):
     """The paper's §V system with exact Ĝ and G_e: (model, recording)."""
-    from scipy.signal import cont2discrete, ss2tf
-
     from fdi_daemon.io.model_file import FaultFilter, FdiModel
     from fdi_daemon.io.recordings import Recording
-    from hil_sim.msd import MsdParams, MsdSimulator, nominal_tf, state_space
+    from hil_sim.msd import MsdParams, MsdSimulator, friction_tf, nominal_tf
 
     params = MsdParams(fault_time_s=fault_time_s, coulomb_n=coulomb_n,
                        viscous_n_s_per_m=viscous, accel_noise_width=0.02)
-    a, _, bf, ca, _ = state_space(params)
-    ad, bd, cd, dd, _ = cont2discrete((a, bf[:, None], ca[None, :],
-                                       np.array([[1.0 / params.mass_kg]])), 1.0 / FS_HZ,
-                                      method="zoh")
-    num, den = ss2tf(ad, bd, cd, dd)
+    num, den = friction_tf(params)
     plant_b, plant_a = nominal_tf(params)
     model = FdiModel(fs=FS_HZ, plant_b=plant_b, plant_a=plant_a,
-                     fault_filter=FaultFilter(b=-coulomb_n * np.asarray(num[0]),
-                                              f=np.asarray(den), nk=0,
+                     fault_filter=FaultFilter(b=-coulomb_n * num, f=den, nk=0,
                                               gamma_f=viscous / coulomb_n),
                      velocity={"lead_compensation_hz": 8.0})
     t = np.arange(int(duration_s * FS_HZ)) / FS_HZ

@@ -24,23 +24,16 @@ BLOCK_S = 20.0
 
 def _system():
     """(model, v_in, accel) of the §V system with exact Ĝ and G_e."""
-    from scipy.signal import cont2discrete, ss2tf
-
     from fdi_daemon.core.velocity import VelocityEstimator
     from fdi_daemon.io.model_file import FaultFilter, FdiModel
-    from hil_sim.msd import MsdParams, MsdSimulator, multisine, nominal_tf, state_space
+    from hil_sim.msd import MsdParams, MsdSimulator, friction_tf, multisine, nominal_tf
 
     params = MsdParams(accel_noise_width=0.02, fs_hz=FS_HZ)
     coulomb_n, viscous = 0.5, 2.0
-    a, _, bf, ca, _ = state_space(params)
-    ad, bd, cd, dd, _ = cont2discrete((a, bf[:, None], ca[None, :],
-                                       np.array([[1.0 / params.mass_kg]])), 1.0 / FS_HZ,
-                                      method="zoh")
-    num, den = ss2tf(ad, bd, cd, dd)
+    num, den = friction_tf(params)
     plant_b, plant_a = nominal_tf(params)
     model = FdiModel(fs=FS_HZ, plant_b=plant_b, plant_a=plant_a,
-                     fault_filter=FaultFilter(b=-coulomb_n * np.asarray(num[0]),
-                                              f=np.asarray(den), nk=0,
+                     fault_filter=FaultFilter(b=-coulomb_n * num, f=den, nk=0,
                                               gamma_f=viscous / coulomb_n),
                      velocity=VelocityEstimator(FS_HZ).settings())
     u = multisine(BLOCK_S, FS_HZ, 1.0, 12.0, 0.7, seed=1, n_tones=6)

@@ -186,6 +186,7 @@ def realtime_rig(scenario=None, seed: int | None = None,
     `DEFAULT_SCENARIO`) with its events plus ``faults``; the excitation loops."""
     from hil_sim.excitation import build_program
     from hil_sim.rig import Rig
+    from hil_sim.rig.rig import compile_kernel
     from hil_sim.scenarios import Scenario, load_scenario, scenario_from_dict
 
     if scenario is None:
@@ -196,6 +197,7 @@ def realtime_rig(scenario=None, seed: int | None = None,
     fs = scenario.rig.fs_hz
     program = build_program(scenario.excitation, fs, int(round(scenario.duration_s * fs)),
                             np.random.default_rng([seed, 0x5EED]))
+    compile_kernel(scenario.rig)  # before the device serves: no multi-second first tick
     rig = Rig(scenario.rig, seed=seed)
     rig.set_centring(scenario.centring_gain_v_per_m)
     schedule = [ScheduledFault(ev["t_s"], "bearing_supply", ev["bearing_supply"])

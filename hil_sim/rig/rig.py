@@ -120,6 +120,14 @@ def null_pressure_pa(packed: np.ndarray, supply_fraction: float, temperature_k: 
     return 0.5 * (lo + hi)
 
 
+def compile_kernel(params: RigParams | None = None) -> None:
+    """Compile the physics kernel now (or load it from numba's cache), on a throwaway rig.
+
+    Compiling takes seconds on a fresh install and holds the interpreter: a real-time device
+    must do it before it starts serving, not on its first tick."""
+    Rig(params, seed=0).run(np.zeros(1))
+
+
 class Rig:
     """The nonlinear servo-pneumatic rig sampled at ``params.fs_hz``.
 

@@ -270,14 +270,14 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
         raise RecordingError(f"{path}: header row {header_line} has empty or repeated names")
     body = "\n".join(lines[body_start:])
     ncol = len(header)
+    if not any(line.strip() and not line.lstrip().startswith("#") for line in lines[body_start:]):
+        return {name: np.empty(0) for name in header}, meta
     try:
         with np.errstate(all="ignore"):
             data = np.loadtxt(io.StringIO(body), delimiter=",", comments="#", ndmin=2,
                               dtype=np.float64)
     except ValueError:
         raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol)) from None
-    if data.size == 0:
-        data = np.empty((0, ncol))
     if data.shape[1] != ncol:
         raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol))
     columns = {name: np.ascontiguousarray(data[:, j]) for j, name in enumerate(header)}
@@ -314,7 +314,7 @@ def _as_counter(seq: np.ndarray, path: Path) -> np.ndarray:
 
 
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    with np.load(path, allow_pickle=False) as data:
+    with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
         meta = _meta_object(str(data["__meta__"])) if "__meta__" in data.files else {}
         columns = {}
         for name in data.files:

@@ -194,12 +194,6 @@ def test_random_defects_are_all_accounted_for(defects):
         json.dumps(e, allow_nan=False)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "reported to the monitor engineer: a glitch of a few samples in accel (below full "
-    "scale, so not a bad sample) is isolated as friction (with configs/model_sim_rig.yaml: "
-    "3 samples at 6 m/s², 5 samples at 4 m/s²): the 1 s window least squares carries the "
-    "spike for a whole window and the Coulomb coefficient stays above friction_min_level "
-    "for track_samples ticks (fdi_daemon/detect/detector.py isolation)"))
 def test_a_short_accel_glitch_is_not_isolated_as_friction():
     """Glitches of 1-10 samples at 2-6 m/s² (the signal's peak is 4.1 m/s²): an alarm is
     fine (something is wrong), calling it friction is not."""

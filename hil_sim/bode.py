@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fdi_daemon.io.outputs import pyplot, save_figure
 from fdi_daemon.io.recordings import Recording
 
 SEGMENT_SAMPLES = 1024
@@ -37,10 +38,7 @@ def plot_bode(path: str | Path, curves: list[tuple[str, object]],
               min_coherence: float = 0.5) -> Path:
     """Magnitude, phase and coherence of each (label, FrequencyResponse); points with
     coherence below ``min_coherence`` are drawn faint."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, (ax_m, ax_p, ax_c) = plt.subplots(3, 1, figsize=(8, 9), sharex=True,
                                            gridspec_kw={"height_ratios": [3, 2, 1]})
@@ -69,10 +67,7 @@ def plot_bode(path: str | Path, curves: list[tuple[str, object]],
         ax.grid(True, which="both", alpha=0.3)
         ax.set_xlim(0.3, 128)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _level_at(fr, freq_hz: float) -> float:

@@ -18,7 +18,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
     import platform
     import time
 
@@ -27,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.bench.ident import bench_ident
     from fdi_daemon.bench.monitor import bench_monitor
     from fdi_daemon.bench.sim import bench_sim
-    from fdi_daemon.errors import UserError
+    from fdi_daemon.io.outputs import write_json
 
     console = Console()
     results: dict = {"machine": {"python": platform.python_version(),
@@ -54,12 +53,7 @@ def run(args: argparse.Namespace) -> int:
 
         console.print(e2e_table(results["e2e"]))
     if args.json:
-        try:
-            with open(args.json, "w", encoding="utf-8") as fh:
-                json.dump(results, fh, indent=2)
-                fh.write("\n")
-        except OSError as exc:
-            raise UserError(f"{args.json}: cannot write: {exc.strerror or exc}") from None
+        write_json(args.json, results)
     return 0
 
 

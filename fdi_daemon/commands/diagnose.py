@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 HELP = "find where a model and a recording disagree, name the missing effect, add it"
@@ -50,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
 
     from fdi_daemon.errors import UserError
     from fdi_daemon.io.model_file import FdiModel, load_model, save_model
+    from fdi_daemon.io.outputs import write_json
     from fdi_daemon.io.recordings import read_recording
 
     from pathlib import Path
@@ -99,12 +99,7 @@ def run(args: argparse.Namespace) -> int:
     for line in summary_lines(report):
         print(line)
     if args.json:
-        try:
-            with open(args.json, "w", encoding="utf-8") as fh:
-                json.dump(report, fh, indent=1)
-                fh.write("\n")
-        except OSError as exc:
-            raise UserError(f"{args.json}: cannot write report: {exc.strerror or exc}") from None
+        write_json(args.json, report, indent=1)
     if args.plot:
         from fdi_daemon.diagnose.plots import plot_diagnosis
 

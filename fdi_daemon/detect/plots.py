@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from fdi_daemon.detect.monitor import MonitorTrace
-from fdi_daemon.errors import UserError
+from fdi_daemon.io.outputs import pyplot, save_figure
 
 __all__ = ["plot_replay"]
 
@@ -29,10 +29,7 @@ def plot_replay(path: str | Path, trace: MonitorTrace, events: list[dict[str, An
                 gamma_f: float, band: dict[str, list[float]] | None, threshold: float,
                 fault_onset_t: float | None = None, title: str = "") -> Path:
     """Write the figure; returns its path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     path = Path(path)
     sl = _thin(trace.t.size)
@@ -84,10 +81,4 @@ def plot_replay(path: str | Path, trace: MonitorTrace, events: list[dict[str, An
     if handles:
         ax_a.legend(loc="upper left", fontsize=7)
     fig.tight_layout()
-    try:
-        fig.savefig(path, dpi=110)
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write the plot: {exc.strerror or exc}") from None
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path)

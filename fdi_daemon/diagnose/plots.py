@@ -6,14 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fdi_daemon.errors import UserError
+from fdi_daemon.io.outputs import pyplot, save_figure
 
 
 def plot_diagnosis(result, report: dict, path: str | Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     ctx = result.ctx
     fs = ctx.fs_hz
@@ -77,11 +74,4 @@ def plot_diagnosis(result, report: dict, path: str | Path) -> Path:
     ax.set_title("error spectrum")
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    path = Path(path)
-    try:
-        fig.savefig(path, dpi=90)
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write plot: {exc.strerror or exc}") from None
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=90)

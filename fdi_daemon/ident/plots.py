@@ -13,34 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from fdi_daemon.errors import UserError
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(fig, path: str | Path) -> Path:
-    path = Path(path)
-    try:
-        fig.savefig(path, dpi=110)
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write plot: {exc.strerror or exc}") from None
-    finally:
-        fig.clear()
-    return path
+from fdi_daemon.io.outputs import pyplot, save_figure
 
 
 def plot_identification(path: str | Path, fr, model_response: np.ndarray,
                         band_hz: tuple[float, float], validation: dict | None = None,
                         title: str = "") -> Path:
     """Fig. 4 (+ coherence, + validation time series when given)."""
-    plt = _pyplot()
+    plt = pyplot()
     rows = 4 if validation is not None else 3
     fig, axes = plt.subplots(rows, 1, figsize=(8, 2.6 * rows), constrained_layout=True)
     f = fr.freq_hz
@@ -75,14 +55,14 @@ def plot_identification(path: str | Path, fr, model_response: np.ndarray,
         ax.set_title(validation.get("label", "validation"))
         ax.legend(loc="upper right")
         ax.grid(True, alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_signature(path: str | Path, t: np.ndarray, residual: np.ndarray, result,
                    title: str = "", zoom_s: float = 1.0) -> Path:
     """Fig. 8 (residual vs G_e x_f: whole window and its last `zoom_s` seconds) and the γ
     cost profile with its 99 % interval."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, (ax_t, ax_z, ax_g) = plt.subplots(3, 1, figsize=(8, 9), constrained_layout=True)
     model = result.fit.y_sim
     zoom = t >= t[-1] - zoom_s
@@ -108,4 +88,4 @@ def plot_signature(path: str | Path, t: np.ndarray, residual: np.ndarray, result
     ax_g.set_title("cost profile" + ("  —  FLAT: γ_f not identifiable" if result.flat else ""))
     ax_g.legend(loc="best")
     ax_g.grid(True, alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)

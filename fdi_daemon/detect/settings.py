@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from typing import Any
 
 from fdi_daemon.errors import ConfigError
@@ -105,9 +105,6 @@ class DetectorSettings:
             if getattr(settings, name) <= 0:
                 raise ConfigError(f"{source}.{name} must be > 0")
         return settings
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
     def samples(self, seconds: float, fs_hz: float, minimum: int = 1) -> int:
         """A duration in ticks (rounded, at least ``minimum``)."""

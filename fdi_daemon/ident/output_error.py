@@ -42,9 +42,6 @@ class OEFit:
         """B with the nk leading zeros, for lfilter(b_delayed, f, u)."""
         return np.concatenate([np.zeros(self.nk), self.b])
 
-    def rms_error(self) -> float:
-        return float(np.sqrt(self.sse / len(self.y_sim)))
-
 
 def initial_pulse_count(nb: int, nf: int, nk: int) -> int:
     """Number of samples at the window start that depend on the unknown initial state."""

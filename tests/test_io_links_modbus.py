@@ -2,6 +2,7 @@
 
 import math
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,8 +12,8 @@ from fdi_daemon.io import modbus_map as mm
 from fdi_daemon.io.links.base import LinkError, ReconnectingLink, make_link
 from fdi_daemon.io.links.modbus_link import ModbusLink
 from hil_sim.devices import SimulatedDevice, realtime_rig
-from hil_sim.devices.modbus_server import ModbusDevice
-from hil_sim.devices.realtime import DEFAULT_SCENARIO
+from hil_sim.devices.modbus_server import ModbusDevice, RegisterImage
+from hil_sim.devices.realtime import DEFAULT_SCENARIO, DeviceSample
 from hil_sim.scenarios import scenario_from_dict, simulate
 
 
@@ -72,6 +73,53 @@ def test_a_slow_poller_loses_nothing(reference):
     c = link.counters()
     assert c["samples_lost"] == 0
     assert c["requests"] > c["polls"]  # the deeper FIFO slots were read
+
+
+class _FifoThatGrowsBetweenRequests:
+    """A client on the device's register image that publishes ``per_request`` new samples
+    after answering each request, as a device does while a poll's requests are in flight."""
+
+    def __init__(self, image, per_request):
+        self.image, self.per_request, self.seq = image, per_request, 0
+
+    def publish(self, n):
+        self.image.publish([DeviceSample(self.seq + i, 0.0, float(self.seq + i), 0.0, 0.0,
+                                         False, False) for i in range(n)])
+        self.seq += n
+
+    def connect(self):
+        return True
+
+    def close(self):
+        pass
+
+    def read_input_registers(self, address, count, device_id):
+        regs = [0] * self.image.input_size
+        self.image.fill_inputs(regs, address, count)
+        self.publish(self.per_request)
+        return SimpleNamespace(registers=regs[address:address + count], isError=lambda: False)
+
+
+@pytest.mark.parametrize("fifo_depth", [64, 256])
+@pytest.mark.parametrize("per_request", [0, 1, 2, 3])
+def test_a_poll_loses_nothing_while_the_fifo_fills_between_its_requests(per_request,
+                                                                      fifo_depth):
+    """The deeper reads of a poll follow the FIFO as it moves on, also before it is full."""
+    rig = SimpleNamespace(fs_hz=256.0, fault_injected=False)
+    client = _FifoThatGrowsBetweenRequests(RegisterImage(rig, fifo_depth=fifo_depth), 0)
+    link = ModbusLink("modbus-tcp", "fake", lambda: client)
+    link.open()
+    client.publish(1)
+    delivered = link.poll()  # seq 0: the FIFO is far from full, as just after device start
+    client.per_request = per_request
+    for behind in (17, 40, 29, fifo_depth // 2):  # with what moves on, less than the FIFO
+        client.publish(behind)
+        delivered += link.poll()
+    seqs = [s.seq for s in delivered]
+    assert seqs == list(range(seqs[-1] + 1))
+    assert len(seqs) > 17 + 40 + 29 + fifo_depth // 2
+    assert [s.v_in for s in delivered] == [float(s.seq) for s in delivered]
+    assert link.counters()["samples_lost"] == 0
 
 
 def test_a_poller_behind_the_fifo_shows_the_loss_as_a_seq_jump():

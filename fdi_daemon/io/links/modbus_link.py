@@ -25,6 +25,12 @@ from fdi_daemon.io.sample import Sample
 _U32 = 1 << 32
 
 
+def _behind(newest_raw: int, seq_raw: int) -> int:
+    """How many samples ``seq_raw`` is older than ``newest_raw`` (negative: newer), mod 2**32."""
+    behind = (newest_raw - seq_raw) % _U32
+    return behind - _U32 if behind >= _U32 // 2 else behind
+
+
 class ModbusLink(Link):
     """Poll the register map through a pymodbus sync client made by ``client_factory``."""
 
@@ -137,15 +143,21 @@ class ModbusLink(Link):
             self._last_seq = None
         valid = min(header.fifo_valid, header.fifo_depth)
         got: dict[int, mm.SlotSample] = {}
-        self._collect(regs[mm.HEADER_REGS:mm.slot_address(min(first, valid))],
-                      newest_raw, newest, got)
+        self._collect(mm.decode_slots(regs[mm.HEADER_REGS:mm.slot_address(min(first, valid))],
+                                      self.word_order, self._scales), newest_raw, newest, got)
         if self._last_seq is None:
             self._last_seq = newest - 1  # start live: deliver the newest sample only
-        start = first
-        while got and min(got) > self._last_seq + 1 and start < valid:
-            count = min(mm.SLOTS_PER_READ, valid - start)
-            block = self._read(mm.slot_address(start), count * mm.WORDS_PER_SAMPLE)
-            self._collect(block, newest_raw, newest, got)
+        start, filled = first, valid  # filled: FIFO slots that hold a sample, a lower bound
+        while got and min(got) > self._last_seq + 1 and start < filled:
+            count = min(mm.SLOTS_PER_READ, header.fifo_depth - start)
+            block = mm.decode_slots(self._read(mm.slot_address(start),
+                                               count * mm.WORDS_PER_SAMPLE),
+                                    self.word_order, self._scales)
+            # Slot `start` holds a sample (start < filled); how much newer it is than what
+            # sat there when the header was read is how far the FIFO has moved on since.
+            published = start - _behind(newest_raw, block[0].seq)
+            filled = min(valid + published, header.fifo_depth)
+            self._collect(block[:filled - start], newest_raw, newest, got)
             start += count
         wanted = sorted(seq for seq in got if seq > self._last_seq)
         if wanted and wanted[0] > self._last_seq + 1:
@@ -159,11 +171,12 @@ class ModbusLink(Link):
         self._counts["samples"] += len(out)
         return out
 
-    def _collect(self, regs: list[int], newest_raw: int, newest: int,
+    @staticmethod
+    def _collect(slots: list[mm.SlotSample], newest_raw: int, newest: int,
                  got: dict[int, mm.SlotSample]) -> None:
-        for slot in mm.decode_slots(regs, self.word_order, self._scales):
-            behind = (newest_raw - slot.seq) % _U32
-            if behind >= _U32 // 2:
+        for slot in slots:
+            behind = _behind(newest_raw, slot.seq)
+            if behind < 0:
                 continue  # written after the header was read: the next poll takes it
             got[newest - behind] = slot
 

@@ -176,6 +176,14 @@ def test_latency_and_deadline_are_paced_by_the_sample_counter():
     link.batches = [batch(range(80, 140))]
     loop.iterate()
     assert loop.deadline_misses > 0
+    assert loop.late_arrivals == loop.deadline_misses  # the link was late, not the loop
+    # now the loop is slow (60 ms per sample) with samples arriving on time
+    slow = ServiceLoop(ScriptedLink([batch(range(i, i + 8)) for i in range(0, 80, 8)], clock),
+                       StubMonitor(clock, step_s=0.06), Collect(), fs_hz=FS, clock=clock,
+                       deadline_s=0.05)
+    slow.iterate()
+    assert slow.deadline_misses == 8 and slow.late_arrivals == 0
+    assert slow.snapshot()["link"]["late_arrivals"] == 0
 
 
 def test_histogram_percentiles_against_numpy():

@@ -331,7 +331,8 @@ class Daemon:
                 f"duplicates; tick latency p50 {lat['p50']:.0f} µs p99 {lat['p99']:.0f} µs "
                 f"max {lat['max']:.0f} µs; lateness p50 {late['p50'] / 1e3:.1f} ms p99 "
                 f"{late['p99'] / 1e3:.1f} ms; deadline misses {loop.deadline_misses} "
-                f"(> {loop.deadline_s * 1e3:g} ms); dropped outputs "
+                f"(> {loop.deadline_s * 1e3:g} ms; {loop.late_arrivals} arrived late); "
+                f"dropped outputs "
                 f"{self.sinks.dropped() if self.sinks else 0}; events: {counts}")
 
     # ------------------------------------------------------------------ signals

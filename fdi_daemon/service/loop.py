@@ -12,7 +12,10 @@ Timing (monotonic clock only):
 - lateness: end of the step minus the sample's due time. Due times come from the device's
   sample counter: ``seq / fs + offset``, where offset is the smallest ``arrival - seq/fs``
   seen over the last ~10 s (the fastest delivery; a windowed minimum follows clock drift
-  between device and host). A tick later than ``deadline_s`` is a deadline miss.
+  between device and host). A tick later than ``deadline_s`` is a deadline miss; a miss whose
+  sample already *arrived* later than ``deadline_s`` is also a late arrival (the device or
+  the link was late, not the daemon). A miss is logged, at most once per
+  `MISS_LOG_PERIOD_S`, with both figures.
 Both go into log-spaced histograms (p50/p99 in the status snapshot).
 
 Sequence check. Gaps and duplicates are the monitor's to handle (`Monitor.step` sees
@@ -42,6 +45,8 @@ log = logging.getLogger("fdi.loop")
 
 #: a step back by more than this many samples is a device restart, not a duplicate
 RESTART_STEP_SAMPLES = 256
+#: a deadline miss is logged at most this often (s); the counters count every one
+MISS_LOG_PERIOD_S = 10.0
 ALARM_STATES = ("fault_detected", "friction_isolated", "other_fault")
 
 
@@ -158,6 +163,8 @@ class ServiceLoop:
         self.bad_samples = 0
         self.restarts = 0
         self.deadline_misses = 0
+        self.late_arrivals = 0
+        self._next_miss_log = -math.inf
         self.event_counts: collections.Counter = collections.Counter()
         self.recent_events: collections.deque = collections.deque(maxlen=20)
         self.last_t = math.nan
@@ -238,10 +245,19 @@ class ServiceLoop:
         self.tick_latency.add((done - received) * 1e6)
         nominal = sample.seq / self.fs_hz
         offset = self._offset_min.add(received, received - nominal)
-        late_s = done - (nominal + offset)
+        due = nominal + offset
+        late_s = done - due
         self.lateness.add(late_s * 1e6)
         if late_s > self.deadline_s:
             self.deadline_misses += 1
+            arrived_late_s = received - due
+            self.late_arrivals += arrived_late_s > self.deadline_s
+            if done >= self._next_miss_log:
+                self._next_miss_log = done + MISS_LOG_PERIOD_S
+                log.warning("deadline miss: sample %d done %.1f ms after its due time, arrived "
+                            "%.1f ms after it (misses %d, late arrivals %d)", sample.seq,
+                            late_s * 1e3, arrived_late_s * 1e3, self.deadline_misses,
+                            self.late_arrivals)
 
     def _emit(self, event: dict) -> None:
         kind = event.get("kind")
@@ -300,6 +316,7 @@ class ServiceLoop:
                 "lateness_us": {"p50": lateness["p50"], "p99": lateness["p99"],
                                 "max": lateness["max"]},
                 "deadline_misses": self.deadline_misses,
+                "late_arrivals": self.late_arrivals,
                 "deadline_s": self.deadline_s,
                 "counters": counters,
             },

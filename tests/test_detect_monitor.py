@@ -20,12 +20,15 @@ def _samples(rec):
             for s, t, v, a in zip(seq, rec.t, rec.v_in, rec.accel)]
 
 
-def _stepped(monitor, rec):
+def _stepped(monitor, rec, thetas=None):
+    """Events, statistic and state codes per tick; θ as reported appended to ``thetas``."""
     events, stat, state = [], [], []
     for sample in _samples(rec):
         events.extend(monitor.step(sample))
         stat.append(monitor.detector.statistic)
         state.append(STATES.index(monitor.detector.state))
+        if thetas is not None:
+            thetas.append((monitor.detector.theta1, monitor.detector.theta2))
     events.extend(monitor.finish())
     return events, np.array(stat), np.array(state)
 
@@ -37,12 +40,14 @@ def _stepped(monitor, rec):
 def test_step_and_batch_give_the_same_events_and_statistic(scenario, method):
     rec = scenario_recording(scenario)
     model = model_copy(detector={"method": method})
-    ev_step, stat_step, state_step = _stepped(Monitor(model), rec)
+    thetas = []
+    ev_step, stat_step, state_step = _stepped(Monitor(model), rec, thetas)
     ev_batch, trace = Monitor(model).run(rec)
     assert ev_batch == ev_step
     assert any(e["kind"] == "fault_detected" for e in ev_batch)
     np.testing.assert_array_equal(trace.statistic, stat_step)
     np.testing.assert_array_equal(trace.state, state_step)
+    np.testing.assert_array_equal(np.column_stack([trace.theta1, trace.theta2]), thetas)
     # batch in pieces (continuing from the same state) gives the same again
     mon = Monitor(model)
     n = len(rec)
@@ -52,6 +57,31 @@ def test_step_and_batch_give_the_same_events_and_statistic(scenario, method):
         pieces.extend(mon.run(part)[0])
     pieces.extend(mon.finish())
     assert pieces == ev_batch
+
+
+def test_during_an_episode_theta_is_fitted_on_the_data_since_the_change():
+    """From the isolation window on, θ of eq. (17) is the least-squares fit on the samples
+    since the reference window ended (the lag before the detection), a direct solve."""
+    from fdi_daemon.detect.pipeline import Pipeline
+
+    rec = scenario_recording("test_case_2")
+    model = sim_rig_model()
+    monitor = Monitor(model)
+    _, trace = monitor.run(rec)
+    det = monitor.detector
+    chain = Pipeline(model, det.window_samples).run(rec.v_in, rec.accel)
+    k_d = int(np.flatnonzero(trace.state == STATES.index("fault_detected"))[0])
+    first = k_d - det.lag_samples + 1  # the newest lag rows at the detection start the fit
+    for k in (first + det.iso_samples - 1, k_d + 100, first + det.window_samples - 1):
+        g = np.column_stack([chain.g1[first:k + 1], chain.g2[first:k + 1]])
+        direct = np.linalg.lstsq(g, chain.residual[first:k + 1], rcond=None)[0]
+        np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]], direct, rtol=1e-7)
+    # before the isolation window is full: the sliding window's θ
+    k = first + det.iso_samples - 2
+    g = np.column_stack([chain.g1[k - det.window_samples + 1:k + 1],
+                         chain.g2[k - det.window_samples + 1:k + 1]])
+    direct = np.linalg.lstsq(g, chain.residual[k - det.window_samples + 1:k + 1], rcond=None)[0]
+    np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]], direct, rtol=1e-7)
 
 
 def test_bad_samples_and_gaps():

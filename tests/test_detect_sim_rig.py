@@ -1,10 +1,13 @@
 """Issue 4 targets on the simulated rig (hil_sim): the paper's test cases, the other faults,
 and fault-free changing operation."""
 
+import functools
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from conftest_detect import SCENARIOS, first_event, scenario_recording, sim_rig_model
+from conftest_detect import MODEL, SCENARIOS, first_event, scenario_recording, sim_rig_model
 from fdi_daemon.detect.monitor import Monitor
 
 #: (scenario, fault time in the scenario (s), detection target (s), isolation target (s))
@@ -43,18 +46,54 @@ def test_test_case_1_detected_within_15_ms():
     assert first_event(events, "fault_detected")["t"] - 3.05 <= 0.015
 
 
+@functools.lru_cache(maxsize=None)
+def own_signature(name, fault_s, tmp):
+    """The paper's §IV-B procedure: G_e and γ_f fitted on a recording of the same input and
+    fault (another seed, 20 s, the fault window from 1.1 s after the fault) with
+    `fdi signature`; returns (model, the window θ of the replay of the seed-0 test case)."""
+    from fdi_daemon.cli import main
+    from fdi_daemon.io.model_file import load_model
+    from fdi_daemon.io.recordings import write_recording
+    from hil_sim.scenarios import load_scenario, simulate
+
+    rec = simulate(load_scenario(SCENARIOS / f"{name}.yaml"), seed=1, duration_s=20.0)
+    path, model_path = Path(tmp) / f"{name}.npz", Path(tmp) / f"{name}.yaml"
+    write_recording(path, rec)
+    assert main(["signature", str(path), "--model", str(MODEL), "--fault-window",
+                 f"{fault_s + 1.1}:20", "-o", str(model_path)]) == 0
+    model = load_model(model_path)
+    return model, Monitor(model).run(scenario_recording(name))[1]
+
+
+@pytest.mark.parametrize("name,fault_s,from_s", [("test_case_1", 3.05, 1.5),
+                                                  ("test_case_2", 2.9, 1.3)])
+def test_theta_settles_on_its_own_signature(name, fault_s, from_s, tmp_path_factory):
+    """Against a signature calibrated on the same fault, as the paper calibrates: θ1 (the
+    friction level) within ±15 % of 1 from the paper's tracking time (case 1) or once the
+    0.5 s transient after the supply cut has left the window (case 2, where θ2 also sits
+    within ±15 % of γ_f), and staying there."""
+    model, trace = own_signature(name, fault_s, tmp_path_factory.getbasetemp())
+    k = np.searchsorted(trace.t, fault_s + from_s)
+    assert np.all(np.abs(trace.theta1[k:] - 1.0) <= 0.15)
+    if name == "test_case_2":
+        gamma = model.fault_filter.gamma_f
+        assert np.all(np.abs(trace.theta2[k:] - gamma) <= 0.15 * abs(gamma))
+
+
 @pytest.mark.xfail(strict=True, reason=(
-    "θ of eq. (17) does not settle within ±15 % of (1, γ_f): the test-case faults are not the "
-    "calibrated fault (bearing supply 65 % and 0 % against 45 %), and under a single 8 Hz sine "
-    "g1 and g2 are nearly collinear, so θ2 is ill-determined (measured θ at +1.5 s / +0.7 s in "
-    "docs/detector.md)"))
+    "case 1: θ1 is within ±15 % from +0.3 s, but θ2 wanders up to 29 % off γ_f after +1.5 s: "
+    "under a single 8 Hz sine g1 and g2 are nearly collinear, the γ profile of the signature "
+    "is flat (γ_f is arbitrary) and θ2 moves along the least-squares valley; case 2: at "
+    "+0.7 s θ = (1.24, -9.1) against (1, 10): the first 0.5 s after the supply cut are not "
+    "the steady fault the signature holds (within ±15 % from +1.3 s)"))
 @pytest.mark.parametrize("name,fault_s,_detect,isolate_s", TEST_CASES)
-def test_theta_tracks_the_signature_within_15_percent(name, fault_s, _detect, isolate_s):
-    _, trace = _replay(name)
-    gamma = sim_rig_model().fault_filter.gamma_f
+def test_theta_tracks_the_signature_within_15_percent(name, fault_s, _detect, isolate_s,
+                                                      tmp_path_factory):
+    model, trace = own_signature(name, fault_s, tmp_path_factory.getbasetemp())
+    gamma = model.fault_filter.gamma_f
     k = np.searchsorted(trace.t, fault_s + isolate_s)
-    assert abs(trace.theta1[k] - 1.0) <= 0.15
-    assert abs(trace.theta2[k] - gamma) <= 0.15 * abs(gamma)
+    assert np.all(np.abs(trace.theta1[k:] - 1.0) <= 0.15)
+    assert np.all(np.abs(trace.theta2[k:] - gamma) <= 0.15 * abs(gamma))
 
 
 @pytest.mark.parametrize("name", OTHER_FAULTS)

@@ -130,9 +130,9 @@ def _paced(monitor, rec, on_tick=None):
                 time.sleep(delay)
             new = monitor.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]), float(accel[k])))
             events.extend(new)
-            pl = monitor.pipeline
-            values = (float(t[k]), pl.residual + pl.xhat, pl.residual, pl.theta1,
-                      pl.theta2, monitor.detector.statistic,
+            pl, det = monitor.pipeline, monitor.detector
+            values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
+                      det.theta2, det.statistic,
                       STATES.index(monitor.detector.state))
             for name, value in zip(names, values):
                 out[name][k] = value

@@ -56,6 +56,8 @@ N_REGRESSORS = 4
 #: order of the autoregressive model of the valve command (the operating-point guard)
 COMMAND_ORDER = 4
 _WIDTH = packed_width(N_REGRESSORS)
+#: an episode's θ needs 1 - ρ² of (g1, g2) above this, as the sliding window's (WindowLS)
+_MIN_RCOND = 1e-6
 _CHUNK = 16384
 
 
@@ -65,6 +67,8 @@ class DetectorTrace:
 
     statistic: np.ndarray
     state: np.ndarray  # int8 codes into STATES
+    theta1: np.ndarray  # θ as reported (`Detector.theta1`)
+    theta2: np.ndarray
 
 
 class Detector:
@@ -94,6 +98,9 @@ class Detector:
                                            self.lag_samples, self.test_samples,
                                            s.reference_every_samples, s.guard_min_sigma_v)
         self.band: dict[str, list[float]] | None = None
+        #: θ as reported for the newest tick: eq. (17) over the sliding window, or during an
+        #: alarm episode over the data since the change (`_Episode.theta`)
+        self.theta1 = self.theta2 = math.nan
         self.state = "calibrating"
         self._episode: _Episode | None = None
         self._calibration: list[tuple[float, float, float]] = []
@@ -155,11 +162,12 @@ class Detector:
         if guard_stat > self.settings.guard_threshold:
             self._guard_until = tick + self.hold_samples
         self._tick = tick + 1
+        self.theta1, self.theta2 = theta1, theta2
         return self._decide(tick, t, phi, row, r, theta1, theta2)
 
     def _decide(self, tick, t, phi, row, r, theta1, theta2) -> list[dict[str, Any]]:
         if self._episode is not None:
-            return self._episode.step(self, tick, t, phi, row, r, theta1, theta2)
+            return self._episode.step(self, tick, t, phi, row, r)
         if tick < self._hold_until:
             self._above = self._slow_above = 0
             return []
@@ -219,10 +227,11 @@ class Detector:
     def run(self, t: np.ndarray, v_in: np.ndarray, xhat: np.ndarray, r: np.ndarray,
             g1: np.ndarray, g2: np.ndarray, theta1: np.ndarray, theta2: np.ndarray
             ) -> tuple[list[dict[str, Any]], DetectorTrace]:
-        """Batch ``step`` over arrays: the same events, statistic and states."""
+        """Batch ``step`` over arrays: the same events, statistic, states and reported θ."""
         n = len(t)
         stat = np.empty(n)
         codes = np.empty(n, dtype=np.int8)
+        reported1, reported2 = theta1, theta2  # copied when an episode reports its own θ
         events: list[dict[str, Any]] = []
         pos = 0
         while pos < n:
@@ -239,10 +248,14 @@ class Detector:
                                         theta1[pos], theta2[pos]))
                 stat[pos] = self.statistic
                 codes[pos] = _STATE_CODE[self.state]
+                if reported1 is theta1:
+                    reported1, reported2 = theta1.copy(), theta2.copy()
+                reported1[pos], reported2[pos] = self.theta1, self.theta2
                 pos += 1
                 if self._episode is None:
                     break
-        return events, DetectorTrace(statistic=stat, state=codes)
+        return events, DetectorTrace(statistic=stat, state=codes, theta1=reported1,
+                                     theta2=reported2)
 
     def _run_quiet(self, pos, stop, t, v_in, xhat, r, g1, g2, theta1, theta2, stat, codes
                    ) -> int:
@@ -261,6 +274,8 @@ class Detector:
             arrays = self._vector_stats(v_in[sl], xhat[sl], r[sl], g1[sl], g2[sl])
             count = first
         self._commit_quiet(arrays, theta1[pos:pos + count], theta2[pos:pos + count])
+        if count:
+            self.theta1, self.theta2 = theta1[pos + count - 1], theta2[pos + count - 1]
         stat[pos:pos + count] = arrays["stat"]
         codes[pos:pos + count] = _STATE_CODE[self.state]
         return count
@@ -358,10 +373,23 @@ class _Episode:
         self.track = 0
         self.hold_until = det.warmup_samples
 
-    def step(self, det: Detector, tick, t, phi, row, r, theta1, theta2):
+    def theta(self, det: Detector) -> tuple[float, float]:
+        """θ of eq. (17) fitted on the data since the change (the post window, once it holds
+        ``isolation_window_s``): the estimate no longer mixes pre-fault data, so it reaches
+        the signature after the isolation window instead of after a whole window. Falls back
+        to the sliding-window θ (NaN at rest, early in the episode, ill-conditioned)."""
+        if self.post.count < det.iso_samples or not math.isfinite(det.theta1):
+            return det.theta1, det.theta2
+        s = self.post.sliding  # packed g1, g2, x̂̈, 1 (normal_equations layout)
+        theta, _, ok = solve_packed((s[0], s[1], s[4], s[10], s[11], s[14]), 2,
+                                    min_pivot=_MIN_RCOND)
+        return (theta[0], theta[1]) if ok else (det.theta1, det.theta2)
+
+    def step(self, det: Detector, tick, t, phi, row, r):
         s = det.settings
         self.ticks += 1
         self.post.push(row)
+        det.theta1, det.theta2 = theta1, theta2 = self.theta(det)
         e = innovation(r, phi, self.theta_ref)
         frozen_stat = self.frozen_test.push((e * e / self.sigma2_ref,))[0] / det.test_samples
         if tick < self.hold_until:

@@ -126,7 +126,7 @@ class Monitor:
         events.extend(self.detector.step(t, v_in, pl.xhat, pl.residual, pl.g1, pl.g2,
                                          pl.theta1, pl.theta2))
         if self._samples % self._history_every == 0:
-            self._history.append((t, pl.theta1, pl.theta2))
+            self._history.append((t, self.detector.theta1, self.detector.theta2))
         self._samples += 1
         return events
 
@@ -253,14 +253,15 @@ class Monitor:
         sol_t1, sol_t2 = pl.thetas(batch)
         events, det_trace = self.detector.run(t, v_in, batch.xhat, batch.residual, batch.g1,
                                               batch.g2, sol_t1, sol_t2)
+        theta1, theta2 = det_trace.theta1, det_trace.theta2
         n = len(t)
         ticks = self._samples + np.arange(n)
         hist = np.flatnonzero(ticks % self._history_every == 0)
         for k in hist[-HISTORY_POINTS:]:
-            self._history.append((float(t[k]), float(sol_t1[k]), float(sol_t2[k])))
+            self._history.append((float(t[k]), float(theta1[k]), float(theta2[k])))
         keep = np.flatnonzero(ticks % trace_every == 0)
         for name, values in (("t", t), ("accel", accel), ("residual", batch.residual),
-                             ("theta1", sol_t1), ("theta2", sol_t2),
+                             ("theta1", theta1), ("theta2", theta2),
                              ("statistic", det_trace.statistic), ("state", det_trace.state)):
             parts[name].append(np.asarray(values)[keep])
         self._samples += n
@@ -277,7 +278,7 @@ class Monitor:
             return
         pl = self.pipeline
         values = {"t": self._last_t, "accel": pl.residual + pl.xhat, "residual": pl.residual,
-                  "theta1": pl.theta1, "theta2": pl.theta2,
+                  "theta1": self.detector.theta1, "theta2": self.detector.theta2,
                   "statistic": self.detector.statistic,
                   "state": STATES.index(self.detector.state)}
         for name, value in values.items():
@@ -294,9 +295,9 @@ class Monitor:
         hist = list(self._history)
         return {
             "state": det.state if self._samples else "starting",
-            "theta1": _finite(pl.theta1),
-            "theta2": _finite(pl.theta2),
-            "friction_level": _finite(pl.theta1),
+            "theta1": _finite(det.theta1),
+            "theta2": _finite(det.theta2),
+            "friction_level": _finite(det.theta1),
             "band": det.band,
             "signature": [1.0, self.gamma_f],
             "residual_rms": _finite(math.sqrt(syy / count)) if count and syy >= 0 else None,

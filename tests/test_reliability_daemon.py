@@ -100,6 +100,7 @@ def realtime_run(tmp_path, seconds: float, judge_deadlines: bool) -> None:
         assert daemon.stop(signal.SIGTERM) == 0, daemon.output()
         summary = [line for line in daemon.lines if "deadline misses" in line]
         assert summary, daemon.output()
+        print(summary[-1])  # the figures, with `pytest -s`
         if judge_deadlines:
             assert "deadline misses 0 " in summary[-1], summary
     finally:

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 import yaml
-from conftest_ident import msd_recordings, plant_recording  # noqa: F401  (fixture)
+from conftest_ident import plant_recording
 
 from fdi_daemon.cli import main
 from fdi_daemon.io.model_file import load_model

@@ -3,7 +3,7 @@ friction signature on the calibration and the paper's test-case windows."""
 
 import numpy as np
 import pytest
-from conftest_ident import sim_model, sim_recordings, true_gamma  # noqa: F401  (fixtures)
+from conftest_ident import true_gamma
 
 from fdi_daemon.cli import main
 from fdi_daemon.core.velocity import VelocityEstimator

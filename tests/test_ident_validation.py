@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest_ident import FS, chirp, plant
+from conftest_ident import chirp, plant
 from scipy import signal
 
 from fdi_daemon.ident import validation

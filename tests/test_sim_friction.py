@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from conftest_sim import FS, run_sine_with_supply, sine, test_case_recordings  # noqa: F401
+from conftest_sim import FS, run_sine_with_supply, sine
 from hil_sim.rig import Rig, RigParams
 from hil_sim.rig.params import GRAVITY_M_PER_S2
 

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from conftest_sim import FS, h1_response, sine, sweep_recording  # noqa: F401 (fixture)
+from conftest_sim import FS, h1_response, sine
 from hil_sim.rig import FAULTS, Rig, RigOutput, RigParams
 
 

@@ -132,8 +132,7 @@ def _paced(monitor, rec, on_tick=None):
             events.extend(new)
             pl, det = monitor.pipeline, monitor.detector
             values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
-                      det.theta2, det.statistic,
-                      STATES.index(monitor.detector.state))
+                      det.theta2, det.statistic, STATES.index(det.state))
             for name, value in zip(names, values):
                 out[name][k] = value
             if on_tick is not None:

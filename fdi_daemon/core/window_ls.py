@@ -27,10 +27,12 @@ import numpy as np
 
 from fdi_daemon.core.sliding_sums import SlidingSums
 
-__all__ = ["WindowLS", "WindowSolution", "solve_sums", "products", "N_SUMS"]
+__all__ = ["WindowLS", "WindowSolution", "solve_sums", "products", "N_SUMS", "MIN_RCOND"]
 
 #: sums kept per window: S11, S12, S22, S1y, S2y, Syy
 N_SUMS = 6
+#: default floor of 1 - ρ² = det / (S11 S22) for a valid window
+MIN_RCOND = 1e-6
 
 _NAN = math.nan
 
@@ -52,7 +54,7 @@ class WindowLS:
     __slots__ = ("window_samples", "min_rcond", "min_mean_square", "_sums", "_min_s11",
                  "_min_s22", "ok", "sse", "theta1", "theta2")
 
-    def __init__(self, window_samples: int, min_rcond: float = 1e-6,
+    def __init__(self, window_samples: int, min_rcond: float = MIN_RCOND,
                  min_mean_square: tuple[float, float] = (0.0, 0.0)) -> None:
         if isinstance(window_samples, bool) or not isinstance(window_samples, (int, np.integer)) \
                 or window_samples < 3:

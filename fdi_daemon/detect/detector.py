@@ -41,6 +41,7 @@ import numpy as np
 from fdi_daemon.core.innovation_test import InnovationTest, innovation, packed_row
 from fdi_daemon.core.normal_equations import packed_width, solve_packed
 from fdi_daemon.core.sliding_sums import SlidingSums
+from fdi_daemon.core.window_ls import MIN_RCOND
 from fdi_daemon.detect.events import make_event
 from fdi_daemon.detect.settings import DetectorSettings
 
@@ -56,8 +57,6 @@ N_REGRESSORS = 4
 #: order of the autoregressive model of the valve command (the operating-point guard)
 COMMAND_ORDER = 4
 _WIDTH = packed_width(N_REGRESSORS)
-#: an episode's θ needs 1 - ρ² of (g1, g2) above this, as the sliding window's (WindowLS)
-_MIN_RCOND = 1e-6
 _CHUNK = 16384
 
 
@@ -382,7 +381,7 @@ class _Episode:
             return det.theta1, det.theta2
         s = self.post.sliding  # packed g1, g2, x̂̈, 1 (normal_equations layout)
         theta, _, ok = solve_packed((s[0], s[1], s[4], s[10], s[11], s[14]), 2,
-                                    min_pivot=_MIN_RCOND)
+                                    min_pivot=MIN_RCOND)  # 1 - ρ², as WindowLS
         return (theta[0], theta[1]) if ok else (det.theta1, det.theta2)
 
     def step(self, det: Detector, tick, t, phi, row, r):

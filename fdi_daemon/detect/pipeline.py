@@ -24,7 +24,7 @@ import numpy as np
 from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.core.sliding_sums import SlidingSums
 from fdi_daemon.core.velocity import VelocityEstimator
-from fdi_daemon.core.window_ls import WindowLS, solve_sums
+from fdi_daemon.core.window_ls import MIN_RCOND, WindowLS, solve_sums
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.model_file import FdiModel
 
@@ -51,7 +51,7 @@ class Pipeline:
     __slots__ = ("plant", "velocity", "ge_sign", "ge_velocity", "wls", "speed", "min_v2_sum",
                  "xhat", "residual", "v", "g1", "g2", "moving", "theta1", "theta2")
 
-    def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = 1e-6,
+    def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = MIN_RCOND,
                  min_velocity_rms_mps: float = 0.0) -> None:
         ff = model.fault_filter
         if ff is None:

@@ -17,9 +17,9 @@ T = mean over the test window of (e/σ)² (≈ 1 without a fault); T > threshold
 character: the same test on an AR(4) model of v_in (the operating-point guard) holds
 alarms for ``guard_hold_s`` after it fires. Isolation fits φ again on the data since the
 reference ended: an increase of the Coulomb coefficient by ``friction_min_level`` (units of
-the calibrated signature) is friction, once the fault has outlived the samples that
-raised the alarm (the frozen-reference test still above the threshold a test window
-later: a glitch does not persist); gain (x̂̈) or offset (1) changes without it, or no
+the calibrated signature), held for ``track_samples`` ticks, is friction once the fault
+has persisted (the frozen-reference test still above the threshold on samples an
+isolation window after the detection: a knock or glitch does not persist); gain (x̂̈) or offset (1) changes without it, or no
 friction evidence within ``isolation_timeout_s``, are another fault. A slow path catches
 friction that creeps in (wear) or starts while the guard holds: the reference's Coulomb
 coefficient above its calibrated value by ``friction_min_level`` for ``slow_persistence_s``
@@ -356,10 +356,11 @@ class _Episode:
         self.quiet = 0
         self.track = 0
         self.level_change = math.nan
+        self.evidence = math.nan  # Coulomb increase once held for track_samples (friction)
         self.hold_until = 0
         # friction persists, a glitch does not: the fault must still be there (the frozen
-        # test above h) on a test window made only of samples more than one test window
-        # after the detection, i.e. after the samples that raised the alarm have left it.
+        # test above h) on a test window made only of samples more than one isolation
+        # window after the detection, long after the samples that raised the alarm.
         # The slow path's alarm is persistence itself (slow_persistence_s of the reference)
         # and its frozen reference already holds the fault.
         self.persisted = slow
@@ -393,7 +394,7 @@ class _Episode:
         frozen_stat = self.frozen_test.push((e * e / self.sigma2_ref,))[0] / det.test_samples
         if tick < self.hold_until:
             return []
-        if self.ticks > 2 * det.test_samples and frozen_stat > det.threshold:
+        if self.ticks > det.iso_samples + det.test_samples and frozen_stat > det.threshold:
             self.persisted = True
         if s.method == "band":
             return self._step_band(det, t, theta1, theta2)
@@ -405,7 +406,10 @@ class _Episode:
                 friction = self.level_change >= s.friction_min_level
         if det.state == "fault_detected":
             self.track = self.track + 1 if friction else 0
-            if self.track >= s.track_samples and self.persisted:
+            if self.track >= s.track_samples and math.isnan(self.evidence):
+                self.evidence = self.level_change
+            if not math.isnan(self.evidence) and self.persisted:
+                self.level_change = self.evidence
                 return self._to(det, "friction_isolated", t, theta1, theta2)
             if self.ticks >= det.timeout_samples:
                 return self._to(det, "other_fault", t, theta1, theta2)

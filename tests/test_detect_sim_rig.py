@@ -96,9 +96,10 @@ def test_theta_tracks_the_signature_within_15_percent(name, fault_s, _detect, is
     assert np.all(np.abs(trace.theta2[k:] - gamma) <= 0.15 * abs(gamma))
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
 @pytest.mark.parametrize("name", OTHER_FAULTS)
-def test_other_faults_are_detected_and_not_called_friction(name):
-    events, _ = _replay(name)
+def test_other_faults_are_detected_and_not_called_friction(name, seed):
+    events, _ = _replay(name, seed=seed)
     kinds = [e["kind"] for e in events]
     assert "fault_detected" in kinds
     assert "friction_isolated" not in kinds

@@ -66,6 +66,23 @@ def serial_link(path: str, stall_timeout_s: float | None = None) -> Reconnecting
                             backoff_max_s=0.2, stall_timeout_s=stall_timeout_s)
 
 
+def stream_through_pty(tmp_path, data: bytes, delivered: int, seed: int):
+    """Write ``data`` to a pty device in random pieces, run the service loop on a serial
+    link until ``delivered`` samples are through (and a while longer); returns the closed
+    (link, loop, out) for their counters and events."""
+    dev = PtyDevice(tmp_path)
+    link = serial_link(dev.path)
+    link.open()
+    loop, out = service_loop(link)
+    thread = writer(dev, data, seed=seed)
+    pump(loop, lambda: loop.samples >= delivered, 120.0, f"{delivered} samples")
+    thread.join(10)
+    drain(loop)
+    link.close()
+    dev.close()
+    return link, loop, out
+
+
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """(start, length) of each run of True."""
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
@@ -83,17 +100,8 @@ def test_corrupted_bytes_are_counted_exactly_and_raise_no_alarm(tmp_path, rate):
     assert hit.sum() > 0
     expected_crc = sum(f[:3] == SYNC + bytes([VERSION]) for f, h in zip(frames, hit) if h)
 
-    dev = PtyDevice(tmp_path)
-    link = serial_link(dev.path)
-    link.open()
-    loop, out = service_loop(link)
-    thread = writer(dev, b"".join(frames), seed=1)
     delivered = len(frames) - int(hit.sum())
-    pump(loop, lambda: loop.samples >= delivered, 120.0, "every clean frame")
-    thread.join(10)
-    drain(loop)
-    link.close()
-    dev.close()
+    link, loop, out = stream_through_pty(tmp_path, b"".join(frames), delivered, seed=1)
 
     counters = link.counters()
     gap_runs = runs(hit)
@@ -126,17 +134,8 @@ def test_truncated_frames_and_a_garbage_flood_lose_only_those_frames(tmp_path):
             pieces.append(garbage[flooded:flooded + 30_000])
             flooded += 30_000
         pieces.append(frame[:FRAME_SIZE // 2] if cut[k] else frame)
-    dev = PtyDevice(tmp_path)
-    link = serial_link(dev.path)
-    link.open()
-    loop, out = service_loop(link)
-    thread = writer(dev, b"".join(pieces), seed=2)
     delivered = len(frames) - int(cut.sum())
-    pump(loop, lambda: loop.samples >= delivered, 120.0, "every whole frame")
-    thread.join(10)
-    drain(loop)
-    link.close()
-    dev.close()
+    link, loop, out = stream_through_pty(tmp_path, b"".join(pieces), delivered, seed=2)
 
     counters = link.counters()
     assert flooded == len(garbage) >= 300_000

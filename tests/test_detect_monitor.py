@@ -61,7 +61,9 @@ def test_step_and_batch_give_the_same_events_and_statistic(scenario, method):
 
 def test_during_an_episode_theta_is_fitted_on_the_data_since_the_change():
     """From the isolation window on, θ of eq. (17) is the least-squares fit on the samples
-    since the reference window ended (the lag before the detection), a direct solve."""
+    since the reference window ended (the lag before the detection), a direct solve; once
+    another isolation window has passed, on the samples from one isolation window after the
+    detection on (the onset transient left out)."""
     from fdi_daemon.detect.pipeline import Pipeline
 
     rec = scenario_recording("test_case_2")
@@ -71,17 +73,27 @@ def test_during_an_episode_theta_is_fitted_on_the_data_since_the_change():
     det = monitor.detector
     chain = Pipeline(model, det.window_samples).run(rec.v_in, rec.accel)
     k_d = int(np.flatnonzero(trace.state == STATES.index("fault_detected"))[0])
-    first = k_d - det.lag_samples + 1  # the newest lag rows at the detection start the fit
-    for k in (first + det.iso_samples - 1, k_d + 100, first + det.window_samples - 1):
+
+    def direct(first, k):
         g = np.column_stack([chain.g1[first:k + 1], chain.g2[first:k + 1]])
-        direct = np.linalg.lstsq(g, chain.residual[first:k + 1], rcond=None)[0]
-        np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]], direct, rtol=1e-7)
+        return np.linalg.lstsq(g, chain.residual[first:k + 1], rcond=None)[0]
+
+    post = k_d - det.lag_samples + 1  # the newest lag rows at the detection start the fit
+    settled = k_d + det.iso_samples + 1
+    for first, k in ((post, post + det.iso_samples - 1), (post, k_d + 100),
+                     (post, settled + det.iso_samples - 2),
+                     (settled, settled + det.iso_samples - 1),
+                     (settled, settled + det.window_samples - 1)):
+        np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]], direct(first, k),
+                                   rtol=1e-7)
     # before the isolation window is full: the sliding window's θ
-    k = first + det.iso_samples - 2
-    g = np.column_stack([chain.g1[k - det.window_samples + 1:k + 1],
-                         chain.g2[k - det.window_samples + 1:k + 1]])
-    direct = np.linalg.lstsq(g, chain.residual[k - det.window_samples + 1:k + 1], rcond=None)[0]
-    np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]], direct, rtol=1e-7)
+    k = post + det.iso_samples - 2
+    np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]],
+                               direct(k - det.window_samples + 1, k), rtol=1e-7)
+    # a window later, the settled window is the sliding window
+    k = settled + det.window_samples + 10
+    np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]],
+                               direct(k - det.window_samples + 1, k), rtol=1e-7)
 
 
 def test_bad_samples_and_gaps():

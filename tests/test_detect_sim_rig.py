@@ -38,9 +38,10 @@ def test_test_case_2_detected_within_35_ms():
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "measured 63 ms after the 3.05 s event (47 ms after the simulated contact at 3.066 s): "
-    "the bearing pocket pressure needs ~16 ms to fall below lift-off, and the small friction "
-    "force then needs ~12 samples to lift the statistic above its threshold"))
+    "measured 63 ms after the 3.05 s event: the bearing touches down at +16 ms, but the "
+    "friction's residual during the sliding half-cycle fades within ~20 ms (the plant's "
+    "stiffness) and lifts the statistic to ~12 only; it crosses h = 30 at the first velocity "
+    "reversal under friction, +59 ms (also on rig variants with contact at +4 ms)"))
 def test_test_case_1_detected_within_15_ms():
     events, _ = _replay("test_case_1")
     assert first_event(events, "fault_detected")["t"] - 3.05 <= 0.015
@@ -65,30 +66,28 @@ def own_signature(name, fault_s, tmp):
     return model, Monitor(model).run(scenario_recording(name))[1]
 
 
-@pytest.mark.parametrize("name,fault_s,from_s", [("test_case_1", 3.05, 1.5),
-                                                  ("test_case_2", 2.9, 1.3)])
-def test_theta_settles_on_its_own_signature(name, fault_s, from_s, tmp_path_factory):
+def test_theta1_of_test_case_1_settles_on_its_own_signature(tmp_path_factory):
     """Against a signature calibrated on the same fault, as the paper calibrates: θ1 (the
-    friction level) within ±15 % of 1 from the paper's tracking time (case 1) or once the
-    0.5 s transient after the supply cut has left the window (case 2, where θ2 also sits
-    within ±15 % of γ_f), and staying there."""
-    model, trace = own_signature(name, fault_s, tmp_path_factory.getbasetemp())
-    k = np.searchsorted(trace.t, fault_s + from_s)
+    friction level) within ±15 % of 1 from the paper's tracking time on, and staying there
+    (θ2 does not: see the xfail below)."""
+    _model, trace = own_signature("test_case_1", 3.05, tmp_path_factory.getbasetemp())
+    k = np.searchsorted(trace.t, 3.05 + 1.5)
     assert np.all(np.abs(trace.theta1[k:] - 1.0) <= 0.15)
-    if name == "test_case_2":
-        gamma = model.fault_filter.gamma_f
-        assert np.all(np.abs(trace.theta2[k:] - gamma) <= 0.15 * abs(gamma))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "case 1: θ1 is within ±15 % from +0.3 s, but θ2 wanders up to 29 % off γ_f after +1.5 s: "
-    "under a single 8 Hz sine g1 and g2 are nearly collinear, the γ profile of the signature "
-    "is flat (γ_f is arbitrary) and θ2 moves along the least-squares valley; case 2: at "
-    "+0.7 s θ = (1.24, -9.1) against (1, 10): the first 0.5 s after the supply cut are not "
-    "the steady fault the signature holds (within ±15 % from +1.3 s)"))
-@pytest.mark.parametrize("name,fault_s,_detect,isolate_s", TEST_CASES)
+CASE_1_THETA2 = pytest.mark.xfail(strict=True, reason=(
+    "case 1: θ1 is within ±1.1 % of 1 from +1.5 s, but θ2 ranges over 0.56-1.02 against "
+    "γ_f = 0.80 (29 % off): under a single 8 Hz sine g1 and g2 are nearly collinear, the γ "
+    "profile of the signature is flat (γ_f is arbitrary) and θ2 moves along the "
+    "least-squares valley"))
+
+
+@pytest.mark.parametrize("name,fault_s,_detect,isolate_s", [
+    pytest.param(*TEST_CASES[0], marks=CASE_1_THETA2), TEST_CASES[1]])
 def test_theta_tracks_the_signature_within_15_percent(name, fault_s, _detect, isolate_s,
                                                       tmp_path_factory):
+    """The paper's tracking target, against a signature calibrated on another recording of
+    the same input and fault (§IV-B): from the tracking time on, θ within ±15 % of (1, γ_f)."""
     model, trace = own_signature(name, fault_s, tmp_path_factory.getbasetemp())
     gamma = model.fault_filter.gamma_f
     k = np.searchsorted(trace.t, fault_s + isolate_s)

@@ -57,6 +57,15 @@ N_REGRESSORS = 4
 #: order of the autoregressive model of the valve command (the operating-point guard)
 COMMAND_ORDER = 4
 _WIDTH = packed_width(N_REGRESSORS)
+#: isolation beyond a linear change of the plant: g1, x̂̈(k), x̂̈(k-1), 1
+_LINEAR_REGRESSORS = 4
+_LINEAR_WIDTH = packed_width(_LINEAR_REGRESSORS)
+#: the load has stopped: the measured acceleration keeps at most this fraction of the
+#: predicted energy (20 % of its RMS) ...
+STOPPED_ENERGY_FRACTION = 0.04
+#: ... and the accelerometer is alive: its sample-to-sample changes carry more than this
+#: fraction of the predicted energy (a dead sensor repeats one value exactly)
+FLAT_ENERGY_FRACTION = 1e-6
 _CHUNK = 16384
 
 
@@ -351,12 +360,24 @@ class _Episode:
         self.post = SlidingSums(det.window_samples, _WIDTH)
         for row in test.recent_rows:  # data since the reference window ended, newest included
             self.post.push(row)
+        # the same after the fault's onset transient (the first isolation window after the
+        # detection, while the motion settles into its new periodic state): θ's window
+        self.settled = SlidingSums(det.window_samples, _WIDTH)
+        # on the settled window: the innovation against the frozen reference, regressed on
+        # g1 and a linear change of the plant (x̂̈ and x̂̈ one tick earlier: any gain and
+        # phase change at one frequency, a smooth one across a band) and an offset
+        self.beyond_linear = SlidingSums(det.window_samples, _LINEAR_WIDTH)
+        self._xhat_past = math.nan
         self.frozen_test = SlidingSums(det.test_samples, 1)
+        # over the test window: Σ(ẍ(k) - ẍ(k-1))², Σẍ², Σx̂̈² (has the load stopped?)
+        self.motion = SlidingSums(det.test_samples, 3)
+        self._accel_past = math.nan
         self.ticks = 0
         self.quiet = 0
         self.track = 0
         self.level_change = math.nan
         self.evidence = math.nan  # Coulomb increase once held for track_samples (friction)
+        self.evidence_kind: str | None = None  # and what showed it (`_friction_kind`)
         self.hold_until = 0
         # friction persists, a glitch does not: the fault must still be there (the frozen
         # test above h) on a test window made only of samples more than one isolation
@@ -364,33 +385,87 @@ class _Episode:
         # The slow path's alarm is persistence itself (slow_persistence_s of the reference)
         # and its frozen reference already holds the fault.
         self.persisted = slow
+        self.slow = slow
 
     def restart(self, det: Detector) -> None:
         """After a data gap: the windows restart, the episode goes on."""
         self.post.reset()
+        self.settled.reset()
+        self.beyond_linear.reset()
+        self._xhat_past = math.nan
         self.frozen_test.reset()
+        self.motion.reset()
+        self._accel_past = math.nan
         self.quiet = 0
         self.track = 0
         self.hold_until = det.warmup_samples
 
     def theta(self, det: Detector) -> tuple[float, float]:
-        """θ of eq. (17) fitted on the data since the change (the post window, once it holds
-        ``isolation_window_s``): the estimate no longer mixes pre-fault data, so it reaches
-        the signature after the isolation window instead of after a whole window. Falls back
-        to the sliding-window θ (NaN at rest, early in the episode, ill-conditioned)."""
-        if self.post.count < det.iso_samples or not math.isfinite(det.theta1):
+        """θ of eq. (17) fitted on the data since the change, without pre-fault data: on the
+        settled window (from one isolation window after the detection: the fault's onset
+        transient left out) once it holds ``isolation_window_s``, before that on the post
+        window (from the end of the reference window) once that does. Falls back to the
+        sliding-window θ (NaN at rest, early in the episode, ill-conditioned)."""
+        if not math.isfinite(det.theta1):
             return det.theta1, det.theta2
-        s = self.post.sliding  # packed g1, g2, x̂̈, 1 (normal_equations layout)
-        theta, _, ok = solve_packed((s[0], s[1], s[4], s[10], s[11], s[14]), 2,
-                                    min_pivot=MIN_RCOND)  # 1 - ρ², as WindowLS
-        return (theta[0], theta[1]) if ok else (det.theta1, det.theta2)
+        for window in (self.settled, self.post):
+            if window.count >= det.iso_samples:
+                s = window.sliding  # packed g1, g2, x̂̈, 1 (normal_equations layout)
+                theta, _, ok = solve_packed((s[0], s[1], s[4], s[10], s[11], s[14]), 2,
+                                            min_pivot=MIN_RCOND)  # 1 - ρ², as WindowLS
+                if ok:
+                    return theta[0], theta[1]
+        return det.theta1, det.theta2
+
+    def coulomb_beyond_linear(self, det: Detector) -> float:
+        """The Coulomb coefficient of the innovation on the settled window once any linear
+        change of the plant is allowed for: what g1 explains beyond it (the odd harmonics of
+        sign v̂) is dry friction. NaN before the settled window holds
+        ``isolation_window_s`` or if the fit is ill-conditioned."""
+        if self.beyond_linear.count < det.iso_samples:
+            return math.nan
+        theta, _, ok = solve_packed(self.beyond_linear.sliding, _LINEAR_REGRESSORS)
+        return theta[0] if ok else math.nan
+
+    def load_stopped(self, det: Detector) -> bool:
+        """The load has stopped although the model says it moves: over the last test window
+        the measured acceleration keeps at most ``STOPPED_ENERGY_FRACTION`` of the energy of
+        x̂̈, and it is not a flat line (a dead accelerometer repeats one value; a stopped
+        load still shows the sensor's noise)."""
+        if self.motion.count < det.test_samples:
+            return False
+        s_step, s_accel, s_xhat = self.motion.sliding
+        return (s_xhat > 0.0 and s_accel <= STOPPED_ENERGY_FRACTION * s_xhat
+                and s_step > FLAT_ENERGY_FRACTION * s_xhat)
+
+    def _friction_kind(self, det: Detector) -> str | None:
+        """Given a rise of the Coulomb coefficient: is it dry friction? ``"harmonics"``: g1
+        explains the innovation beyond any linear change of the plant; ``"load_stopped"``:
+        the load has stopped (friction holds it); ``"slow"``: the slow path's alarm (its
+        reference already holds the fault, there is no innovation to test)."""
+        if self.slow:
+            return "slow"
+        if self.coulomb_beyond_linear(det) >= det.settings.friction_min_level:
+            return "harmonics"
+        return "load_stopped" if self.load_stopped(det) else None
 
     def step(self, det: Detector, tick, t, phi, row, r):
         s = det.settings
         self.ticks += 1
         self.post.push(row)
-        det.theta1, det.theta2 = theta1, theta2 = self.theta(det)
         e = innovation(r, phi, self.theta_ref)
+        g1, _, xhat, _ = phi
+        if self.ticks > det.iso_samples:
+            self.settled.push(row)
+            if not math.isnan(self._xhat_past):
+                self.beyond_linear.push(packed_row((g1, xhat, self._xhat_past, 1.0), e))
+        self._xhat_past = xhat
+        accel = r + xhat
+        if not math.isnan(self._accel_past):
+            step = accel - self._accel_past
+            self.motion.push((step * step, accel * accel, xhat * xhat))
+        self._accel_past = accel
+        det.theta1, det.theta2 = theta1, theta2 = self.theta(det)
         frozen_stat = self.frozen_test.push((e * e / self.sigma2_ref,))[0] / det.test_samples
         if tick < self.hold_until:
             return []
@@ -398,16 +473,18 @@ class _Episode:
             self.persisted = True
         if s.method == "band":
             return self._step_band(det, t, theta1, theta2)
-        friction = False
+        kind = None  # what shows the friction on this tick (None: nothing)
         if self.post.count >= det.iso_samples:
             theta, _, ok = solve_packed(self.post.sliding, N_REGRESSORS)
             if ok:
                 self.level_change = theta[0] - self.coulomb_base
-                friction = self.level_change >= s.friction_min_level
+                if self.level_change >= s.friction_min_level:
+                    kind = self._friction_kind(det)
         if det.state == "fault_detected":
-            self.track = self.track + 1 if friction else 0
+            self.track = self.track + 1 if kind else 0
             if self.track >= s.track_samples and math.isnan(self.evidence):
                 self.evidence = self.level_change
+                self.evidence_kind = kind
             if not math.isnan(self.evidence) and self.persisted:
                 self.level_change = self.evidence
                 return self._to(det, "friction_isolated", t, theta1, theta2)
@@ -447,7 +524,10 @@ class _Episode:
     def _to(self, det, state, t, theta1, theta2):
         det.state = state
         self.quiet = 0
-        return [det._event(t, state, theta1, theta2, coulomb_change=float(self.level_change))]
+        extra = {"friction_evidence": self.evidence_kind} if (
+            state == "friction_isolated" and self.evidence_kind) else {}
+        return [det._event(t, state, theta1, theta2, coulomb_change=float(self.level_change),
+                           **extra)]
 
     def _clear(self, det, t, theta1, theta2):
         det.state = "monitoring"

@@ -174,6 +174,22 @@ def test_events_are_strict_json():
         assert {"t", "kind", "theta1", "theta2"} <= set(json.loads(line))
 
 
+def test_settings_of_another_tool_are_ignored_with_a_warning(caplog):
+    """A model file shared with another tool may carry its settings (DESIGN.md: more keys
+    welcome): they are ignored with a warning naming them, and the monitor runs as without
+    them; a typo of a known key is still refused."""
+    rec = scenario_recording("test_case_2")
+    plain, _ = Monitor(sim_rig_model()).run(rec)
+    shared = model_copy(detector={"cusum_drift": 0.5, "threshold": 30.0},
+                        velocity={**sim_rig_model().velocity, "estimator": "kalman"})
+    with caplog.at_level("WARNING", logger="fdi.model"):
+        events, _ = Monitor(shared).run(rec)
+    assert events == plain
+    assert "'cusum_drift'" in caplog.text and "'estimator'" in caplog.text
+    with pytest.raises(ConfigError, match="did you mean 'highpass_hz'"):
+        Monitor(model_copy(velocity={"highpas_hz": 1.0}))
+
+
 def test_bad_settings_and_unstable_filters_are_refused():
     with pytest.raises(ConfigError, match="unknown setting"):
         Monitor(model_copy(detector={"treshold": 3}))

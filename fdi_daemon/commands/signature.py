@@ -63,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
 
     from fdi_daemon.commands.identify import load_io, parse_range
     from fdi_daemon.core.velocity import DEFAULT_SETTINGS, VelocityEstimator
+    from fdi_daemon.detect.settings import velocity_settings
     from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.errors import ConfigError, UserError
     from fdi_daemon.ident import provenance
@@ -100,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--fault-window {args.fault_window} holds {int(inside.sum())} "
                         f"samples; at least {needed} are needed")
 
-    settings = {k: v for k, v in (model.velocity or DEFAULT_SETTINGS).items()}
+    settings = velocity_settings(model.velocity or DEFAULT_SETTINGS)
     if args.highpass_hz is not None:
         settings["highpass_hz"] = args.highpass_hz
     try:

@@ -25,6 +25,7 @@ from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.core.sliding_sums import SlidingSums
 from fdi_daemon.core.velocity import VelocityEstimator
 from fdi_daemon.core.window_ls import MIN_RCOND, WindowLS, solve_sums
+from fdi_daemon.detect.settings import velocity_settings
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.model_file import FdiModel
 
@@ -58,7 +59,8 @@ class Pipeline:
             raise ConfigError("the model has no fault_filter (G_e, γ_f): run `fdi signature` "
                               "on a recording with a friction fault first")
         try:
-            self.velocity = VelocityEstimator.from_settings(model.velocity, model.fs)
+            self.velocity = VelocityEstimator.from_settings(velocity_settings(model.velocity),
+                                                            model.fs)
         except ValueError as exc:
             raise ConfigError(f"model velocity settings: {exc}") from None
         if model.extra.get("effects"):  # Ĝ plus the effects `fdi diagnose` added (same API)

@@ -173,3 +173,17 @@ def test_cleared_when_the_fault_goes_away(fault, kind):
                         "events": [{"t_s": 4.0, **fault}, {"t_s": 8.0, **off}]})
     assert _kinds(events) == ["fault_detected", kind, "cleared"]
     assert 8.0 < events[-1]["t"] < 8.0 + 3.5
+
+
+@pytest.mark.parametrize("fault,kind", [({"bearing_supply": 0.35}, "friction_isolated"),
+                                        ({"fault": "accel_dropout", "value": 1.0},
+                                         "other_fault")])
+def test_a_fault_is_not_cleared_while_the_rig_rests(fault, kind):
+    """Start-stop operation (8 Hz bursts of 5 s, 3 s at rest): at rest nothing shows the
+    fault, nor its absence, so the episode stays open through the rests. Before, the
+    friction episode was cleared 2 s into the first rest and found again after it."""
+    burst = [{**SINE, "duration_s": 5.0}, {"kind": "zero", "duration_s": 3.0}]
+    events = _scenario({"name": "bursts", "duration_s": 40.0, "excitation": burst * 5,
+                        "events": [{"t_s": 10.0, **fault}]})
+    assert _kinds(events) == ["fault_detected", kind]
+    assert 10.0 <= events[1]["t"] < 10.1

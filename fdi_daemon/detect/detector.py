@@ -451,6 +451,7 @@ class _Episode:
 
     def step(self, det: Detector, tick, t, phi, row, r):
         s = det.settings
+        moving = math.isfinite(det.theta1)  # the pipeline's window θ: NaN at rest
         self.ticks += 1
         self.post.push(row)
         e = innovation(r, phi, self.theta_ref)
@@ -499,7 +500,8 @@ class _Episode:
                       and _moves_freely(test.reference_sums))
         else:
             normal = frozen_stat <= det.threshold
-        self.quiet = self.quiet + 1 if normal else 0
+        # at rest nothing shows a fault, nor its absence: no clearing
+        self.quiet = self.quiet + 1 if normal and moving else 0
         if self.quiet >= det.clear_samples:
             return self._clear(det, t, theta1, theta2)
         return []

@@ -187,3 +187,22 @@ def test_a_fault_is_not_cleared_while_the_rig_rests(fault, kind):
                         "events": [{"t_s": 10.0, **fault}]})
     assert _kinds(events) == ["fault_detected", kind]
     assert 10.0 <= events[1]["t"] < 10.1
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("excitation", [
+    [{"kind": "steps", "levels_v": [1.0, -1.0], "hold_s": 0.25, "duration_s": 300.0}],
+    [{"kind": "steps", "levels_v": [0.8, -0.8], "hold_s": 1.0, "duration_s": 300.0}],
+    [{"kind": "steps", "levels_v": [0.3, -0.5, 0.9, -0.2, 0.6, -1.0, 0.1], "hold_s": 0.4,
+      "duration_s": 300.0}],
+    [{**SINE, "duration_s": 5.0}, {"kind": "zero", "duration_s": 3.0}] * 30,
+    [{"kind": "sine", "amplitude_v": 0.6, "frequency_hz": 6.0, "duration_s": 7.0},
+     {"kind": "zero", "duration_s": 2.0}] * 30,
+], ids=["square_2hz", "square_0.5hz", "random_steps", "bursts_8hz", "bursts_6hz_low"])
+def test_operation_unlike_the_fault_free_hour_raises_no_alarm(excitation):
+    """Fault-free regimes the detector was not tuned on (the fault-free hour holds sines,
+    multisines and chirps only): square waves, level steps, start-stop bursts; 4-5 min each."""
+    duration = sum(segment["duration_s"] for segment in excitation)
+    events = _scenario({"name": "unseen", "duration_s": duration,
+                        "centring_gain_v_per_m": 30.0, "excitation": excitation}, seed=0)
+    assert _kinds(events) == []

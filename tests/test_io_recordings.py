@@ -105,6 +105,19 @@ def test_fs_is_estimated_from_median_step_when_metadata_missing():
     assert nominal_fs_hz(t) == pytest.approx(100.0)
 
 
+@pytest.mark.parametrize("decimals,start_s", [(4, 0.0), (3, 0.0), (6, 100.0), (4, 3600.0)])
+def test_times_printed_with_few_decimals_give_the_rate_and_no_issue(decimals, start_s):
+    """Another tool's CSV may print t with few decimals: one step of a 256 Hz file at 4
+    decimals is 0.0039 s (256.4 Hz); over the span the rounding cancels."""
+    t = np.round(start_s + np.arange(1536) / 256.0, decimals)
+    assert nominal_fs_hz(t) == pytest.approx(256.0, rel=1e-4)
+    assert check_sampling(t).ok
+    with_gap = np.delete(t, np.arange(700, 710))  # 10 samples missing
+    report = check_sampling(with_gap)
+    assert [(i.kind, i.index, i.missing_samples) for i in report.issues] == [("gap", 700, 10)]
+    assert report.fs_hz == pytest.approx(256.0, rel=1e-4)
+
+
 @pytest.mark.parametrize(
     "body, message",
     [

@@ -20,6 +20,24 @@ def files(tmp_path_factory):
     return root, model, rec
 
 
+def test_a_csv_of_another_tool_with_rounded_times_replays(files, tmp_path):
+    """Times printed with 4 decimals, no seq, CRLF line ends and an extra column, as another
+    tool may write them: the rate comes out as 256 Hz and the events are those of the
+    original file."""
+    root, model, rec = files
+    src = scenario_recording("test_case_2")
+    lines = ["t,v_in,accel,truth"] + [f"{t:.4f},{v:.6f},{a:.6f},0" for t, v, a in
+                                      zip(src.t, src.v_in, src.accel)]
+    other = tmp_path / "other.csv"
+    other.write_bytes("\r\n".join(lines).encode() + b"\r\n")
+    for path, name in ((rec, "ev_own.jsonl"), (other, "ev_other.jsonl")):
+        assert main(["replay", str(path), "--model", str(model),
+                     "--events", str(tmp_path / name)]) == 0
+    kinds = [[e["kind"] for e in read_events(tmp_path / name)]
+             for name in ("ev_own.jsonl", "ev_other.jsonl")]
+    assert kinds[0] == kinds[1] == ["calibrated", "fault_detected", "friction_isolated"]
+
+
 def test_replay_writes_events_summary_and_plot(files, capsys):
     root, model, rec = files
     code = main(["replay", str(rec), "--model", str(model), "--events", str(root / "ev.jsonl"),

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 HELP = "find where a model and a recording disagree, name the missing effect, add it"
 
@@ -50,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.errors import UserError
     from fdi_daemon.io.model_file import FdiModel, load_model, save_model
     from fdi_daemon.io.outputs import write_json
-    from fdi_daemon.io.recordings import read_recording
+    from fdi_daemon.io.recordings import read_recording, same_rate
 
     from pathlib import Path
 
@@ -78,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     plant_b = plant_a = None
     if args.model:
         model = load_model(args.model)
-        if not math.isclose(model.fs, fs, rel_tol=1e-6):
+        if not same_rate(fs, model.fs):
             raise UserError(f"{args.model}: model fs = {model.fs:g} Hz but {args.recording} "
                             f"is sampled at {fs:g} Hz")
         plant_b, plant_a = model.plant_b, model.plant_a

@@ -68,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.errors import UserError
     from fdi_daemon.ident import plant, provenance
     from fdi_daemon.io.model_file import FdiModel, save_model
+    from fdi_daemon.io.recordings import same_rate
 
     if args.order < 1 or args.order > 12:
         raise UserError(f"--order must be 1..12, got {args.order}")
@@ -92,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.validate:
         val_rec, u_val, y_val = load_io(args.validate)
-        if abs(val_rec.fs - fs) > 1e-6 * fs:
+        if not same_rate(val_rec.fs, fs):
             raise UserError(f"{args.validate}: fs = {val_rec.fs:g} Hz differs from "
                             f"{fs:g} Hz of {args.recording}")
         val_label, t_val = f"validation: {args.validate}", val_rec.t

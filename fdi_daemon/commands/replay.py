@@ -31,14 +31,14 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.detect.summary import replay_summary, write_summary
     from fdi_daemon.errors import UserError
     from fdi_daemon.io.model_file import load_model
-    from fdi_daemon.io.recordings import read_recording
+    from fdi_daemon.io.recordings import read_recording, same_rate
 
     if args.dashboard and not args.realtime:
         raise UserError("--dashboard needs --realtime (a batch replay is over before a "
                         "screen could show it)")
     model = load_model(args.model)
     rec = read_recording(args.recording, strict=False)
-    if abs(rec.fs - model.fs) > 1e-6 * model.fs:
+    if not same_rate(rec.fs, model.fs):
         raise UserError(f"{args.recording}: sampled at {rec.fs:g} Hz but the model is for "
                         f"{model.fs:g} Hz")
     monitor = Monitor(model)

@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.detect.settings import velocity_settings
     from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.errors import ConfigError, UserError
+    from fdi_daemon.io.recordings import same_rate
     from fdi_daemon.ident import provenance
     from fdi_daemon.ident import signature as sig
     from fdi_daemon.io.model_file import FaultFilter, load_model, save_model
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
 
     model = load_model(args.model)
     rec, v_in, accel = load_io(args.recording)
-    if abs(rec.fs - model.fs) > 1e-6 * model.fs:
+    if not same_rate(rec.fs, model.fs):
         raise UserError(f"{args.recording}: fs = {rec.fs:g} Hz but the model has "
                         f"fs = {model.fs:g} Hz")
     t = rec.t

@@ -34,6 +34,8 @@ REQUIRED_COLUMNS = ("t", "v_in", "accel")
 
 #: relative tolerance on a sample interval before it counts as irregular
 DT_TOLERANCE = 0.25
+#: relative tolerance between a recording's sampling rate and a model's
+FS_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -129,19 +131,27 @@ class Recording:
 
 
 def nominal_fs_hz(t: np.ndarray, seq: np.ndarray | None = None) -> float:
-    """Sampling rate in Hz from the median time step per sample counter step."""
+    """Sampling rate in Hz: the time per sample counter step over all regular steps (within
+    half a step of the median: a gap is a whole step longer, a duplicate a whole step
+    shorter). Summed over the whole span, the rounding of times printed with few decimals
+    cancels (t at 4 decimals: 256.41 Hz from one step, 256.000 Hz from the span)."""
     if len(t) < 2:
         raise RecordingError("a recording needs at least 2 samples to know its sampling rate")
     dt = np.diff(t)
-    if seq is not None:
-        dseq = np.diff(seq)
-        ok = dseq > 0
-        if ok.any():
-            dt = dt[ok] / dseq[ok]
-    dt = dt[dt > 0]
-    if dt.size == 0:
+    counts = np.ones_like(dt) if seq is None else np.diff(seq).astype(float)
+    ok = (counts > 0) & (dt > 0)
+    if not ok.any():
         raise RecordingError("time column never increases: cannot tell the sampling rate")
-    return float(1.0 / np.median(dt))
+    dt, counts = dt[ok], counts[ok]
+    per_count = dt / counts
+    regular = np.abs(per_count / np.median(per_count) - 1.0) <= 0.5
+    return float(counts[regular].sum() / dt[regular].sum())
+
+
+def same_rate(fs_a_hz: float, fs_b_hz: float) -> bool:
+    """Two sampling rates are the same within ``FS_TOLERANCE`` (a recording's rate is
+    estimated from its time column)."""
+    return abs(fs_a_hz - fs_b_hz) <= FS_TOLERANCE * fs_b_hz
 
 
 def check_sampling(t: np.ndarray, seq: np.ndarray | None = None,

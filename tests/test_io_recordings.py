@@ -118,6 +118,19 @@ def test_times_printed_with_few_decimals_give_the_rate_and_no_issue(decimals, st
     assert report.fs_hz == pytest.approx(256.0, rel=1e-4)
 
 
+@pytest.mark.parametrize("header,sep", [('"t","v_in","accel"', ","), ("t, v_in, accel", ", "),
+                                        ("t;v_in;accel", ";"), ("t\tv_in\taccel", "\t")])
+def test_csv_dialects_of_other_tools_are_read(tmp_path, header, sep):
+    """Quoted names (R's write.csv), spaces after commas, semicolons, tabs."""
+    t = np.arange(8) / FS
+    rows = [sep.join(f"{x:.8f}" for x in (ti, 0.5 * ti, -ti)) for ti in t]
+    path = tmp_path / "other.csv"
+    path.write_text("\n".join([header, *rows]) + "\n")
+    rec = read_recording(path)
+    np.testing.assert_allclose(rec.t, t, atol=1e-8)
+    np.testing.assert_allclose(rec.accel, -t, atol=1e-8)
+
+
 @pytest.mark.parametrize(
     "body, message",
     [
@@ -129,6 +142,7 @@ def test_times_printed_with_few_decimals_give_the_rate_and_no_issue(decimals, st
         ("t,t,accel\n0,1,2\n", r"empty or repeated names"),
         ("# fs: fast\nt,v_in,accel\n0,1,2\n1,1,2\n", r"fs='fast' is not a number"),
         ("t,v_in,accel\n0,1,2\nnan,1,2\n", r"time column t is not finite at row 1"),
+        ("t;v_in;accel\n0,0;1,0;2,0\n0,1;1,0;2,0\n", r"line 2: '0,0' is not a number"),
     ],
 )
 def test_malformed_csv_gives_one_clear_line(tmp_path, body, message):

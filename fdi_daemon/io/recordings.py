@@ -270,7 +270,8 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
             if sep and key.strip() and header is None:
                 meta[key.strip()] = value.strip()
             continue
-        header = [h.strip() for h in stripped.split(",")]
+        delimiter = _delimiter(stripped)
+        header = [h.strip().strip('"').strip() for h in stripped.split(delimiter)]
         header_line = number
         body_start = number
         break
@@ -284,24 +285,35 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
         return {name: np.empty(0) for name in header}, meta
     try:
         with np.errstate(all="ignore"):
-            data = np.loadtxt(io.StringIO(body), delimiter=",", comments="#", ndmin=2,
+            data = np.loadtxt(io.StringIO(body), delimiter=delimiter, comments="#", ndmin=2,
                               dtype=np.float64)
     except ValueError:
-        raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol)) from None
+        raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol,
+                                                  delimiter)) from None
     if data.shape[1] != ncol:
-        raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol))
+        raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol, delimiter))
     columns = {name: np.ascontiguousarray(data[:, j]) for j, name in enumerate(header)}
     if "seq" in columns:
         columns["seq"] = _as_counter(columns["seq"], path)
     return columns, meta
 
 
-def _locate_bad_csv_line(path: Path, lines: list[str], start: int, ncol: int) -> str:
+def _delimiter(header: str) -> str:
+    """The CSV's field separator, from its header row: a comma, else a semicolon or a tab
+    (as spreadsheets and other tools write them; numbers still need a decimal point)."""
+    for candidate in (",", ";", "\t"):
+        if candidate in header:
+            return candidate
+    return ","
+
+
+def _locate_bad_csv_line(path: Path, lines: list[str], start: int, ncol: int,
+                         delimiter: str) -> str:
     for number in range(start + 1, len(lines) + 1):
         line = lines[number - 1].strip()
         if not line or line.startswith("#"):
             continue
-        cells = line.split(",")
+        cells = line.split(delimiter)
         if len(cells) != ncol:
             return f"{path}: line {number} has {len(cells)} field(s), the header has {ncol}"
         for cell in cells:

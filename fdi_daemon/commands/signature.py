@@ -66,10 +66,10 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.detect.settings import velocity_settings
     from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.errors import ConfigError, UserError
-    from fdi_daemon.io.recordings import same_rate
     from fdi_daemon.ident import provenance
     from fdi_daemon.ident import signature as sig
     from fdi_daemon.io.model_file import FaultFilter, load_model, save_model
+    from fdi_daemon.io.recordings import same_rate
 
     t0, t1 = parse_range(args.fault_window, "--fault-window")
     if not t1 > t0:

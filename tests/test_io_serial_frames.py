@@ -32,6 +32,18 @@ def make_frames(n, seq0=0, seed=0):
     return frames, b"".join(encode_frame(f) for f in frames)
 
 
+def feed_in_cuts(decoder, wire, cuts):
+    """Feed ``wire`` to ``decoder`` in pieces of the sizes in ``cuts`` (repeated); the
+    samples it decodes."""
+    out, pos, k = [], 0, 0
+    while pos < len(wire):
+        step = cuts[k % len(cuts)]
+        out += decoder.feed(wire[pos:pos + step])
+        pos += step
+        k += 1
+    return out
+
+
 def test_crc_matches_the_catalogue_check_value_and_a_bitwise_reference():
     assert crc16_ccitt(b"123456789") == 0x29B1
     rng = np.random.default_rng(1)
@@ -83,12 +95,7 @@ def test_whole_halves_and_byte_by_byte_give_the_same_samples():
 def test_any_split_gives_the_same_samples(cuts):
     _, wire = make_frames(30, seed=3)
     dec = FrameDecoder()
-    out, pos, k = [], 0, 0
-    while pos < len(wire):
-        step = cuts[k % len(cuts)]
-        out += dec.feed(wire[pos:pos + step])
-        pos += step
-        k += 1
+    out = feed_in_cuts(dec, wire, cuts)
     assert [s.seq for s in out] == list(range(30))
     assert dec.pending_bytes == 0
 

@@ -29,6 +29,7 @@ from fdi_daemon.cli import main
 from fdi_daemon.io.recordings import write_recording
 from fdi_daemon.io.serial_frames import Frame, FrameDecoder, encode_frame
 from reliability_support import fault_free, model_path
+from test_io_serial_frames import feed_in_cuts
 
 CALL_TIMEOUT_S = 60
 
@@ -351,12 +352,7 @@ def test_frames_survive_random_bytes_between_them(garbage, cuts):
               for i in range(len(garbage))]
     wire = b"".join(g + f for g, f in zip(garbage, frames)) + encode_frame(Frame(9999, 0, 0))
     decoder = FrameDecoder()
-    got, pos, k = [], 0, 0
-    while pos < len(wire):
-        n = cuts[k % len(cuts)]
-        got += decoder.feed(wire[pos:pos + n])
-        pos += n
-        k += 1
+    got = feed_in_cuts(decoder, wire, cuts)
     seqs = [s.seq for s in got]
     assert seqs[:len(frames)] == list(range(1000, 1000 + len(frames)))
     assert len(seqs) == len(frames) + 1 and got[-1].seq == 9999

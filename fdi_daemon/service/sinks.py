@@ -307,8 +307,8 @@ class StatusSocketServer:
         buffer = b""
         try:
             with conn:
+                self.requests += 1  # counted before the answer, which the client may act on
                 conn.sendall(self.board.line())
-                self.requests += 1
                 while not self._stop.is_set():
                     chunk = conn.recv(4096)
                     if not chunk:
@@ -316,8 +316,8 @@ class StatusSocketServer:
                     buffer += chunk
                     while b"\n" in buffer:
                         _, buffer = buffer.split(b"\n", 1)
-                        conn.sendall(self.board.line())
                         self.requests += 1
+                        conn.sendall(self.board.line())
                     if len(buffer) > 65536:
                         return  # not a status client
         except (TimeoutError, ConnectionError, BrokenPipeError):

@@ -24,6 +24,7 @@ import json
 import math
 import zipfile
 from dataclasses import dataclass, field
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -185,11 +186,13 @@ def check_sampling(t: np.ndarray, seq: np.ndarray | None = None,
 
 
 def read_recording(path: str | Path, strict: bool = True,
-                   required: tuple[str, ...] = REQUIRED_COLUMNS) -> Recording:
+                   required: tuple[str, ...] = REQUIRED_COLUMNS,
+                   columns: Mapping[str, str] | None = None) -> Recording:
     """Read a recording in any supported format and check its sampling.
 
     strict: refuse gaps, duplicates and backward time with a RecordingError; otherwise
-    return them in ``Recording.sampling``.
+    return them in ``Recording.sampling``. columns: fdi name -> the file's column name
+    (``--columns``, `fdi_daemon.io.columns`); the file's columns are renamed on read.
     """
     path = Path(path)
     if not path.exists():
@@ -199,11 +202,11 @@ def read_recording(path: str | Path, strict: bool = True,
     name = path.name.lower()
     try:
         if name.endswith(".csv") or name.endswith(".csv.gz"):
-            columns, meta = _read_csv(path)
+            columns_read, meta = _read_csv(path)
         elif name.endswith(".npz"):
-            columns, meta = _read_npz(path)
+            columns_read, meta = _read_npz(path)
         elif name.endswith(".mat"):
-            columns, meta = _read_mat(path)
+            columns_read, meta = _read_mat(path)
         else:
             raise RecordingError(
                 f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
@@ -213,11 +216,14 @@ def read_recording(path: str | Path, strict: bool = True,
             NotImplementedError, zipfile.BadZipFile) as exc:
         raise RecordingError(f"{path}: cannot read recording: {_one_line(exc)}") from None
 
+    columns = _renamed(columns_read, mapping, path) if (mapping := dict(columns or {})) \
+        else columns_read
     missing = [c for c in required if c not in columns]
     if missing:
         raise RecordingError(
             f"{path}: missing column(s) {', '.join(missing)} "
-            f"(found: {', '.join(columns) or 'none'})")
+            f"(found: {', '.join(columns) or 'none'}; map other names with "
+            f"--columns {missing[0]}=COLUMN)")
     if "t" in columns and not np.all(np.isfinite(columns["t"])):
         bad = int(np.flatnonzero(~np.isfinite(columns["t"]))[0])
         raise RecordingError(f"{path}: time column t is not finite at row {bad}")
@@ -229,6 +235,20 @@ def read_recording(path: str | Path, strict: bool = True,
     if strict and not rec.sampling.ok:
         raise RecordingError(f"{path}: irregular sampling, {rec.sampling.summary()}")
     return rec
+
+
+def _renamed(found: dict[str, np.ndarray], mapping: Mapping[str, str], path: Path
+             ) -> dict[str, np.ndarray]:
+    """The file's columns with ``mapping`` (fdi name -> file column) applied."""
+    absent = [f"{name}={col}" for name, col in mapping.items() if col not in found]
+    if absent:
+        raise RecordingError(f"{path}: --columns {', '.join(absent)}: no such column "
+                             f"(found: {', '.join(found) or 'none'})")
+    sources = set(mapping.values())
+    out = {name: col for name, col in found.items()
+           if name not in sources and name not in mapping}
+    out.update({name: found[col] for name, col in mapping.items()})
+    return out
 
 
 def _meta_fs(meta: dict[str, str], path: Path) -> float | None:

@@ -7,7 +7,8 @@ from fdi_daemon.cli import main
 
 
 def test_bench_monitor_reports_both_implementations():
-    out = bench_monitor(step_samples=1_000, batch_samples=20_000, baseline_samples=700)
+    out = bench_monitor(step_samples=1_000, batch_samples=20_000, baseline_samples=700,
+                        incident_s=60.0)
     for section in ("step_us", "baseline_step_us"):
         assert set(out[section]) == {"p50", "p99", "max", "samples"}
         assert 0 < out[section]["p50"] <= out[section]["p99"] <= out[section]["max"]
@@ -15,6 +16,19 @@ def test_bench_monitor_reports_both_implementations():
     assert out["batch_samples_per_s"] > 0 and out["baseline_samples_per_s"] > 0
     assert out["batch_alarm_episodes"] == 0  # the fault-free data take the quiet path
     assert out["step_speedup_p50"] == out["baseline_step_us"]["p50"] / out["step_us"]["p50"]
+    assert out["step_cpu_over_reference"] == (out["step_cpu_us_p50"]
+                                              / out["reference_step_cpu_us_p50"])
+    incident = out["incident_replay"]
+    assert incident["quiet"]["samples"] == incident["incident"]["samples"] == 60 * 256
+    assert incident["quiet"]["alarm_episodes"] == 0
+
+
+def test_the_incident_recording_holds_an_alarm_and_the_quiet_one_none():
+    from fdi_daemon.bench.incident import bench_incident_replay
+
+    out = bench_incident_replay(240.0)
+    assert out["quiet"]["alarm_episodes"] == 0
+    assert out["incident"]["alarm_episodes"] >= 1
 
 
 def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
@@ -22,7 +36,8 @@ def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
     import fdi_daemon.bench.monitor as bm
     import fdi_daemon.bench.sim as bs
 
-    small = bench_monitor(step_samples=600, batch_samples=5_000, baseline_samples=600)
+    small = bench_monitor(step_samples=600, batch_samples=5_000, baseline_samples=600,
+                          incident_s=0.0)
     monkeypatch.setattr(bm, "bench_monitor", lambda **kw: small)
     monkeypatch.setattr(bs, "bench_sim", lambda **kw: {"sim_s_per_wall_s": 100.0,
                                                        "hour_wall_s": 36.0,
@@ -34,4 +49,5 @@ def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
     assert main(["bench", "--quick", "--json", str(tmp_path / "b.json")]) == 0
     data = json.loads((tmp_path / "b.json").read_text())
     assert data["monitor"] == small and {"sim", "ident", "machine"} <= set(data)
-    assert "per-tick step p50" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "per-tick step p50" in out and "compiled chain without detector" in out

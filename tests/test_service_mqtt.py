@@ -325,3 +325,42 @@ def test_topic_prefix_defaults_to_the_host_name(monkeypatch):
     monkeypatch.setattr(socket, "gethostname", lambda: "rig-12.plant.example")
     settings = config_from_dict(minimal(mqtt={"site": "hall3"}), "rig.yaml").mqtt
     assert topic_prefix(settings) == "fdi/hall3/rig-12"
+
+
+@needs_mosquitto
+def test_daemon_sinks_send_the_event_log_line_and_reopen_after_a_reload(tmp_path):
+    """The daemon's `Sinks` wiring: the MQTT message is the event log's line (same
+    ``time``) plus ``id``; closing and rebuilding them (what SIGHUP does) rebinds the
+    metrics port and reconnects with the same client id, and ids go on."""
+    from fdi_daemon.service.daemon import Sinks
+    from fdi_daemon.service.sinks import StatusBoard
+    from mqtt_support import free_port
+
+    broker = Broker(tmp_path / "broker").start()
+    metrics_port = free_port()
+    cfg = config_from_dict(minimal(
+        mqtt={"enabled": True, "port": broker.port, "site": "lab", "rig": "rig7"},
+        metrics={"listen": f"127.0.0.1:{metrics_port}"},
+        sinks={"status_socket": None, "stdout": False}, recorder={"enabled": False},
+        service={"state_dir": str(tmp_path / "state")}), "rig.yaml", tmp_path)
+    sub = Subscriber(broker.port, "fdi/lab/rig7/event")
+    try:
+        for reload in range(2):
+            sinks = Sinks(cfg, 256.0, "modbus-tcp", StatusBoard())
+            try:
+                assert sinks.metrics.port == metrics_port
+                sinks.event({"t": 20.0 + reload, "kind": "fault_detected", "theta1": 1.0,
+                             "theta2": float("nan")})
+                sub.wait(lambda s: len(alarm_ids(s)) == reload + 1, 30, "the alarm",
+                         broker.tail)
+            finally:
+                sinks.close()
+    finally:
+        sub.close()
+        broker.stop()
+    lines = [json.loads(line) for line in
+             (tmp_path / "state" / "events.jsonl").read_text().splitlines()]
+    messages = [m["payload"] for m in sub.on("/event")]
+    assert [m["id"] for m in messages] == [1, 2]
+    assert [{k: v for k, v in m.items() if k != "id"} for m in messages] == lines
+    assert all(line["schema"] == 2 and line["theta2"] is None for line in lines)

@@ -45,6 +45,8 @@ log = logging.getLogger("fdi.mqtt")
 #: paho's reconnect backoff (s): first retry, cap
 RECONNECT_MIN_S = 0.5
 RECONNECT_MAX_S = 5.0
+#: the last will (retained on the status topic), also published on a clean stop
+OFFLINE = {"schema": EVENT_SCHEMA, "online": False, "state": "offline"}
 #: the outbox file is compacted when it has this many more lines than pending alarms
 COMPACT_SLACK_LINES = 1000
 
@@ -226,9 +228,6 @@ def status_payload(snapshot: dict[str, Any], outbox: AlarmOutbox | None = None,
     return payload
 
 
-OFFLINE = {"schema": EVENT_SCHEMA, "online": False, "state": "offline"}
-
-
 class MqttSink:
     """Publishes events and the status of one rig (see the module doc)."""
 
@@ -248,7 +247,7 @@ class MqttSink:
         self.status_period_s = settings["status_period_s"]
         self.skipped_events = 0
         self.connected = False
-        self._refusal_logged = False
+        self._outage_logged = False  # paho retries every few s: say it once per outage
         self._next_status = -float("inf")
         self._last_snapshot: dict[str, Any] = {"state": "starting"}
         self._in_flight: tuple[int, int] | None = None  # (alarm id, paho mid)
@@ -270,6 +269,7 @@ class MqttSink:
         client.reconnect_delay_set(RECONNECT_MIN_S, RECONNECT_MAX_S)
         client.on_connect = self._on_connect
         client.on_disconnect = self._on_disconnect
+        client.on_connect_fail = self._on_connect_fail
         client.on_publish = self._on_publish
         self._mqtt = mqtt
         self.client = client
@@ -295,13 +295,13 @@ class MqttSink:
     # --- paho's network thread: only queue
     def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
         if reason_code.is_failure:
-            if not self._refusal_logged:  # paho retries; say it once per outage
-                self._refusal_logged = True
-                log.error("MQTT broker %s refused the connection: %s", self.where,
-                          reason_code)
-            return
-        self._refusal_logged = False
-        self.worker.put(("connected", None), critical=True)
+            self.worker.put(("down", f"the broker refused the connection: {reason_code}"),
+                            critical=True)
+        else:
+            self.worker.put(("connected", None), critical=True)
+
+    def _on_connect_fail(self, client, userdata) -> None:
+        self.worker.put(("down", "cannot connect"), critical=True)
 
     def _on_disconnect(self, client, userdata, flags, reason_code, properties) -> None:
         self.worker.put(("disconnected", str(reason_code)), critical=True)
@@ -324,13 +324,16 @@ class MqttSink:
                 self._in_flight = None
         elif kind == "connected":
             self.connected = True
+            self._outage_logged = False
             log.info("MQTT connected to %s (topics %s/#); %d alarm(s) waiting", self.where,
                      self.prefix, len(self.outbox))
             self._publish(self.status_topic, self._status(), qos=1, retain=True)
-        elif kind == "disconnected":
-            if self.connected:
-                log.warning("MQTT connection to %s lost (%s); alarms wait on disk in %s",
-                            self.where, value, self.outbox.path)
+        elif kind in ("disconnected", "down"):
+            if not self._outage_logged:
+                self._outage_logged = True
+                log.warning("MQTT broker %s: %s (%s); retrying, alarms wait on disk in %s",
+                            self.where, "connection lost" if self.connected else "no connection",
+                            value, self.outbox.path)
             self.connected = False
         self._pump()
 

@@ -368,3 +368,27 @@ def test_daemon_sinks_send_the_event_log_line_and_reopen_after_a_reload(tmp_path
     assert [m["id"] for m in messages] == [1, 2]
     assert [{k: v for k, v in m.items() if k != "id"} for m in messages] == lines
     assert all(line["schema"] == 2 and line["theta2"] is None for line in lines)
+
+
+def test_a_broker_that_never_answers_holds_up_nothing(tmp_path):
+    """A TCP peer that accepts and never sends CONNACK: alarms go to the outbox file,
+    statuses are dropped, and close() comes back (what is not delivered stays on disk)."""
+    import socket
+
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen()
+    outbox = tmp_path / "outbox.jsonl"
+    sink = MqttSink(sink_settings(silent.getsockname()[1]), outbox)
+    try:
+        for i in range(50):
+            sink.event(alarm(float(i)))
+            sink.status({"state": "monitoring"})
+        deadline = time.monotonic() + 30
+        while len(sink.outbox) < 50 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert len(sink.outbox) == 50 and not sink.connected
+    finally:
+        sink.close(timeout_s=0.5)
+        silent.close()
+    assert len(AlarmOutbox(outbox, max_messages=100)) == 50

@@ -139,3 +139,22 @@ def test_grafana_dashboard_queries_the_exported_metrics(tmp_path):
         for name in re.findall(r"\bfdi_[a-z0-9_]+", expr):
             base = re.sub(r"_(total|bucket|count|sum)$", "", name)
             assert base in exported, f"{name} in the dashboard is not exported"
+
+
+def test_a_taken_port_is_one_clear_config_error(tmp_path):
+    from fdi_daemon.errors import ConfigError
+    from fdi_daemon.service.config import config_from_dict
+    from fdi_daemon.service.daemon import Sinks
+
+    first = MetricsServer(StatusBoard(), "127.0.0.1:0")
+    try:
+        cfg = config_from_dict({
+            "link": {"kind": "modbus-tcp"}, "model": {"path": "model.yaml"},
+            "metrics": {"listen": f"127.0.0.1:{first.port}"},
+            "sinks": {"status_socket": None, "stdout": False}, "recorder": {"enabled": False},
+            "service": {"state_dir": str(tmp_path)}}, "rig.yaml", tmp_path)
+        with pytest.raises(ConfigError, match=rf"rig.yaml: cannot open an output: metrics "
+                                              rf"exporter on 127.0.0.1:{first.port}: "):
+            Sinks(cfg, 256.0, "modbus-tcp", StatusBoard())
+    finally:
+        first.close()

@@ -136,8 +136,11 @@ class MetricsServer:
         self.collector = StatusCollector(board, mqtt)
         self.registry = CollectorRegistry(auto_describe=True)
         self.registry.register(self.collector)
-        self._server, self._thread = start_http_server(int(port), addr=self.host,
-                                                       registry=self.registry)
+        try:
+            self._server, self._thread = start_http_server(int(port), addr=self.host,
+                                                           registry=self.registry)
+        except OSError as exc:
+            raise OSError(f"metrics exporter on {listen}: {exc.strerror or exc}") from None
         self.port = self._server.server_address[1]
 
     @property

@@ -392,3 +392,28 @@ def test_a_broker_that_never_answers_holds_up_nothing(tmp_path):
         sink.close(timeout_s=0.5)
         silent.close()
     assert len(AlarmOutbox(outbox, max_messages=100)) == 50
+
+
+def test_a_full_buffer_drops_the_oldest_alarms_counts_and_logs_them(tmp_path, caplog):
+    import socket
+
+    caplog.set_level("WARNING", logger="fdi.mqtt")
+    silent = socket.socket()  # a broker that never answers: nothing is ever delivered
+    silent.bind(("127.0.0.1", 0))
+    silent.listen()
+    sink = MqttSink(sink_settings(silent.getsockname()[1], buffer_max_messages=2),
+                    tmp_path / "outbox.jsonl")
+    try:
+        for i in range(5):
+            sink.event(alarm(float(i)))
+        deadline = time.monotonic() + 30
+        while sink.outbox.lost < 3 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert [m["id"] for m in sink.outbox.pending.values()] == [4, 5]
+        assert status_payload({}, sink.outbox)["mqtt"]["lost"] == 3
+        dropped = [r.getMessage() for r in caplog.records if "dropped alarm" in r.getMessage()]
+        assert len(dropped) == 3 and "dropped alarm id 1 " in dropped[0]
+        assert dropped[-1].endswith("3 lost since start")
+    finally:
+        sink.close(timeout_s=0.5)
+        silent.close()

@@ -170,7 +170,8 @@ class AlarmOutbox:
                 gone = record.get("ack", record.get("drop"))
                 self.pending.pop(gone, None)
                 self._sent.discard(gone)
-        for message_id in self._sent & set(self.pending):
+        self._sent &= set(self.pending)
+        for message_id in self._sent:
             self.pending[message_id]["dup"] = True
         if self.pending:
             log.info("%s: %d alarm(s) from before the restart wait for the broker",

@@ -11,6 +11,9 @@ non-finite numbers are stored as None so that each line is strict JSON. Kinds:
 - ``data_gap``: samples missing (``missing_samples``); the estimator restarts;
 - ``link_lost`` / ``link_restored``: emitted by the service's link layer, not the monitor;
 - ``bad_sample``: a non-finite or saturated sample (``reason``) that the monitor skipped.
+
+Lines written to a file also carry ``"schema": EVENT_SCHEMA`` (lines without it are schema
+1); the daemon's event log adds ``"time"``, the RFC 3339 wall clock (docs/service.md).
 """
 
 from __future__ import annotations
@@ -23,7 +26,11 @@ from typing import Any
 
 from fdi_daemon.errors import UserError
 
-__all__ = ["EVENT_KINDS", "ALARM_KINDS", "make_event", "write_events", "read_events"]
+__all__ = ["EVENT_KINDS", "ALARM_KINDS", "EVENT_SCHEMA", "make_event", "write_events",
+           "read_events"]
+
+#: version of the event line format; 2 added ``schema`` and (in the daemon) ``time``
+EVENT_SCHEMA = 2
 
 EVENT_KINDS = ("calibrated", "fault_detected", "friction_isolated", "other_fault", "cleared",
                "data_gap", "link_lost", "link_restored", "bad_sample")
@@ -52,13 +59,14 @@ def make_event(t: float, kind: str, theta1: float | None = None, theta2: float |
 
 
 def write_events(path: str | Path, events: Iterable[dict[str, Any]], append: bool = False) -> int:
-    """Write events as JSON Lines; returns how many were written."""
+    """Write events as JSON Lines (with ``schema``); returns how many were written."""
     path = Path(path)
     count = 0
     try:
         with open(path, "a" if append else "w", encoding="utf-8") as fh:
             for event in events:
-                fh.write(json.dumps(event, allow_nan=False, separators=(",", ":")) + "\n")
+                line = {**event, "schema": EVENT_SCHEMA}
+                fh.write(json.dumps(line, allow_nan=False, separators=(",", ":")) + "\n")
                 count += 1
     except OSError as exc:
         raise UserError(f"{path}: cannot write events: {exc.strerror or exc}") from None

@@ -23,6 +23,11 @@ Sections::
     sinks: {event_log, stdout, status_socket, modbus_status: {enabled, host, port, device_id}}
     recorder: {enabled, dir, rotate_seconds, rotate_bytes, fsync_period_s, keep_files}
     service: {fs, deadline_s, status_period_s, queue_size, read_timeout_s, state_dir}
+    mqtt: {enabled, host, port, site, rig, username, password_file, password_env, tls: {...}, ...}
+    metrics: {listen}  # Prometheus exporter, e.g. 127.0.0.1:9108; null (default) = off
+
+Secrets (the MQTT password) are never read from the YAML: ``mqtt.password`` is refused;
+``mqtt.password_file`` or ``mqtt.password_env`` name where the daemon reads it.
 
 Reconnect backoff is the link's: ``link.reconnect: {backoff_initial_s, backoff_max_s,
 stall_timeout_s}`` (see `fdi_daemon.io.links.base`).
@@ -84,6 +89,18 @@ def _fraction(v: Any) -> str | None:
     return None if 0 <= v <= 1 else "must be a fraction in [0, 1]"
 
 
+def _topic_level(v: Any) -> str | None:
+    bad = not v or any(c in v for c in "/+#\0")
+    return "must be a non-empty MQTT topic level without / + #" if bad else None
+
+
+def _listen(v: Any) -> str | None:
+    host, sep, port = v.rpartition(":")
+    if sep and host and port.isdigit() and int(port) <= 65535:
+        return None
+    return "must be HOST:PORT, e.g. 127.0.0.1:9108 (port 0 = any free port)"
+
+
 def _one_of(*choices: str) -> Callable[[Any], str | None]:
     def check(v: Any) -> str | None:
         return None if v in choices else f"must be one of {', '.join(choices)}"
@@ -139,6 +156,42 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "state_dir": Field(STR, None, "base of relative output paths; null = "
                                       "$STATE_DIRECTORY or ./fdi-state", nullable=True),
     },
+    "mqtt": {
+        "enabled": Field(BOOL, False, "publish events and status to an MQTT broker"),
+        "host": Field(STR, "127.0.0.1", "broker host"),
+        "port": Field(INT, 1883, "broker port (8883 is the usual one with TLS)", _port),
+        "site": Field(STR, "site", "first topic level: fdi/<site>/<rig>/...", _topic_level),
+        "rig": Field(STR, None, "second topic level; null = this host's name",
+                     _topic_level, nullable=True),
+        "client_id": Field(STR, None, "MQTT client id; null = fdi-<site>-<rig>",
+                           nullable=True),
+        "keepalive_s": Field(INT, 30, "MQTT keepalive (s); a silent daemon is declared "
+                                      "offline after 1.5 times this", _positive),
+        "username": Field(STR, None, "user name for the broker", nullable=True),
+        "password_file": Field(STR, None, "file holding the password (first line), relative "
+                                          "to the config file", nullable=True),
+        "password_env": Field(STR, None, "environment variable holding the password",
+                              nullable=True),
+        "tls": {
+            "enabled": Field(BOOL, False, "connect with TLS"),
+            "ca_file": Field(STR, None, "CA certificate(s) (PEM) to check the broker "
+                                        "with; null = the system's", nullable=True),
+            "cert_file": Field(STR, None, "client certificate (PEM) for mutual TLS",
+                               nullable=True),
+            "key_file": Field(STR, None, "the client certificate's key (PEM)",
+                              nullable=True),
+        },
+        "status_period_s": Field(NUM, 1.0, "how often the retained status is published",
+                                 _positive),
+        "buffer_file": Field(STR, "mqtt-outbox.jsonl", "alarms waiting for the broker, on "
+                                                       "disk (relative to state_dir)"),
+        "buffer_max_messages": Field(INT, 10000, "bound of that buffer; beyond it the oldest "
+                                                 "alarm is dropped and counted", _positive),
+    },
+    "metrics": {
+        "listen": Field(STR, None, "HOST:PORT of the Prometheus exporter; null = off",
+                        _listen, nullable=True),
+    },
     "simulated_device": {
         "transport": Field(STR, "modbus-tcp", "fake device protocol: modbus-tcp | "
                                               "modbus-rtu | serial (pty)",
@@ -149,7 +202,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
     },
 }
 
-TOP_LEVEL = ("link", "simulated_device", "model", "monitor", "sinks", "recorder", "service")
+TOP_LEVEL = ("link", "simulated_device", "model", "monitor", "sinks", "recorder", "service",
+             "mqtt", "metrics")
+#: keys that would put a secret into the YAML, refused with where to put it instead
+SECRET_KEYS = ("password", "passwd", "secret")
 
 
 @dataclass
@@ -165,6 +221,8 @@ class RigConfig:
     sinks: dict[str, Any]
     recorder: dict[str, Any]
     service: dict[str, Any]
+    mqtt: dict[str, Any]
+    metrics: dict[str, Any]
 
     @property
     def state_dir(self) -> Path:
@@ -213,7 +271,33 @@ def config_from_dict(data: Any, source: str = "config",
         source=source, base_dir=base_dir, link=link, simulated_device=sim,
         model_path=model_path, monitor=_monitor(data.get("monitor"), source),
         sinks=_section(data, "sinks", source), recorder=_section(data, "recorder", source),
-        service=_section(data, "service", source))
+        service=_section(data, "service", source), mqtt=_mqtt(data, source, base_dir),
+        metrics=_section(data, "metrics", source))
+
+
+def _mqtt(data: Mapping, source: str, base_dir: Path) -> dict[str, Any]:
+    """The ``mqtt`` section; a secret written into it is refused, a password file resolved."""
+    given = data.get("mqtt")
+    for key in SECRET_KEYS:
+        if isinstance(given, dict) and key in given:
+            raise ConfigError(f"{source}: mqtt.{key}: secrets are not read from the config; "
+                              "put the password in a file (mqtt.password_file) or an "
+                              "environment variable (mqtt.password_env)")
+    mqtt = _section(data, "mqtt", source)
+    if mqtt["password_file"] is not None and mqtt["password_env"] is not None:
+        raise ConfigError(f"{source}: mqtt.password_file and mqtt.password_env: set one")
+    mqtt["password_file"] = _beside(mqtt["password_file"], base_dir)
+    for key in ("ca_file", "cert_file", "key_file"):
+        mqtt["tls"][key] = _beside(mqtt["tls"][key], base_dir)
+    return mqtt
+
+
+def _beside(value: str | None, base_dir: Path) -> str | None:
+    """A file named in the config: relative paths are relative to the config's folder."""
+    if value is None:
+        return None
+    path = Path(value).expanduser()
+    return str(path if path.is_absolute() else base_dir / path)
 
 
 def _no_unknown(data: Mapping, known: tuple[str, ...] | Mapping, prefix: str,

@@ -28,7 +28,7 @@ from fdi_daemon.service.notify import Notifier, watchdog_period_s
 from fdi_daemon.service.recorder import Recorder
 from fdi_daemon.service.sinks import (EventLog, ModbusStatusServer, PriorityFormatter,
                                       StatusBoard, StatusSocketServer, StdoutLog, Worker,
-                                      journald_attached)
+                                      journald_attached, stamp_event)
 
 log = logging.getLogger("fdi.daemon")
 
@@ -44,7 +44,11 @@ def setup_logging(level: int = logging.INFO) -> None:
 
 
 class Sinks:
-    """The sink worker, the recorder worker and the servers of one config."""
+    """The sink worker, the recorder worker and the servers of one config.
+
+    The MQTT sink and the metrics exporter are imported only when the config enables them
+    (their libraries are the optional ``fleet`` extra).
+    """
 
     def __init__(self, config: RigConfig, fs_hz: float, link_kind: str,
                  board: StatusBoard) -> None:
@@ -57,6 +61,8 @@ class Sinks:
         self.recorder = None
         self.worker = None
         self.recorder_worker = None
+        self.mqtt = None
+        self.metrics = None
         try:
             if (path := config.output_path(sinks["event_log"])) is not None:
                 self.event_log = EventLog(path)
@@ -74,9 +80,22 @@ class Sinks:
                     config.output_path(rec["dir"]), fs_hz, rec["rotate_seconds"],
                     rec["rotate_bytes"], rec["fsync_period_s"], rec["keep_files"],
                     meta={"link": link_kind, "config": config.source})
+            if config.mqtt["enabled"]:
+                from fdi_daemon.service.mqtt_sink import MqttSink
+
+                self.mqtt = MqttSink(config.mqtt, config.output_path(config.mqtt["buffer_file"]),
+                                     config.source, config.service["queue_size"])
+            if config.metrics["listen"] is not None:
+                from fdi_daemon.service.metrics import MetricsServer
+
+                self.metrics = MetricsServer(board, config.metrics["listen"], self.mqtt,
+                                             config.source)
         except OSError as exc:
             self.close()
             raise ConfigError(f"{config.source}: cannot open an output: {exc}") from None
+        except UserError:
+            self.close()
+            raise
         queue_size = config.service["queue_size"]
         self.worker = Worker("sinks", self._handle, queue_size)
         if self.recorder is not None:
@@ -96,17 +115,23 @@ class Sinks:
             self.recorder_worker.put(None)  # an idle recorder still fsyncs on time
 
     def dropped(self) -> int:
-        return sum(w.dropped for w in (self.worker, self.recorder_worker) if w is not None)
+        return (sum(w.dropped for w in (self.worker, self.recorder_worker) if w is not None)
+                + (self.mqtt.dropped() if self.mqtt is not None else 0))
 
     # --- worker threads
     def _handle(self, item: tuple[str, Any]) -> None:
         kind, payload = item
         if kind == "status":
             self.board.publish(payload)
+            if self.mqtt is not None:
+                self.mqtt.status(payload)
             return
+        stamped = stamp_event(payload)
+        if self.mqtt is not None:
+            self.mqtt.event(stamped)
         try:
             if self.event_log is not None:
-                self.event_log.write(payload)
+                self.event_log.write(stamped)
         finally:  # the stdout line even when the log's disk failed (the worker logs why)
             if self.stdout is not None:
                 self.stdout.write(payload)
@@ -121,7 +146,8 @@ class Sinks:
         for worker in (self.worker, self.recorder_worker):
             if worker is not None:
                 worker.close()
-        for thing in (self.recorder, self.event_log, self.status_server, self.modbus_server):
+        for thing in (self.recorder, self.event_log, self.status_server, self.modbus_server,
+                      self.mqtt, self.metrics):
             if thing is not None:
                 try:
                     thing.close()
@@ -213,6 +239,8 @@ class Daemon:
             read_timeout_s=config.service["read_timeout_s"],
             status_period_s=config.service["status_period_s"], model_info=model_info,
             notifier=self.notifier, watchdog_period_s=watchdog_period_s())
+        if sinks.metrics is not None:
+            sinks.metrics.watch(loop)
         return loop, sinks, link
 
     def link_config(self, config: RigConfig) -> dict[str, Any]:
@@ -274,6 +302,11 @@ class Daemon:
         if sinks.modbus_server is not None:
             lines.append(f"  modbus  {sinks.modbus_server.host}:{sinks.modbus_server.port} "
                          f"(status registers, docs/status_registers.md)")
+        if sinks.mqtt is not None:
+            lines.append(f"  mqtt    {sinks.mqtt.where} {sinks.mqtt.prefix}/event, "
+                         f"{sinks.mqtt.prefix}/status")
+        if sinks.metrics is not None:
+            lines.append(f"  metrics {sinks.metrics.url}")
         self.echo("\n".join(lines))
 
     def reload(self) -> None:

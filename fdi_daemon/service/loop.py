@@ -60,6 +60,7 @@ class LatencyHistogram:
     def __init__(self) -> None:
         self.counts = [0] * (self.BINS_PER_DECADE * self.DECADES + 2)
         self.total = 0
+        self.sum_us = 0.0
         self.max_us = 0.0
 
     def add(self, value_us: float) -> None:
@@ -70,6 +71,7 @@ class LatencyHistogram:
             index = min(index, len(self.counts) - 1)
         self.counts[index] += 1
         self.total += 1
+        self.sum_us += value_us
         if value_us > self.max_us:
             self.max_us = value_us
 

@@ -6,7 +6,8 @@ the queue is full, and an unbounded lane for alarms, which are never dropped), p
 status snapshots to a `StatusBoard`, and the two servers answer from the board.
 
 - `EventLog`: JSON Lines, append-only; every line is flushed, alarm lines are also
-  fsynced, and the file is fsynced at least once a second otherwise.
+  fsynced, and the file is fsynced at least once a second otherwise. Lines are events
+  stamped by `stamp_event` (``time``: RFC 3339 wall clock; ``schema``).
 - `StdoutLog`: one clear line per event; under journald (``$JOURNAL_STREAM`` set) each line
   starts with a ``<N>`` syslog priority so that ``journalctl -p warning`` finds alarms.
 - `StatusSocketServer`: a Unix stream socket (mode 0660). On connect the server sends one
@@ -30,10 +31,12 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TextIO
 
 from fdi_daemon.detect.events import ALARM_KINDS as EVENT_ALARM_KINDS
+from fdi_daemon.detect.events import EVENT_SCHEMA
 
 log = logging.getLogger("fdi.sinks")
 
@@ -66,6 +69,24 @@ def json_safe(value: Any) -> Any:
 
 def json_line(value: Any) -> str:
     return json.dumps(json_safe(value), allow_nan=False, separators=(",", ":")) + "\n"
+
+
+def rfc3339(epoch_s: float) -> str:
+    """UTC wall-clock time as RFC 3339 with microseconds: ``2026-11-23T18:00:00.123456Z``."""
+    return datetime.fromtimestamp(epoch_s, timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def stamp_event(event: dict, now: float | None = None) -> dict:
+    """The event as written out (event log, MQTT): ``time`` and ``schema`` added.
+
+    ``time`` is the wall clock when the event is written, except for link events, which
+    carry the wall clock (epoch s) at which the link layer noticed the loss or restore.
+    ``t`` and ``kind`` stay as the monitor made them.
+    """
+    when = event.get("time")
+    if not isinstance(when, (int, float)) or isinstance(when, bool):
+        when = time.time() if now is None else now
+    return {**event, "time": rfc3339(when), "schema": EVENT_SCHEMA}
 
 
 # ----------------------------------------------------------------------------- worker

@@ -48,9 +48,12 @@ def test_once_prints_a_frame_of_the_requested_size(tmp_path, capsys):
     assert "OTHER FAULT" in lines[0]
 
 
-def test_once_without_daemon_says_so(tmp_path, capsys):
-    assert main(["dashboard", "--connect", str(tmp_path / "none.sock"), "--once"]) == 1
-    assert "daemon not reachable, retrying" in capsys.readouterr().out
+def test_once_without_daemon_is_one_line_naming_the_socket(tmp_path, capsys):
+    sock = tmp_path / "none.sock"
+    assert main(["dashboard", "--connect", str(sock), "--once"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1
+    assert f"no daemon answers on the status socket {sock} (" in err
 
 
 @pytest.mark.parametrize("rate", ["0.5", "fast", "100"])

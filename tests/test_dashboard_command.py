@@ -17,10 +17,11 @@ def test_default_socket_is_the_one_fdi_run_uses(tmp_path, monkeypatch):
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("STATE_DIRECTORY", raising=False)
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
     config = load_config(None)
     expected = config.output_path(config.sinks["status_socket"])
     assert Path(default_socket_path(None)) == expected
-    assert expected == Path("fdi-state") / "status.sock"
+    assert expected == tmp_path / "xdg" / "fdi" / "status.sock"
     monkeypatch.setenv("STATE_DIRECTORY", str(tmp_path / "state"))
     assert Path(default_socket_path(None)) == tmp_path / "state" / "status.sock"
 

@@ -16,6 +16,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "SIGTERM or Ctrl-C)")
     parser.add_argument("--dashboard", action="store_true",
                         help="show the live dashboard in this terminal (q stops the daemon)")
+    parser.add_argument("--state-dir", metavar="DIR",
+                        help="base of the relative output paths (event log, recordings, status "
+                             "socket); default: the config's service.state_dir, else "
+                             "$STATE_DIRECTORY under systemd, else $XDG_STATE_HOME/fdi "
+                             "(~/.local/state/fdi)")
     parser.add_argument("--log-level", choices=("debug", "info", "warning", "error"),
                         default="info", help="daemon log level on stderr (default %(default)s)")
 
@@ -29,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be a positive number of seconds (got {args.duration:g})")
     setup_logging(getattr(logging, args.log_level.upper()))
-    daemon = Daemon(args.config, echo=lambda text: print(text, flush=True))
+    daemon = Daemon(args.config, echo=lambda text: print(text, flush=True),
+                    state_dir=args.state_dir)
     if args.dashboard:
         from fdi_daemon.dashboard.app import Frame, run_alongside
 

@@ -178,8 +178,10 @@ def start_simulated_device(settings: dict[str, Any]):
 class Daemon:
     """`fdi run`: one config, one loop; signals for stop and reload."""
 
-    def __init__(self, config_path: str | Path | None = None, echo=print) -> None:
+    def __init__(self, config_path: str | Path | None = None, echo=print,
+                 state_dir: str | Path | None = None) -> None:
         self.config_path = config_path
+        self.state_dir = state_dir  # `fdi run --state-dir`: wins over service.state_dir
         self.echo = echo
         self.notifier = Notifier()
         self.board = StatusBoard()
@@ -215,6 +217,12 @@ class Daemon:
             notifier=self.notifier, watchdog_period_s=watchdog_period_s())
         return loop, sinks, link
 
+    def load_config(self) -> RigConfig:
+        config = load_config(self.config_path)
+        if self.state_dir is not None:
+            config.service["state_dir"] = str(self.state_dir)
+        return config
+
     def link_config(self, config: RigConfig) -> dict[str, Any]:
         if config.simulated_device is None:
             return dict(config.link)
@@ -230,7 +238,7 @@ class Daemon:
 
     # ------------------------------------------------------------------ running
     def run(self, duration_s: float | None = None) -> int:
-        self.config = load_config(self.config_path)
+        self.config = self.load_config()
         try:
             self.loop, self.sinks, self.link = self.assemble(self.config,
                                                              *self.prepare(self.config))
@@ -263,7 +271,7 @@ class Daemon:
         assert self.config is not None and self.sinks is not None
         sinks = self.sinks
         lines = [f"fdi run: config {self.config.source}", f"  model   {self.config.model_path}",
-                 f"  link    {self.link.describe()}"]
+                 f"  link    {self.link.describe()}", f"  state   {self.config.state_dir}/"]
         if sinks.event_log is not None:
             lines.append(f"  events  {sinks.event_log.path}")
         if sinks.recorder is not None:
@@ -284,7 +292,7 @@ class Daemon:
         self.notifier.reloading()
         log.info("SIGHUP: reloading %s", self.config_path or "the default config")
         try:
-            config = load_config(self.config_path)
+            config = self.load_config()
             prepared = self.prepare(config)
         except (UserError, OSError) as exc:
             log.error("reload failed, keeping the previous config: %s", exc)

@@ -15,7 +15,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="stop after S seconds of wall-clock time (default: run until "
                              "SIGTERM or Ctrl-C)")
     parser.add_argument("--dashboard", action="store_true",
-                        help="show the live dashboard in this terminal (q stops the daemon)")
+                        help="show the live dashboard in this terminal (q, or the terminal "
+                             "going away, stops the daemon; what it prints meanwhile is kept "
+                             "in STATE_DIR/dashboard-output.log)")
     parser.add_argument("--state-dir", metavar="DIR",
                         help="base of the relative output paths (event log, recordings, status "
                              "socket); default: the config's service.state_dir, else "
@@ -35,10 +37,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--duration must be a positive number of seconds (got {args.duration:g})")
     setup_logging(getattr(logging, args.log_level.upper()))
     daemon = Daemon(args.config, echo=lambda text: print(text, flush=True),
-                    state_dir=args.state_dir)
+                    state_dir=args.state_dir, hangup_stops=args.dashboard)
     if args.dashboard:
         from fdi_daemon.dashboard.app import Frame, run_alongside
 
+        held = daemon.load_config().state_dir / "dashboard-output.log"
         return run_alongside(lambda: daemon.run(args.duration),
-                             lambda: Frame(daemon.board.snapshot()))
+                             lambda: Frame(daemon.board.snapshot()), held_output=held)
     return daemon.run(args.duration)

@@ -2,8 +2,9 @@
 
 Lifecycle: build everything from the config (a mistake is a `ConfigError`, one line,
 exit 2), tell systemd READY=1, run the loop; SIGTERM/SIGINT stop it cleanly (queues
-drained, files fsynced, sockets removed, STOPPING=1); SIGHUP reloads the config and the
-model: the new set is built first and swapped in only if it builds, otherwise the daemon
+drained, files fsynced, sockets removed, STOPPING=1); so does SIGHUP when the daemon draws
+its dashboard on the terminal that hung up (`hangup_stops`); otherwise SIGHUP reloads the
+config and the model: the new set is built first and swapped in only if it builds, otherwise the daemon
 logs why and keeps running on the old one. A reload restarts the monitor (it calibrates
 again) and reopens the link and the sinks; a simulated device keeps running.
 """
@@ -179,9 +180,10 @@ class Daemon:
     """`fdi run`: one config, one loop; signals for stop and reload."""
 
     def __init__(self, config_path: str | Path | None = None, echo=print,
-                 state_dir: str | Path | None = None) -> None:
+                 state_dir: str | Path | None = None, hangup_stops: bool = False) -> None:
         self.config_path = config_path
         self.state_dir = state_dir  # `fdi run --state-dir`: wins over service.state_dir
+        self.hangup_stops = hangup_stops  # `fdi run --dashboard`: SIGHUP = terminal gone
         self.echo = echo
         self.notifier = Notifier()
         self.board = StatusBoard()
@@ -349,7 +351,8 @@ class Daemon:
             return {}
         previous = {}
         for signum, handler in ((signal.SIGTERM, self._on_stop), (signal.SIGINT, self._on_stop),
-                                (signal.SIGHUP, self._on_reload)):
+                                (signal.SIGHUP, self._on_stop if self.hangup_stops
+                                 else self._on_reload)):
             previous[signum] = signal.signal(signum, handler)
         return previous
 

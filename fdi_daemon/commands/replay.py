@@ -142,7 +142,7 @@ def _paced(monitor, rec, on_tick=None):
                 on_tick(monitor, float(t[k]), new)
                 continue
             for event in new:
-                progress.console.print(_line(event), highlight=False)
+                progress.console.print(_line(event), highlight=False, soft_wrap=True)
             if k % 256 == 0:
                 progress.update(task, completed=k + 1)
     events.extend(monitor.finish())
@@ -164,7 +164,7 @@ def _line(event: dict) -> str:
 def _report(events: list, summary: dict) -> None:
     from rich.console import Console
 
-    console = Console()
+    console = Console(soft_wrap=True)  # whole lines: the terminal wraps, never mid-sentence
     shown = [e for e in events if e["kind"] != "bad_sample"][:50]
     for event in shown:
         console.print(_line(event), highlight=False)

@@ -161,9 +161,18 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from fdi_daemon.ident.plots import plot_signature
 
-        plot_signature(args.plot, t_win, result.residual, result)
+        plot_signature(args.plot, t_win, result.residual, result,
+                       residual_label=_fitted_residual_label(args))
     _report(args, result, estimator, fault_fit, full_band_pct)
     return 0
+
+
+def _fitted_residual_label(args) -> str:
+    """What the fit saw: the residual r (eq. 3), less the fault-free reference, filtered."""
+    label = "residual r" + (" − fault-free reference" if args.reference_window else "")
+    filters = [f"{kind}-passed {hz:g} Hz" for kind, hz in
+               (("high", args.prefilter_hz), ("low", args.lowpass_hz)) if hz is not None]
+    return ", ".join([label, *filters])
 
 
 def _prefilter(args, fs):

@@ -190,3 +190,22 @@ def test_hangup_of_the_dashboards_terminal_stops_the_work():
     console = DashboardConsole(file=dead, width=80, height=24, force_terminal=True)
     assert run_alongside(work, lambda: Frame(make_snapshot()), request_stop=stopped.set,
                          console=console) == 0
+
+
+def test_an_unwritable_place_for_the_held_output_is_one_clear_error(tmp_path, monkeypatch):
+    """Only with a terminal on stdout is anything held; a pty stands in for it."""
+    from fdi_daemon.dashboard.app import captured_output
+    from fdi_daemon.errors import UserError
+
+    master, slave = pty.openpty()
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    try:
+        with open(slave, "w", closefd=False) as fake_stdout:
+            monkeypatch.setattr("sys.stdout", fake_stdout)
+            with pytest.raises(UserError, match="cannot hold the output there"):
+                with captured_output(keep=blocker / "held.log"):
+                    pass
+    finally:
+        os.close(master)
+        os.close(slave)

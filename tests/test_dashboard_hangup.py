@@ -67,7 +67,7 @@ def test_run_dashboard_ends_cleanly_when_its_terminal_hangs_up(tmp_path, hangup)
         if hangup == "SIGHUP":
             os.kill(pids[0], signal.SIGHUP)
         else:
-            screen._tmux("kill-session", "-t", "dash")  # the terminal goes away
+            screen.hang_up()
         deadline = time.monotonic() + 30.0  # generous: it never ended before the fix
         while alive(pids[0]) and time.monotonic() < deadline:
             time.sleep(0.1)

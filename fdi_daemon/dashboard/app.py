@@ -34,6 +34,7 @@ from rich.console import Console
 from rich.live import Live
 
 from fdi_daemon.dashboard.render import render
+from fdi_daemon.errors import UserError
 
 DEFAULT_REFRESH_HZ = 10.0
 
@@ -245,13 +246,18 @@ def captured_output(tail_lines: int = 40, keep: Path | None = None) -> Iterator[
     if not sys.stdout.isatty():
         yield DashboardConsole()
         return
+    try:
+        if keep is not None:
+            keep.parent.mkdir(parents=True, exist_ok=True)
+        held_file = open(keep, "w+b") if keep is not None else tempfile.TemporaryFile()
+    except OSError as exc:
+        raise UserError(f"{keep}: cannot hold the output there while the dashboard is on "
+                        f"screen: {exc.strerror or exc}") from None
     sys.stdout.flush()
     sys.stderr.flush()
     saved = [os.dup(1), os.dup(2)]
     terminal = os.fdopen(os.dup(1), "w", encoding="utf-8")
-    if keep is not None:
-        keep.parent.mkdir(parents=True, exist_ok=True)
-    with (open(keep, "w+b") if keep is not None else tempfile.TemporaryFile()) as held:
+    with held_file as held:
         os.dup2(held.fileno(), 1)
         os.dup2(held.fileno(), 2)
         try:

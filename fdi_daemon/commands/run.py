@@ -39,9 +39,16 @@ def run(args: argparse.Namespace) -> int:
     daemon = Daemon(args.config, echo=lambda text: print(text, flush=True),
                     state_dir=args.state_dir, hangup_stops=args.dashboard)
     if args.dashboard:
+        import signal
+
         from fdi_daemon.dashboard.app import Frame, run_alongside
 
         held = daemon.load_config().state_dir / "dashboard-output.log"
+        # the daemon takes SIGHUP as "stop" while it runs; the kernel's second SIGHUP (the
+        # terminal's session leader exiting) may come during the shutdown, when the
+        # daemon's handlers are gone: it must not cut the shutdown short
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
         return run_alongside(lambda: daemon.run(args.duration),
-                             lambda: Frame(daemon.board.snapshot()), held_output=held)
+                             lambda: Frame(daemon.board.snapshot()), held_output=held,
+                             request_stop=daemon.stop)
     return daemon.run(args.duration)

@@ -421,7 +421,7 @@ def alarm_lines(alarms: list[Any], width: int, rows: int) -> list[Text]:
             if key in event:
                 value = event[key]
                 if key == "statistic" and "threshold" in event:
-                    value = f"{format(number(value), '.3g')}/{format(number(event['threshold']), 'g')}"
+                    value = f"{fmt(value, '.3g')}/{fmt(event['threshold'], 'g')}"
                 parts.append((_field_text(label, value), None))
         if "theta1" in event or "theta2" in event:
             parts.append((f"θ {fmt(event.get('theta1'), '+.3g')} "

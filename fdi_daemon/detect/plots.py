@@ -38,6 +38,15 @@ def _sample_period(trace: MonitorTrace) -> float:
     return float(np.median(np.diff(trace.t))) / max(1, trace.every)
 
 
+def _broken_at_gaps(t: np.ndarray, *series: np.ndarray) -> tuple[np.ndarray, ...]:
+    """`t` and `series` with a NaN after every step longer than 1.5 sample periods, so that
+    no line is drawn across a data gap."""
+    if t.size < 2:
+        return (t, *series)
+    after = np.flatnonzero(np.diff(t) > 1.5 * np.median(np.diff(t))) + 1
+    return tuple(np.insert(np.asarray(x, dtype=float), after, np.nan) for x in (t, *series))
+
+
 def calibration_spans(events: list[dict[str, Any]], period_s: float) -> list[tuple[float, float]]:
     """(start, end) in s of each calibration: the ``samples`` before a ``calibrated`` event."""
     return [(e["t"] - e.get("samples", 0) * period_s, e["t"])
@@ -56,11 +65,13 @@ def replay_figure(trace: MonitorTrace, events: list[dict[str, Any]], gamma_f: fl
     """The figure (matplotlib Figure, not yet saved)."""
     plt = pyplot()
     sl = _thin(trace.t.size)
-    t = trace.t[sl]
+    t, accel, theta1, theta2, residual, stat = _broken_at_gaps(
+        trace.t[sl], trace.accel[sl], trace.theta1[sl], trace.theta2[sl], trace.residual[sl],
+        trace.statistic[sl])
     period_s = _sample_period(trace)
     fig, axes = plt.subplots(5, 1, figsize=(11, 11.5), sharex=True, constrained_layout=True)
     ax_a, ax_1, ax_2, ax_r, ax_s = axes
-    ax_a.plot(t, trace.accel[sl], lw=0.6, color="tab:blue", label="ẍ measured")
+    ax_a.plot(t, accel, lw=0.6, color="tab:blue", label="ẍ measured")
     ax_a.set_ylabel("ẍ (m/s²)")
     n_alarms = sum(e["kind"] == "fault_detected" for e in events)
     ax_a.set_title((title or "Measured acceleration and friction model parameters")
@@ -92,9 +103,9 @@ def replay_figure(trace: MonitorTrace, events: list[dict[str, Any]], gamma_f: fl
             ax_a.text(1.01, 0.0, textwrap.fill(CALIBRATION_NOTE, 34), transform=ax_a.transAxes,
                       ha="left", va="bottom", fontsize=7.5, color="tab:red")
 
-    for ax, values, name, sig, key in ((ax_1, trace.theta1, "θ1 (Coulomb)", 1.0, "theta1"),
-                                       (ax_2, trace.theta2, "θ2 (viscous)", gamma_f, "theta2")):
-        ax.plot(t, values[sl], lw=0.8, color="tab:purple", label=name.split()[0])
+    for ax, values, name, sig, key in ((ax_1, theta1, "θ1 (Coulomb)", 1.0, "theta1"),
+                                       (ax_2, theta2, "θ2 (viscous)", gamma_f, "theta2")):
+        ax.plot(t, values, lw=0.8, color="tab:purple", label=name.split()[0])
         ax.axhline(sig, color="tab:green", ls=":", lw=1.2, label=f"signature {sig:.3g}")
         span = list(band[key]) if band is not None else []
         finite = values[np.isfinite(values)]
@@ -113,9 +124,8 @@ def replay_figure(trace: MonitorTrace, events: list[dict[str, Any]], gamma_f: fl
             ax.axhline(lo, color="k", ls="--", lw=0.6)
             ax.axhline(hi, color="k", ls="--", lw=0.6)
         ax.set_ylabel(name)
-    ax_r.plot(t, trace.residual[sl], lw=0.6, color="tab:brown", label="residual")
+    ax_r.plot(t, residual, lw=0.6, color="tab:brown", label="residual")
     ax_r.set_ylabel("residual ẍ_r (m/s²)")
-    stat = trace.statistic[sl]
     ax_s.semilogy(t, np.where(stat > 0, stat, np.nan), lw=0.6, color="tab:blue",
                   label="statistic")
     ax_s.axhline(threshold, color="tab:red", ls="--", lw=0.8, label=f"threshold {threshold:g}")

@@ -4,8 +4,8 @@ Lifecycle: build everything from the config (a mistake is a `ConfigError`, one l
 exit 2), tell systemd READY=1, run the loop; SIGTERM/SIGINT stop it cleanly (queues
 drained, files fsynced, sockets removed, STOPPING=1); so does SIGHUP when the daemon draws
 its dashboard on the terminal that hung up (`hangup_stops`); otherwise SIGHUP reloads the
-config and the model: the new set is built first and swapped in only if it builds, otherwise the daemon
-logs why and keeps running on the old one. A reload restarts the monitor (it calibrates
+config and the model: the new set is built first and swapped in only if it builds,
+otherwise the daemon logs why and keeps running on the old one. A reload restarts the monitor (it calibrates
 again) and reopens the link and the sinks; a simulated device keeps running.
 """
 
@@ -361,9 +361,13 @@ class Daemon:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
 
-    def _on_stop(self, signum, frame) -> None:
+    def stop(self) -> None:
+        """Stop as SIGTERM does; from any thread (the dashboard's `q` or its hangup)."""
         self._stopping = True
         self._wake.set()
+
+    def _on_stop(self, signum, frame) -> None:
+        self.stop()
 
     def _on_reload(self, signum, frame) -> None:
         self._reload = True

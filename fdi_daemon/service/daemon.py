@@ -5,8 +5,9 @@ exit 2), tell systemd READY=1, run the loop; SIGTERM/SIGINT stop it cleanly (que
 drained, files fsynced, sockets removed, STOPPING=1); so does SIGHUP when the daemon draws
 its dashboard on the terminal that hung up (`hangup_stops`); otherwise SIGHUP reloads the
 config and the model: the new set is built first and swapped in only if it builds,
-otherwise the daemon logs why and keeps running on the old one. A reload restarts the monitor (it calibrates
-again) and reopens the link and the sinks; a simulated device keeps running.
+otherwise the daemon logs why and keeps running on the old one. A reload restarts the
+monitor (it calibrates again) and reopens the link and the sinks; a simulated device keeps
+running.
 """
 
 from __future__ import annotations
@@ -220,6 +221,7 @@ class Daemon:
         return loop, sinks, link
 
     def load_config(self) -> RigConfig:
+        """The rig config, with `fdi run --state-dir` applied."""
         config = load_config(self.config_path)
         if self.state_dir is not None:
             config.service["state_dir"] = str(self.state_dir)

@@ -97,8 +97,9 @@ def identification_figure(fr, model_response: np.ndarray, band_hz: tuple[float, 
             ax.set_xlabel("t (s)")
             ax.set_ylabel("accel (m/s²)")
             ax.grid(True, alpha=0.3)
-        ax_all.axvspan(t[zoom][0], t[zoom][-1], color="C3", alpha=0.25, lw=0, label="zoom")
-        _legend_above(ax_all, ncol=3)
+        ax_all.plot(t, y - y_sim, color="C3", lw=0.5, label="measured − simulated")
+        ax_all.axvspan(t[zoom][0], t[zoom][-1], color="C1", alpha=0.35, lw=0, label="zoom")
+        _legend_above(ax_all, ncol=4)
         ax_all.set_title(validation.get("label", "validation"), loc="left", fontsize=9)
         ax_zoom.set_title(f"zoom: the {zoom_s:g} s where the simulation misses most",
                           loc="left", fontsize=9)

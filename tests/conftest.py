@@ -2,7 +2,15 @@
 conftest_<area> modules are registered here (their helpers are imported where used)."""
 
 import matplotlib
+import pytest
 
 matplotlib.use("Agg")
 
 pytest_plugins = ["conftest_ident", "conftest_sim"]
+
+
+@pytest.fixture(autouse=True)
+def private_state_home(tmp_path_factory, monkeypatch):
+    """`fdi run` without a state dir writes under $XDG_STATE_HOME/fdi: a test's daemon (and
+    the subprocesses it starts) must never touch the user's ~/.local/state/fdi."""
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path_factory.mktemp("xdg_state")))

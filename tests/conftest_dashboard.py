@@ -162,6 +162,10 @@ class TmuxScreen:
     def keys(self, *keys: str) -> None:
         self._tmux("send-keys", "-t", "dash", *keys)
 
+    def hang_up(self) -> None:
+        """Close the terminal (`tmux kill-session`): SIGHUP, then EOF and EIO on the pty."""
+        self._tmux("kill-session", "-t", "dash")
+
     def pane_dead(self) -> bool:
         return self._tmux("display-message", "-p", "-t", "dash", "#{pane_dead}").strip() == "1"
 

@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
+import errno
 import io
 import os
 import pty
 import threading
 import time
 
+import pytest
 from rich.console import Console
 
 from conftest_dashboard import make_snapshot
-from fdi_daemon.dashboard.app import Frame, KeyReader, LatestSnapshot, run_alongside, \
-    run_dashboard
+from fdi_daemon.dashboard.app import DashboardConsole, Frame, KeyReader, LatestSnapshot, \
+    run_alongside, run_dashboard
 
 
 def quiet_console() -> Console:
@@ -134,3 +136,76 @@ def test_output_of_work_waits_until_the_dashboard_has_left_the_screen(tmp_path):
     assert "MONITORING" in text[:leave_screen]
     for line in ("printed by work", "logged by work", "exit code 7"):
         assert text.index(line) > leave_screen, line
+
+
+class DeadTerminal(io.StringIO):
+    """A console file whose writes fail as on a terminal that hung up; counts the tries."""
+
+    def __init__(self, err: int):
+        super().__init__()
+        self.err = err
+        self.writes = 0
+
+    def write(self, text: str) -> int:
+        self.writes += 1
+        raise OSError(self.err, os.strerror(self.err))
+
+
+@pytest.mark.parametrize("err", [errno.EIO, errno.EPIPE])
+def test_a_write_to_a_dead_terminal_ends_the_loop_instead_of_spinning(err):
+    calls = []
+
+    def provider() -> Frame:
+        calls.append(1)
+        return Frame(make_snapshot())
+
+    dead = DeadTerminal(err)
+    console = DashboardConsole(file=dead, width=80, height=24, force_terminal=True)
+    assert run_dashboard(provider, refresh_hz=50, console=console,
+                         keys=KeyReader(io.StringIO())) == "hangup"
+    assert len(calls) <= 1 and dead.writes <= 3  # at most one frame tried, no retry loop
+
+
+def test_a_hung_up_terminal_ends_the_loop_and_restores_nothing_that_fails():
+    master, slave = pty.openpty()
+    with open(slave, "rb", buffering=0, closefd=False) as stream:
+        with KeyReader(stream) as keys:
+            os.close(master)  # the terminal emulator goes away: end of input on the slave
+            started = time.monotonic()
+            assert run_dashboard(lambda: Frame(None), refresh_hz=20,
+                                 console=quiet_console(), keys=keys) == "hangup"
+            assert time.monotonic() - started < 30  # ended by itself (before: spun forever)
+    os.close(slave)
+
+
+def test_hangup_of_the_dashboards_terminal_stops_the_work():
+    """q and a hangup both call request_stop; the work then returns."""
+    stopped = threading.Event()
+
+    def work() -> int:
+        stopped.wait(30)
+        return 0 if stopped.is_set() else 1
+
+    dead = DeadTerminal(errno.EPIPE)
+    console = DashboardConsole(file=dead, width=80, height=24, force_terminal=True)
+    assert run_alongside(work, lambda: Frame(make_snapshot()), request_stop=stopped.set,
+                         console=console) == 0
+
+
+def test_an_unwritable_place_for_the_held_output_is_one_clear_error(tmp_path, monkeypatch):
+    """Only with a terminal on stdout is anything held; a pty stands in for it."""
+    from fdi_daemon.dashboard.app import captured_output
+    from fdi_daemon.errors import UserError
+
+    master, slave = pty.openpty()
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    try:
+        with open(slave, "w", closefd=False) as fake_stdout:
+            monkeypatch.setattr("sys.stdout", fake_stdout)
+            with pytest.raises(UserError, match="cannot hold the output there"):
+                with captured_output(keep=blocker / "held.log"):
+                    pass
+    finally:
+        os.close(master)
+        os.close(slave)

@@ -17,10 +17,11 @@ def test_default_socket_is_the_one_fdi_run_uses(tmp_path, monkeypatch):
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("STATE_DIRECTORY", raising=False)
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
     config = load_config(None)
     expected = config.output_path(config.sinks["status_socket"])
     assert Path(default_socket_path(None)) == expected
-    assert expected == Path("fdi-state") / "status.sock"
+    assert expected == tmp_path / "xdg" / "fdi" / "status.sock"
     monkeypatch.setenv("STATE_DIRECTORY", str(tmp_path / "state"))
     assert Path(default_socket_path(None)) == tmp_path / "state" / "status.sock"
 
@@ -48,9 +49,12 @@ def test_once_prints_a_frame_of_the_requested_size(tmp_path, capsys):
     assert "OTHER FAULT" in lines[0]
 
 
-def test_once_without_daemon_says_so(tmp_path, capsys):
-    assert main(["dashboard", "--connect", str(tmp_path / "none.sock"), "--once"]) == 1
-    assert "daemon not reachable, retrying" in capsys.readouterr().out
+def test_once_without_daemon_is_one_line_naming_the_socket(tmp_path, capsys):
+    sock = tmp_path / "none.sock"
+    assert main(["dashboard", "--connect", str(sock), "--once"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1
+    assert f"no daemon answers on the status socket {sock} (" in err
 
 
 @pytest.mark.parametrize("rate", ["0.5", "fast", "100"])

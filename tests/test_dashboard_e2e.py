@@ -28,7 +28,7 @@ def test_both_dashboards_follow_the_daemon_to_the_friction_fault(tmp_path):
     fdi = [sys.executable, "-m", "fdi_daemon"]
     daemon = TmuxScreen(fdi + ["run", "--dashboard", "--duration", str(fault["at_s"] + 60.0)],
                         100, 30, cwd=tmp_path)
-    # no --connect: the dashboard finds the socket `fdi run` uses (same working directory)
+    # no --connect: the dashboard finds the socket `fdi run` uses (same $XDG_STATE_HOME)
     attached = TmuxScreen(fdi + ["dashboard"], 100, 32, cwd=tmp_path)
     try:
         for screen in (daemon, attached):

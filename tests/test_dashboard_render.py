@@ -170,3 +170,58 @@ def test_provenance_sections_are_summarised_first():
     assert "identify.metrics.band_hz" in tall  # no θ plane below 120 columns: details
     small = screen_text(render(snapshot), 80, 24)
     assert "identify: fit 94.2" in small and "signature: γ_f 2.9" in small
+
+
+def daemon_events() -> list[dict]:
+    """Events as the daemon writes them (fields of a real `fdi run`)."""
+    common = {"statistic": 1.27, "threshold": 30.0, "method": "sequential"}
+    return [
+        {"t": 2.38671875, "kind": "calibrated", "theta1": 0.0474, "theta2": -1.67, **common,
+         "friction_level": 0.0474, "band": {"theta1": [0.03, 0.06], "theta2": [-1.9, -1.3]},
+         "samples": 256},
+        {"t": 20.01953125, "kind": "fault_detected", "theta1": 0.0262, "theta2": -1.4,
+         **common, "statistic": 64.72, "friction_level": 0.0262, "path": "fast"},
+        {"t": 20.546875, "kind": "friction_isolated", "theta1": 1.43, "theta2": 0.805,
+         **common, "friction_level": 1.43, "coulomb_change": 1.6048,
+         "friction_evidence": "harmonics"},
+    ]
+
+
+def test_event_rows_at_80x24_show_kind_time_and_key_fields_whole():
+    snapshot = make_snapshot("friction_isolated", n_alarms=0)
+    snapshot["alarms"] = daemon_events()
+    rows = [line for line in lines_of(screen_text(render(snapshot), 80, 24))
+            if " s " in line and ("_" in line or "calibrated" in line)]
+    text = "\n".join(rows)
+    assert "20.547 s friction_isolated  Δθ1 +1.6 harmonics" in text
+    assert "20.020 s fault_detected     stat 64.7/30 fast" in text
+    assert "2.387 s calibrated         samples 256" in text
+    assert "…" not in text  # whole fields only, never cut after θ
+
+
+def test_theta_plot_titles_are_their_legend():
+    from fdi_daemon.dashboard.render import (BAND_STYLE, SIGNATURE_STYLE, TRACE_STYLE,
+                                             theta_title)
+
+    monitor = make_snapshot("friction_isolated", theta=(0.98, 2.3))["monitor"]
+    title = theta_title(monitor, 0, 50, "drawn")
+    assert title.plain == "━ θ1 +0.98 ━ sig 1 ╍ band [-0.05, 0.05]"
+    styles = {title.plain[span.start:span.end].split()[1]: span.style for span in title.spans}
+    assert styles == {"θ1": TRACE_STYLE, "sig": SIGNATURE_STYLE, "band": BAND_STYLE}
+
+
+def test_model_panel_at_80x24_gives_one_row_to_file_paths():
+    import yaml
+
+    from conftest_detect import MODEL
+
+    snapshot = make_snapshot()
+    snapshot["model"] = {"path": "/home/user/rigs/fdi_daemon/data/model_sim_rig.yaml",
+                         "provenance": yaml.safe_load(MODEL.read_text())["provenance"]}
+    lines = lines_of(screen_text(render(snapshot), 80, 24))
+    top = next(i for i, line in enumerate(lines) if "─ model ─" in line)
+    panel = [line[:30] for line in lines[top + 1:] if line.startswith("│")]
+    assert "model_sim_rig.yaml" in panel[0]
+    assert sum("/" in row for row in panel) == 1, panel  # paths: the model file only
+    assert any("identify: fit" in row for row in panel)
+    assert any("signature: γ_f" in row for row in panel)

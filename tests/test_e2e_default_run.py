@@ -15,7 +15,9 @@ DEFAULT = load_config()
 @pytest.mark.slow
 @pytest.mark.skipif(not DEFAULT.model_path.exists(),
                     reason=f"{DEFAULT.model_path.name} is not in fdi_daemon/data yet")
-def test_default_run_detects_the_scheduled_friction_fault(tmp_path):
+def test_default_run_detects_the_scheduled_friction_fault(tmp_path, monkeypatch):
+    monkeypatch.delenv("STATE_DIRECTORY", raising=False)
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
     (fault,) = DEFAULT.simulated_device["faults"]
     result = subprocess.run([sys.executable, "-m", "fdi_daemon", "run", "--duration",
                              str(fault["at_s"] + 25.0)], capture_output=True, text=True,
@@ -30,7 +32,7 @@ def test_default_run_detects_the_scheduled_friction_fault(tmp_path):
     assert fault["at_s"] <= times["FAULT DETECTED"] <= times["FRICTION ISOLATED"]
     assert times["FRICTION ISOLATED"] <= fault["at_s"] + 10.0
     events = [json.loads(line) for line in
-              (tmp_path / "fdi-state" / "events.jsonl").read_text().splitlines()]
+              (tmp_path / "xdg" / "fdi" / "events.jsonl").read_text().splitlines()]
     kinds = [e["kind"] for e in events]
     assert "fault_detected" in kinds and "friction_isolated" in kinds
     assert not [e for e in events if e["kind"] in ("fault_detected", "other_fault")

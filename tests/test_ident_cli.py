@@ -171,3 +171,17 @@ def test_identify_on_another_rig_with_a_multisine(tmp_path):
     out = tmp_path / "m.yaml"
     assert main(["identify", str(paths[0]), "--validate", str(paths[1]), "-o", str(out)]) == 0
     assert load_model(out).provenance["identify"]["metrics"]["fit_percent"] >= 95.0
+
+
+def test_out_of_band_residual_input_correlation_gets_a_verdict(chirps, tmp_path, capsys):
+    from fdi_daemon.commands.identify import xcorr_verdict
+
+    assert main(["identify", str(chirps[0]), "-o", str(tmp_path / "m2.yaml"), "--order", "2",
+                 "--validate", str(chirps[1])]) == 0  # a 2nd-order model of a 4th-order plant
+    out = capsys.readouterr().out
+    line = out.splitlines().index(next(s for s in out.splitlines() if "xcorr" in s))
+    verdict = out.splitlines()[line + 1]
+    assert "misses input-driven dynamics" in verdict and "--order 4" in verdict
+    assert f"fdi diagnose {chirps[1]} --model {tmp_path / 'm2.yaml'}" in verdict
+    assert xcorr_verdict({"max_abs": 0.05, "bound": 0.057}, 4, "r.csv", "m.yaml") == []
+    assert len(xcorr_verdict({"max_abs": 0.06, "bound": 0.057}, 4, "r.csv", "m.yaml")) == 1

@@ -35,7 +35,10 @@ def test_round_trip_keeps_every_key(tmp_path):
 @pytest.mark.parametrize(
     "text, message",
     [
-        ("fs: 256\n", r"plant must be a mapping"),
+        ("fs: 256\n", r"m.yaml: missing required key plant$"),
+        ("plant: {b: [0, 1], a: [1]}\n", r"m.yaml: missing required key fs$"),
+        ("fs: 256\nplant: {b: [0, 1]}\n", r"plant: missing required key a$"),
+        ("fs: 256\nplant: 3\n", r"plant must be a mapping"),
         ("fs: -1\nplant: {b: [0, 1], a: [1, 0.5]}\n", r"fs must be a positive number"),
         ("fs: 256\nplant: {b: [0, 1], a: [2, 0.5]}\n", r"plant.a must start with 1"),
         ("fs: 256\nplant: {b: [], a: [1]}\n", r"plant.b must be a non-empty list"),
@@ -59,3 +62,44 @@ def test_invalid_models_name_the_key(tmp_path, text, message):
 def test_missing_model_file(tmp_path):
     with pytest.raises(ConfigError, match="no such model file"):
         load_model(tmp_path / "absent.yaml")
+
+
+GOOD = "fs: 256\nplant: {b: [0, 1], a: [1, 0.5]}\n"
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        # a typo anywhere in the file is refused with the suggestion, never taken silently
+        (GOOD + "fault_filter: {b: [1], f: [1], gama_f: 2.9}\n",
+         r"m.yaml: fault_filter: unknown key 'gama_f' \(did you mean 'gamma_f'\?\)"),
+        (GOOD + "detectr: {threshold: 40}\n",
+         r"m.yaml: unknown key 'detectr' \(did you mean 'detector'\?\)"),
+        ("fs: 256\nplnat: {b: [0, 1], a: [1, 0.5]}\n",
+         r"m.yaml: unknown key 'plnat' \(did you mean 'plant'\?\)"),
+        (GOOD + "provenanse: {}\n", r"did you mean 'provenance'"),
+        (GOOD + "efects: []\n", r"did you mean 'effects'"),
+        (GOOD + "baselin: {}\n", r"did you mean 'baseline'"),
+        ("fs: 256\nplant: {b: [0, 1], aa: [1, 0.5]}\n", r"plant: missing required key a$"),
+        ("fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], nk: 0}\n",
+         r"fault_filter: missing required key f$"),
+    ],
+)
+def test_typos_in_a_model_file_are_refused_with_a_suggestion(tmp_path, text, message):
+    path = tmp_path / "m.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_model(path)
+
+
+def test_unknown_keys_of_other_tools_are_kept_with_a_warning(tmp_path, caplog):
+    path = tmp_path / "m.yaml"
+    path.write_text(GOOD + "our_lab_notes: {operator: kim}\nbaseline: {theta: [0.1, 0.2]}\n")
+    with caplog.at_level("WARNING", logger="fdi.model"):
+        model = load_model(path)
+    assert model.extra == {"our_lab_notes": {"operator": "kim"},
+                           "baseline": {"theta": [0.1, 0.2]}}
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{path}: keeping key 'our_lab_notes', which this version does not know"]
+    back = load_model(save_model(tmp_path / "again.yaml", model))
+    assert back.extra == model.extra

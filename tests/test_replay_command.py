@@ -98,3 +98,22 @@ def test_user_mistakes_exit_2(files, tmp_path, capsys, case):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("fdi replay: error:") and err.count("\n") == 1
+
+
+def test_summary_line_is_one_line_in_an_80_column_terminal(files, tmp_path, monkeypatch):
+    """It wrapped mid-sentence with a trailing space ("first detection 2.9180 s, ⏎
+    classification friction"): each line the replay prints stays whole, whatever the
+    terminal's width; the terminal, not the program, wraps it."""
+    import subprocess
+    import sys
+
+    root, model, rec = files
+    env = {**__import__("os").environ, "COLUMNS": "80", "TERM": "xterm"}
+    result = subprocess.run([sys.executable, "-m", "fdi_daemon", "replay", str(rec), "--model",
+                             str(model)], capture_output=True, text=True, env=env, timeout=120)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert all(line == line.rstrip() for line in lines), lines
+    summary = [line for line in lines if " samples at " in line]
+    assert len(summary) == 1 and summary[0].endswith("classification friction"), lines
+    assert "first detection 2.9" in summary[0] and len(summary[0]) > 80

@@ -159,3 +159,19 @@ def test_packaged_model_is_the_shipped_one():
         pytest.skip("model_sim_rig.yaml not in both places yet")
     assert packaged.read_bytes() == shipped.read_bytes(), \
         "fdi_daemon/data/model_sim_rig.yaml differs from configs/model_sim_rig.yaml"
+
+
+def test_default_state_dir_is_systemds_then_xdg_never_the_working_directory(
+        tmp_path, monkeypatch):
+    monkeypatch.delenv("STATE_DIRECTORY", raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("XDG_STATE_HOME", raising=False)
+    assert config_from_dict(minimal()).state_dir == tmp_path / "home" / ".local" / "state" / "fdi"
+    monkeypatch.setenv("XDG_STATE_HOME", "relative/ignored")  # the XDG spec: absolute only
+    assert config_from_dict(minimal()).state_dir == tmp_path / "home" / ".local" / "state" / "fdi"
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
+    assert config_from_dict(minimal()).state_dir == tmp_path / "xdg" / "fdi"
+    monkeypatch.setenv("STATE_DIRECTORY", f"{tmp_path / 'sd'}:{tmp_path / 'other'}")
+    assert config_from_dict(minimal()).state_dir == tmp_path / "sd"  # under systemd
+    cfg = config_from_dict(minimal(service={"state_dir": "~/mine"}))
+    assert cfg.state_dir == tmp_path / "home" / "mine"  # the config's own wins

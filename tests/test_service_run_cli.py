@@ -33,3 +33,19 @@ def test_missing_config_and_bad_duration(tmp_path):
     assert result.returncode == 2 and "no such config file" in result.stderr
     result = fdi("run", "--duration", "-1")
     assert result.returncode == 2 and "--duration" in result.stderr
+
+
+@pytest.mark.parametrize("state_dir_option", [False, True])
+def test_outputs_go_to_the_xdg_state_dir_or_state_dir_never_the_working_directory(
+        tmp_path, monkeypatch, state_dir_option):
+    monkeypatch.delenv("STATE_DIRECTORY", raising=False)
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
+    work = tmp_path / "repo"
+    work.mkdir()
+    expected = tmp_path / "mine" if state_dir_option else tmp_path / "xdg" / "fdi"
+    extra = ["--state-dir", str(expected)] if state_dir_option else []
+    result = fdi("run", "--duration", "2", *extra, cwd=work)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert list(work.iterdir()) == []  # nothing written where the user happened to be
+    assert f"  state   {expected}/" in result.stdout  # says where it went
+    assert (expected / "events.jsonl").exists() and (expected / "recordings").is_dir()

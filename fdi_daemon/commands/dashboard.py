@@ -29,7 +29,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="screen refresh rate (default 10)")
     parser.add_argument("--once", action="store_true",
                         help="print one frame and exit (a text capture; size from --width/"
-                             "--height)")
+                             "--height); no daemon: one line naming the socket, exit 2")
     parser.add_argument("--width", type=int, default=None, help="frame width for --once")
     parser.add_argument("--height", type=int, default=None, help="frame height for --once")
 
@@ -59,6 +59,9 @@ def run(args: argparse.Namespace) -> int:
         if args.once:
             console = Console(width=args.width, height=args.height)
             frame = provider()
+            if frame.snapshot is None:
+                raise UserError(f"no daemon answers on the status socket {path} "
+                                f"({provider.last_error}); is `fdi run` running?")
             console.print(render(frame.snapshot, frame.notice))
             return 0 if frame.notice is None else 1
         run_dashboard(provider, refresh_hz=args.refresh_hz)

@@ -4,7 +4,21 @@ from __future__ import annotations
 
 import argparse
 
+from fdi_daemon.io.columns import add_columns_option
+
 HELP = "identify the plant model G from a friction-free recording (v_in -> accel)"
+
+
+
+def xcorr_verdict(xcorr: dict, order: int, recording: str, model: str) -> list[str]:
+    """What an out-of-band residual-input correlation means and what to try (one line;
+    none when it is inside the 99 % band of a white residual)."""
+    if not xcorr["max_abs"] > xcorr["bound"]:
+        return []
+    return [f"  -> out of band: the residual still follows the input, so the model misses "
+            f"input-driven dynamics (a nonlinearity, too low an order, a delay, or too "
+            f"noisy a fit); try --order {order + 2}, check the band, or "
+            f"`fdi diagnose {recording} --model {model}`"]
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -27,6 +41,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="fit band in Hz (default: chosen from coherence and input spectrum)")
     parser.add_argument("--min-coherence", type=float, default=0.8,
                         help="coherence threshold of the automatic band (default %(default)s)")
+    add_columns_option(parser)
 
 
 def parse_range(text: str, what: str, parts: int = 2) -> tuple[float, ...]:
@@ -46,14 +61,15 @@ def parse_range(text: str, what: str, parts: int = 2) -> tuple[float, ...]:
     return values
 
 
-def load_io(path: str):
-    """Read a recording and return (rec, v_in, accel) with finite values checked."""
+def load_io(path: str, columns: dict[str, str] | None = None):
+    """Read a recording (its columns renamed by ``columns``, ``--columns``) and return
+    (rec, v_in, accel) with finite values checked."""
     import numpy as np
 
     from fdi_daemon.errors import RecordingError
     from fdi_daemon.io.recordings import read_recording
 
-    rec = read_recording(path)
+    rec = read_recording(path, columns=columns)
     for name in ("v_in", "accel"):
         col = rec[name]
         if not np.all(np.isfinite(col)):
@@ -77,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         band = parse_range(args.band, "--band")
         if not 0 <= band[0] < band[1]:
             raise UserError(f"--band needs 0 <= LO < HI, got {args.band}")
-    rec, u, y = load_io(args.recording)
+    rec, u, y = load_io(args.recording, args.columns)
     fs = rec.fs
     if band is not None and band[1] > fs / 2:
         raise UserError(f"--band {args.band} reaches above fs/2 = {fs / 2:g} Hz")
@@ -92,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{args.recording}: {exc}") from None
 
     if args.validate:
-        val_rec, u_val, y_val = load_io(args.validate)
+        val_rec, u_val, y_val = load_io(args.validate, args.columns)
         if not same_rate(val_rec.fs, fs):
             raise UserError(f"{args.validate}: fs = {val_rec.fs:g} Hz differs from "
                             f"{fs:g} Hz of {args.recording}")
@@ -159,6 +175,8 @@ def _report(args, ident, check, val_label) -> None:
         f"simulation fit    : {check['fit_percent']:.2f} % on {val_label}",
         f"residual-input xcorr: max |r| {check['xcorr']['max_abs']:.3f} "
         f"(99 % band ±{check['xcorr']['bound']:.3f})",
+        *xcorr_verdict(check["xcorr"], args.order, args.validate or args.recording,
+                       args.output),
         "band errors       : " + ", ".join(
             f"{r['band_hz'][0]:.3g}-{r['band_hz'][1]:.3g} Hz {100 * r['rms_relative_error']:.1f} %"
             for r in check["band_errors"]),

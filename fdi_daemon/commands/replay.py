@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from fdi_daemon.io.columns import add_columns_option
+
 HELP = "replay a recording through the monitor: events, summary and the paper's Figs. 5-7"
 
 #: recordings longer than this are traced every n-th sample for the plot (bounded memory)
@@ -22,6 +24,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="pace the samples at fs through the per-tick path (as the daemon)")
     parser.add_argument("--dashboard", action="store_true",
                         help="with --realtime: show the live dashboard while replaying (q stops)")
+    add_columns_option(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--dashboard needs --realtime (a batch replay is over before a "
                         "screen could show it)")
     model = load_model(args.model)
-    rec = read_recording(args.recording, strict=False)
+    rec = read_recording(args.recording, strict=False, columns=args.columns)
     if not same_rate(rec.fs, model.fs):
         raise UserError(f"{args.recording}: sampled at {rec.fs:g} Hz but the model is for "
                         f"{model.fs:g} Hz")
@@ -139,7 +142,7 @@ def _paced(monitor, rec, on_tick=None):
                 on_tick(monitor, float(t[k]), new)
                 continue
             for event in new:
-                progress.console.print(_line(event), highlight=False)
+                progress.console.print(_line(event), highlight=False, soft_wrap=True)
             if k % 256 == 0:
                 progress.update(task, completed=k + 1)
     events.extend(monitor.finish())
@@ -161,7 +164,7 @@ def _line(event: dict) -> str:
 def _report(events: list, summary: dict) -> None:
     from rich.console import Console
 
-    console = Console()
+    console = Console(soft_wrap=True)  # whole lines: the terminal wraps, never mid-sentence
     shown = [e for e in events if e["kind"] != "bad_sample"][:50]
     for event in shown:
         console.print(_line(event), highlight=False)

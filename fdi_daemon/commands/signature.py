@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from fdi_daemon.io.columns import add_columns_option
+
 HELP = "identify the friction signature (G_e, gamma_f) from a window with a friction fault"
 
 
@@ -45,6 +47,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-depth", type=float, default=0.01,
                         help="flag the profile flat when max/min cost over the grid is below "
                              "1 + this (default %(default)s)")
+    add_columns_option(parser)
 
 
 def _orders(text: str) -> tuple[int, int, int]:
@@ -88,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--min-depth must be >= 0")
 
     model = load_model(args.model)
-    rec, v_in, accel = load_io(args.recording)
+    rec, v_in, accel = load_io(args.recording, args.columns)
     if not same_rate(rec.fs, model.fs):
         raise UserError(f"{args.recording}: fs = {rec.fs:g} Hz but the model has "
                         f"fs = {model.fs:g} Hz")
@@ -158,9 +161,18 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from fdi_daemon.ident.plots import plot_signature
 
-        plot_signature(args.plot, t_win, result.residual, result)
+        plot_signature(args.plot, t_win, result.residual, result,
+                       residual_label=_fitted_residual_label(args))
     _report(args, result, estimator, fault_fit, full_band_pct)
     return 0
+
+
+def _fitted_residual_label(args) -> str:
+    """What the fit saw: the residual r (eq. 3), less the fault-free reference, filtered."""
+    label = "residual r" + (" − fault-free reference" if args.reference_window else "")
+    filters = [f"{kind}-passed {hz:g} Hz" for kind, hz in
+               (("high", args.prefilter_hz), ("low", args.lowpass_hz)) if hz is not None]
+    return ", ".join([label, *filters])
 
 
 def _prefilter(args, fs):

@@ -10,12 +10,15 @@ can not slow the 256 Hz loop:
   loop `publish()` snapshots into a `LatestSnapshot` (a lock held only to swap a reference)
   and run the loop with `run_alongside(work, provider)`.
 
-`q` quits (stdin in cbreak mode when it is a terminal); Ctrl-C quits too.
+`q` quits (stdin in cbreak mode when it is a terminal); Ctrl-C quits too. When the terminal
+goes away (an ssh drop, a closed window: reads see end of file, writes fail with EIO or
+EPIPE) the loop ends with "hangup" instead of drawing to nobody.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import select
 import signal
@@ -24,14 +27,31 @@ import tempfile
 import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from rich.console import Console
 from rich.live import Live
 
 from fdi_daemon.dashboard.render import render
+from fdi_daemon.errors import UserError
 
 DEFAULT_REFRESH_HZ = 10.0
+
+log = logging.getLogger("fdi.dashboard")
+
+
+class TerminalGone(Exception):
+    """The terminal hung up: end of file on its input (or a read error)."""
+
+
+class DashboardConsole(Console):
+    """A rich Console for the dashboard: a broken pipe is the terminal gone (rich's default
+    points stdout at /dev/null and raises SystemExit, which in the drawing thread would end
+    only that thread, silently, and leave the daemon running for nobody)."""
+
+    def on_broken_pipe(self) -> None:
+        raise TerminalGone("broken pipe")
 
 
 @dataclass(frozen=True)
@@ -98,7 +118,8 @@ class KeyReader:
         if self._fd is not None and self._saved is not None:
             import termios
 
-            termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+            with contextlib.suppress(termios.error, OSError):  # a hung-up terminal
+                termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
         self._fd = self._saved = None
 
     @property
@@ -106,27 +127,36 @@ class KeyReader:
         return self._fd is not None
 
     def wait(self, timeout_s: float) -> str:
-        """Characters typed within `timeout_s` ("" if none; sleeps when not interactive)."""
+        """Characters typed within `timeout_s` ("" if none; sleeps when not interactive).
+        Raises TerminalGone at the end of the terminal's input (it hung up): a hung-up
+        terminal is always readable, so going on would spin."""
         if self._fd is None:
             time.sleep(max(timeout_s, 0.0))
             return ""
-        ready, _, _ = select.select([self._fd], [], [], max(timeout_s, 0.0))
-        if not ready:
-            return ""
-        return os.read(self._fd, 64).decode("utf-8", errors="replace")
+        try:
+            ready, _, _ = select.select([self._fd], [], [], max(timeout_s, 0.0))
+            if not ready:
+                return ""
+            data = os.read(self._fd, 64)
+        except OSError as exc:
+            raise TerminalGone(exc.strerror or str(exc)) from None
+        if not data:
+            raise TerminalGone("end of input")
+        return data.decode("utf-8", errors="replace")
 
 
 def run_dashboard(provider: SnapshotProvider, *, refresh_hz: float = DEFAULT_REFRESH_HZ,
                   console: Console | None = None, stop: threading.Event | None = None,
                   keys: KeyReader | None = None) -> str:
     """Redraw at `refresh_hz` until `q`, Ctrl-C or `stop` is set; returns why it ended:
-    "quit" (q), "interrupt" (Ctrl-C) or "stopped". `keys`, if given, is already entered
-    by the caller; otherwise stdin is read while the loop runs."""
+    "quit" (q), "interrupt" (Ctrl-C), "hangup" (the terminal went away: end of its input, or
+    a write to it failed) or "stopped". `keys`, if given, is already entered by the caller;
+    otherwise stdin is read while the loop runs."""
     if keys is None:
         with KeyReader() as own_keys:
             return run_dashboard(provider, refresh_hz=refresh_hz, console=console, stop=stop,
                                  keys=own_keys)
-    console = console or Console()
+    console = console or DashboardConsole()
     period_s = 1.0 / refresh_hz
     try:
         with Live(console=console, screen=console.is_terminal, auto_refresh=False,
@@ -145,21 +175,25 @@ def run_dashboard(provider: SnapshotProvider, *, refresh_hz: float = DEFAULT_REF
             live.update(render(frame.snapshot, frame.notice), refresh=True)
     except KeyboardInterrupt:
         return "interrupt"
+    except (TerminalGone, OSError) as exc:  # OSError: EIO/EPIPE writing to a dead terminal
+        log.warning("the dashboard's terminal is gone (%s)", exc)
+        return "hangup"
     return "stopped"
 
 
 def run_alongside(work: Callable[[], int], provider: SnapshotProvider, *,
                   request_stop: Callable[[], None] | None = None, linger: bool = False,
                   refresh_hz: float = DEFAULT_REFRESH_HZ,
-                  console: Console | None = None) -> int:
+                  console: Console | None = None, held_output: Path | None = None) -> int:
     """Run `work` in this (main) thread with the dashboard drawn from a background thread.
 
     `work` keeps the main thread so its signal handlers (SIGTERM, SIGINT) work as without a
-    dashboard. `q` calls `request_stop` (default: raise SIGINT in this process, i.e. what
-    Ctrl-C does). With `linger`, the final state stays on screen after `work` returns until
-    `q` (only when stdin is a terminal). While the dashboard owns a terminal, whatever `work`
-    prints (log lines, events) is held back and its last lines are shown afterwards
-    (`captured_output`). Returns `work`'s exit code.
+    dashboard. `q`, and the terminal going away, call `request_stop` (default: raise SIGINT
+    in this process, i.e. what Ctrl-C does). With `linger`, the final state stays on screen
+    after `work` returns until `q` (only when stdin is a terminal). While the dashboard owns
+    a terminal, whatever `work` prints (log lines, events) is held back, in `held_output` if
+    given (kept: it is all there is to read after a hangup), and its last lines are shown
+    afterwards (`captured_output`). Returns `work`'s exit code.
     """
     stop = threading.Event()
     done = threading.Event()
@@ -173,12 +207,12 @@ def run_alongside(work: Callable[[], int], provider: SnapshotProvider, *,
     with contextlib.ExitStack() as stack:
         keys = stack.enter_context(KeyReader())
         if console is None:
-            console = stack.enter_context(captured_output())
+            console = stack.enter_context(captured_output(keep=held_output))
 
         def show() -> None:
             ended = run_dashboard(frames, refresh_hz=refresh_hz, console=console, stop=stop,
                                   keys=keys)
-            if ended == "quit" and not done.is_set():
+            if ended in ("quit", "hangup") and not done.is_set():
                 (request_stop or (lambda: signal.raise_signal(signal.SIGINT)))()
 
         thread = threading.Thread(target=show, name="fdi-dashboard", daemon=True)
@@ -199,26 +233,35 @@ def run_alongside(work: Callable[[], int], provider: SnapshotProvider, *,
 
 
 @contextlib.contextmanager
-def captured_output(tail_lines: int = 40) -> Iterator[Console]:
-    """A Console on the terminal while file descriptors 1 and 2 point at a temporary file.
+def captured_output(tail_lines: int = 40, keep: Path | None = None) -> Iterator[Console]:
+    """A Console on the terminal while file descriptors 1 and 2 point at a file: `keep`
+    (overwritten, left in place) or else a temporary file.
 
     Everything else the process prints meanwhile (print, logging handlers, C libraries) would
     scribble over the full-screen dashboard; it goes to the file instead and its last
-    `tail_lines` lines are printed when the block ends. Without a terminal on stdout nothing
-    is redirected and the Console writes to stdout as usual.
+    `tail_lines` lines are printed when the block ends. If the terminal is gone by then, 1
+    and 2 go to /dev/null instead (the output stays in `keep`). Without a terminal on stdout
+    nothing is redirected and the Console writes to stdout as usual.
     """
     if not sys.stdout.isatty():
-        yield Console()
+        yield DashboardConsole()
         return
+    try:
+        if keep is not None:
+            keep.parent.mkdir(parents=True, exist_ok=True)
+        held_file = open(keep, "w+b") if keep is not None else tempfile.TemporaryFile()
+    except OSError as exc:
+        raise UserError(f"{keep}: cannot hold the output there while the dashboard is on "
+                        f"screen: {exc.strerror or exc}") from None
     sys.stdout.flush()
     sys.stderr.flush()
     saved = [os.dup(1), os.dup(2)]
     terminal = os.fdopen(os.dup(1), "w", encoding="utf-8")
-    with tempfile.TemporaryFile() as held:
+    with held_file as held:
         os.dup2(held.fileno(), 1)
         os.dup2(held.fileno(), 2)
         try:
-            yield Console(file=terminal)
+            yield DashboardConsole(file=terminal)
         finally:
             sys.stdout.flush()
             sys.stderr.flush()
@@ -226,13 +269,21 @@ def captured_output(tail_lines: int = 40) -> Iterator[Console]:
             os.dup2(saved[1], 2)
             for fd in saved:
                 os.close(fd)
-            terminal.close()
+            with contextlib.suppress(OSError):
+                terminal.close()
             size = held.seek(0, os.SEEK_END)
             held.seek(max(0, size - 200 * tail_lines))
             lines = held.read().decode("utf-8", errors="replace").splitlines()
             if size > 200 * tail_lines:
                 lines = lines[1:]  # the first one may be cut
             if len(lines) > tail_lines or size > 200 * tail_lines:
-                print("[earlier output not shown]")
-            for line in lines[-tail_lines:]:
-                print(line)
+                lines.insert(-tail_lines, f"[earlier output in {keep}]" if keep is not None
+                             else "[earlier output not shown]")
+            try:
+                sys.stdout.write("".join(line + "\n" for line in lines[-tail_lines - 1:]))
+                sys.stdout.flush()
+            except OSError:  # the terminal hung up: nobody to tell, and nothing may fail later
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, 1)
+                os.dup2(devnull, 2)
+                os.close(devnull)

@@ -136,6 +136,8 @@ class SocketProvider:
         self._monotonic = monotonic
         self._last: dict[str, Any] | None = None
         self._notice: str | None = None
+        self.last_error: str | None = None
+        """Why the last attempt failed (None after a good answer)."""
         self._retry_s = 0.0
         self._next_try = -math.inf
 
@@ -152,12 +154,14 @@ class SocketProvider:
         if age_s > self.stale_after_s and snapshot.get("state") != "starting":
             return self._failed(now, f"snapshot {age_s:.0f} s old")
         self._retry_s, self._next_try, self._notice = 0.0, -math.inf, None
+        self.last_error = None
         return Frame(snapshot)
 
     def _failed(self, now: float, reason: str) -> Frame:
         self._retry_s = min(max(self._retry_s * 2, self.retry_initial_s), self.retry_max_s)
         self._next_try = now + self._retry_s
         self._notice = f"{UNREACHABLE} ({reason})"
+        self.last_error = reason
         return Frame(self._last, self._notice)
 
     def close(self) -> None:

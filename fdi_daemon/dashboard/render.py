@@ -61,6 +61,18 @@ COMPACT_WIDTH, COMPACT_HEIGHT = 80, 24
 #: the θ1-θ2 plane needs this many rows (inside its border) under a model panel of so many
 PLANE_MIN_ROWS, MODEL_ROWS_WITH_PLANE = 10, 6
 _EVENT_SHOWN_KEYS = ("t", "time", "kind", "theta1", "theta2")
+#: what an event row shows right after its time and kind, before θ and the other fields
+#: (field -> short label); what does not fit the row's width is left out from the end
+EVENT_KEY_FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
+    "fault_detected": (("statistic", "stat"), ("path", "")),
+    "friction_isolated": (("coulomb_change", "Δθ1"), ("friction_evidence", "")),
+    "other_fault": (("coulomb_change", "Δθ1"), ("reason", "")),
+    "calibrated": (("samples", "samples"),),
+    "data_gap": (("missing_samples", "missing"),),
+    "bad_sample": (("count", "count"), ("reason", "")),
+}
+#: legend marks in the θ plot titles: the trace, the signature level, the band edges
+TRACE_MARK, SIGNATURE_MARK, BAND_MARK = "━", "━", "╍"
 
 
 def render(snapshot: dict[str, Any] | None, notice: str | None = None) -> "DashboardView":
@@ -316,16 +328,18 @@ def _plain_value(value: Any) -> str:
     return str(value)
 
 
-def _section_summary(section: dict[str, Any]) -> str:
-    """One line from the well-known leaves of a provenance section (γ_f, fit, date, source)."""
+def _section_summary(section: dict[str, Any], room: int = 10**6) -> str:
+    """One line from the well-known leaves of a provenance section (γ_f, fit, date, source),
+    as many of them as fit in `room` cells (whole parts only)."""
     leaves: dict[str, Any] = {}
     for path, value in flatten(section):
         if path.count(".") <= 1:
             leaves.setdefault(path.rsplit(".", 1)[-1], value)
     parts = []
     if isinstance(leaves.get("gamma_f"), (int, float)):
-        flat = " (flat cost)" if leaves.get("flat") is True else ""
-        parts.append(f"γ_f {leaves['gamma_f']:.3g}{flat}")
+        gamma = f"γ_f {leaves['gamma_f']:.3g}"
+        flat = " (flat cost)" if len(gamma) + 12 <= room else " (flat)"
+        parts.append(gamma + (flat if leaves.get("flat") is True else ""))
     if isinstance(leaves.get("fit_percent"), (int, float)):
         parts.append(f"fit {leaves['fit_percent']:.1f} %")
     date = leaves.get("date_utc", leaves.get("date"))
@@ -333,12 +347,21 @@ def _section_summary(section: dict[str, Any]) -> str:
         parts.append(date[:10])
     if isinstance(leaves.get("source"), str):
         parts.append(leaves["source"].rsplit("/", 1)[-1])
+    while len(parts) > 1 and len(", ".join(parts)) > room:
+        parts.pop()
     return ", ".join(parts)
 
 
+def _is_path_or_hash(entry: tuple[str, str]) -> bool:
+    """File paths, commands and checksums: what a narrow panel can spare first."""
+    key, value = entry
+    return "/" in value or key.endswith(("sha256", "command"))
+
+
 def model_lines(model: dict[str, Any], width: int, rows: int) -> list[Text]:
-    """The model path; then provenance: top-level values, a one-line summary per section
-    (identify, signature, ...), and as many of the remaining entries as `rows` allows."""
+    """The model path (one row, cut from the left); then provenance: top-level values, a
+    one-line summary per section (identify, signature, ...), and as many of the remaining
+    entries as `rows` allows, file paths and commands last."""
     if not model:
         return [Text("no model information", style="dim")]
     lines = [_line((shorten_path(str(model.get("path", "—")), width), "bold"))]
@@ -348,7 +371,8 @@ def model_lines(model: dict[str, Any], width: int, rows: int) -> list[Text]:
     entries: list[tuple[str, str]] = []
     summaries: list[tuple[str, str]] = []
     for key, value in provenance.items():
-        summary = _section_summary(value) if isinstance(value, dict) else ""
+        summary = (_section_summary(value, width - len(str(key)) - 2)
+                   if isinstance(value, dict) else "")
         if summary:
             summaries.append((str(key), summary))
         else:
@@ -356,7 +380,8 @@ def model_lines(model: dict[str, Any], width: int, rows: int) -> list[Text]:
     details = [(path, _plain_value(v)) for key, _ in summaries
                for path, v in flatten({key: provenance[key]})]
     entries = ([entry for entry in entries if "." not in entry[0]] + summaries
-               + [entry for entry in entries if "." in entry[0]] + details)
+               + sorted([entry for entry in entries if "." in entry[0]] + details,
+                        key=_is_path_or_hash))
     room = max(rows - 1, 0)
     shown = entries if len(entries) <= room else entries[: max(room - 1, 0)]
     for key, value in shown:
@@ -366,26 +391,51 @@ def model_lines(model: dict[str, Any], width: int, rows: int) -> list[Text]:
     return lines
 
 
+def _field_text(label: str, value: Any) -> str:
+    spec = "+.3g" if label.startswith("Δ") else ".3g"  # a change carries its sign
+    shown = format(value, spec) if isinstance(value, float) else str(value)
+    return f"{label} {shown}" if label else shown
+
+
 def alarm_lines(alarms: list[Any], width: int, rows: int) -> list[Text]:
-    """Newest first: sample time, wall clock (when there is room), kind, θ, other fields."""
+    """Newest first: sample time, wall clock (when there is room), kind, the kind's key
+    fields (`EVENT_KEY_FIELDS`), θ, then the other fields, as many as fit in `width`."""
     events = [a for a in alarms if isinstance(a, dict)]
     if not events:
         return [Text("no events", style="dim")]
     shown = list(reversed(events))[:rows]
+    times = [f"{fmt(event.get('t'), '.3f')} s" for event in shown]
+    time_width = max(len(t) for t in times)
+    kind_width = max(len(str(event.get("kind", "?"))) for event in shown)
     lines = []
-    for event in shown:
+    for event, t_text in zip(shown, times):
         kind = str(event.get("kind", "?"))
         text = Text(no_wrap=True, overflow="ellipsis")
-        text.append(f"{fmt(event.get('t'), '10.3f')} s ", style="bold")
+        text.append(f"{t_text:>{time_width}} ", style="bold")
         if width >= 64 and "time" in event:
             text.append(f"{_clock(event.get('time'))} ", style="dim")
-        text.append(f"{kind:<17} ", style=EVENT_STYLES.get(kind, "white"))
+        text.append(f"{kind:<{kind_width}}", style=EVENT_STYLES.get(kind, "white"))
+        key_fields = EVENT_KEY_FIELDS.get(kind, ())
+        parts: list[tuple[str, str | None]] = []
+        for key, label in key_fields:
+            if key in event:
+                value = event[key]
+                if key == "statistic" and "threshold" in event:
+                    value = f"{fmt(value, '.3g')}/{fmt(event['threshold'], 'g')}"
+                parts.append((_field_text(label, value), None))
         if "theta1" in event or "theta2" in event:
-            text.append(f"θ {fmt(event.get('theta1'), '+.3g')} {fmt(event.get('theta2'), '+.3g')}")
-        extra = [f"{k}={format(v, '.4g') if isinstance(v, float) else v}"
-                 for k, v in event.items() if k not in _EVENT_SHOWN_KEYS]
-        if extra:
-            text.append("  " + " ".join(extra), style="dim")
+            parts.append((f"θ {fmt(event.get('theta1'), '+.3g')} "
+                          f"{fmt(event.get('theta2'), '+.3g')}", None))
+        skip = {*_EVENT_SHOWN_KEYS, *(key for key, _ in key_fields)}
+        if kind == "fault_detected":
+            skip.add("threshold")
+        parts += [(f"{k}={format(v, '.4g') if isinstance(v, float) else v}", "dim")
+                  for k, v in event.items() if k not in skip and not isinstance(v, dict)]
+        for i, (content, style) in enumerate(parts):  # whole fields only, never cut
+            gap = "  " if i == 0 else " "
+            if len(text) + len(gap) + len(content) > width:
+                break
+            text.append(gap + content, style=style)
         lines.append(text)
     return lines
 
@@ -419,20 +469,23 @@ def theta_plot(monitor: dict[str, Any], trace: Series, layers: list[Series]) -> 
 
 
 def theta_title(monitor: dict[str, Any], index: int, width: int, where: str) -> Text:
-    """"θ1 Coulomb +0.98 sig 1 band [lo, hi]"; the name shortens on narrow plots and an
+    """"━ θ1 Coulomb +0.98 ━ sig 1 ╍ band [lo, hi]", each part in the colour of what it
+    names in the plot, so the title is the legend; the name shortens on narrow plots and an
     arrow marks a signature level outside the plotted range (`where` from `_theta_layers`)."""
     label = THETA_LABELS[index] if width >= 100 else THETA_LABELS[index].split()[0]
     title = Text()
-    title.append(f"{label} {fmt(monitor.get(THETA_NAMES[index]))}", style="bold")
+    title.append(f"{TRACE_MARK} {label} {fmt(monitor.get(THETA_NAMES[index]))}",
+                 style=TRACE_STYLE)
     if where:
         arrow = {"above": "↑", "below": "↓"}.get(where, "")
-        title.append(f" sig {fmt(_signature(monitor, index), '.3g')}{arrow}",
+        title.append(f" {SIGNATURE_MARK} sig {fmt(_signature(monitor, index), '.3g')}{arrow}",
                      style=SIGNATURE_STYLE)
     band = _band(monitor, index)
     if band is not None:
-        title.append(f" band [{fmt(band[0], '.3g')}, {fmt(band[1], '.3g')}]", style=BAND_STYLE)
+        title.append(f" {BAND_MARK} band [{fmt(band[0], '.3g')}, {fmt(band[1], '.3g')}]",
+                     style=BAND_STYLE)
     else:
-        title.append(" band —", style=BAND_STYLE)
+        title.append(f" {BAND_MARK} band —", style=BAND_STYLE)
     return title
 
 

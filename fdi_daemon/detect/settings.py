@@ -6,40 +6,18 @@ false-alarm/detection trade-off it moves.
 
 from __future__ import annotations
 
-import difflib
-import logging
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
 from fdi_daemon.core.velocity import DEFAULT_SETTINGS as VELOCITY_DEFAULTS
 from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.known_keys import known_settings
 
-__all__ = ["DetectorSettings", "METHODS", "known_settings", "velocity_settings"]
+__all__ = ["DetectorSettings", "METHODS", "velocity_settings"]
 
 METHODS = ("sequential", "band")
-
-log = logging.getLogger("fdi.model")
-
-
-def known_settings(mapping: Mapping[str, Any] | None, known: Iterable[str], where: str
-                   ) -> dict[str, Any]:
-    """The entries of a model file section that this version knows. An unknown key close
-    to a known one is a typo: ConfigError naming both. Any other unknown key belongs to
-    another tool that shares the model file (DESIGN.md: more keys welcome): it is ignored,
-    with a warning naming it."""
-    known = list(known)
-    out: dict[str, Any] = {}
-    for key, value in dict(mapping or {}).items():
-        if key in known:
-            out[key] = value
-            continue
-        close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.8)
-        if close:
-            raise ConfigError(f"{where}: unknown setting {key!r} (did you mean {close[0]!r}?)")
-        log.warning("%s: ignoring setting %r, which this version does not know", where, key)
-    return out
 
 
 def velocity_settings(mapping: Mapping[str, Any] | None) -> dict[str, Any]:

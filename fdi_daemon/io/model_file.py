@@ -7,7 +7,12 @@ Keys (DESIGN.md; more are welcome, these keep their meaning):
 - ``velocity``: settings of the velocity estimator (high-pass + integrator), kept as a mapping;
 - ``detector``: detector settings, kept as a mapping;
 - ``provenance``: where the model came from (source hash, date, fit metrics);
-- any other top-level key (for example ``effects`` from `fdi diagnose`) is kept as it is.
+- ``effects`` (from `fdi diagnose -o`) and ``baseline`` (the commissioning baseline), kept
+  as they are.
+
+An unknown key close to a known one (``gama_f``, ``detectr``) is a typo and refused with
+the suggestion; any other unknown top-level key is kept with a warning (the file may be
+shared with other tools); a missing required key is named as missing.
 """
 
 from __future__ import annotations
@@ -21,10 +26,12 @@ import numpy as np
 import yaml
 
 from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.known_keys import split_known
 from fdi_daemon.io.plain import plain_data
 from fdi_daemon.io.yaml_file import read_yaml
 
-KNOWN_KEYS = ("fs", "plant", "fault_filter", "velocity", "detector", "provenance")
+SECTIONS = ("fs", "plant", "fault_filter", "velocity", "detector", "provenance")
+KNOWN_KEYS = (*SECTIONS, "effects", "baseline")  # these two are kept in FdiModel.extra
 
 
 @dataclass
@@ -92,13 +99,15 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
     """Validate a parsed model mapping (see the module docstring for the keys)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: a model file must be a mapping with keys fs, plant, ...")
+    split_known(data, KNOWN_KEYS, source, noun="key", fate="keeping")
+    _require(data, ("fs", "plant"), source)
     fs = _positive(data, "fs", source)
-    plant = _mapping(data, "plant", source, required=True)
+    plant = _section(data, "plant", ("b", "a"), ("b", "a"), source)
     plant_b = _coefficients(plant, "b", f"{source}: plant")
     plant_a = _coefficients(plant, "a", f"{source}: plant", monic=True)
     fault_filter = None
     if data.get("fault_filter") is not None:
-        ff = _mapping(data, "fault_filter", source, required=True)
+        ff = _section(data, "fault_filter", ("b", "f", "nk", "gamma_f"), ("b", "f"), source)
         nk = ff.get("nk", 0)
         if not isinstance(nk, int) or isinstance(nk, bool) or nk < 0:
             raise ConfigError(f"{source}: fault_filter.nk must be a whole number >= 0")
@@ -111,9 +120,26 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
             nk=nk, gamma_f=float(gamma))
     sections = {key: _mapping(data, key, source, required=False)
                 for key in ("velocity", "detector", "provenance")}
-    extra = {k: v for k, v in data.items() if k not in KNOWN_KEYS}
+    extra = {k: v for k, v in data.items() if k not in SECTIONS}
     return FdiModel(fs=fs, plant_b=plant_b, plant_a=plant_a, fault_filter=fault_filter,
                     extra=extra, **sections)
+
+
+def _require(data: dict, keys: tuple[str, ...], where: str) -> None:
+    missing = [key for key in keys if key not in data]
+    if missing:
+        raise ConfigError(f"{where}: missing required key{'s' * (len(missing) > 1)} "
+                          f"{', '.join(missing)}")
+
+
+def _section(data: dict, key: str, known: tuple[str, ...], required: tuple[str, ...],
+             source: str) -> dict:
+    """A mapping whose keys are checked: typos refused, other unknown keys ignored with a
+    warning, required ones present."""
+    section, _ = split_known(_mapping(data, key, source, required=True), known,
+                             f"{source}: {key}", noun="key")
+    _require(section, required, f"{source}: {key}")
+    return section
 
 
 def _positive(data: dict, key: str, source: str) -> float:

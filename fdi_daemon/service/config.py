@@ -6,7 +6,8 @@ Every key is checked: an unknown key, a wrong type or a value out of range is a
 
 Paths. ``model.path`` is relative to the config file's folder. Output paths (event log,
 recorder folder, status socket) are relative to ``service.state_dir``, whose default is
-``$STATE_DIRECTORY`` (set by systemd's ``StateDirectory=``) or else ``./fdi-state``.
+``$STATE_DIRECTORY`` (set by systemd's ``StateDirectory=``) or else ``$XDG_STATE_HOME/fdi``
+(``~/.local/state/fdi``); see `default_state_dir`.
 
 Sections::
 
@@ -154,7 +155,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                        "items beyond it are dropped and counted)", _positive),
         "read_timeout_s": Field(NUM, 0.05, "longest wait in one link read", _positive),
         "state_dir": Field(STR, None, "base of relative output paths; null = "
-                                      "$STATE_DIRECTORY or ./fdi-state", nullable=True),
+                                      "$STATE_DIRECTORY or else $XDG_STATE_HOME/fdi "
+                                      "(~/.local/state/fdi)", nullable=True),
     },
     "mqtt": {
         "enabled": Field(BOOL, False, "publish events and status to an MQTT broker"),
@@ -228,8 +230,8 @@ class RigConfig:
     def state_dir(self) -> Path:
         configured = self.service["state_dir"]
         if configured:
-            return Path(configured)
-        return Path(os.environ.get("STATE_DIRECTORY", "").split(":")[0] or "fdi-state")
+            return Path(configured).expanduser()
+        return default_state_dir()
 
     def output_path(self, value: str | None) -> Path | None:
         """An output path from the config, relative ones under ``state_dir``."""
@@ -237,6 +239,19 @@ class RigConfig:
             return None
         path = Path(value).expanduser()
         return path if path.is_absolute() else self.state_dir / path
+
+
+def default_state_dir() -> Path:
+    """Where outputs go when the config names no ``service.state_dir``: systemd's
+    ``$STATE_DIRECTORY`` (its first entry) under the unit, else the XDG base directory
+    spec's ``$XDG_STATE_HOME/fdi`` (an absolute $XDG_STATE_HOME only, default
+    ``~/.local/state/fdi``), never the current directory."""
+    systemd = os.environ.get("STATE_DIRECTORY", "").split(":")[0]
+    if systemd:
+        return Path(systemd)
+    xdg = os.environ.get("XDG_STATE_HOME", "")
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".local" / "state"
+    return base / "fdi"
 
 
 def default_config_path() -> Path:

@@ -2,10 +2,12 @@
 
 Lifecycle: build everything from the config (a mistake is a `ConfigError`, one line,
 exit 2), tell systemd READY=1, run the loop; SIGTERM/SIGINT stop it cleanly (queues
-drained, files fsynced, sockets removed, STOPPING=1); SIGHUP reloads the config and the
-model: the new set is built first and swapped in only if it builds, otherwise the daemon
-logs why and keeps running on the old one. A reload restarts the monitor (it calibrates
-again) and reopens the link and the sinks; a simulated device keeps running.
+drained, files fsynced, sockets removed, STOPPING=1); so does SIGHUP when the daemon draws
+its dashboard on the terminal that hung up (`hangup_stops`); otherwise SIGHUP reloads the
+config and the model: the new set is built first and swapped in only if it builds,
+otherwise the daemon logs why and keeps running on the old one. A reload restarts the
+monitor (it calibrates again) and reopens the link and the sinks; a simulated device keeps
+running.
 """
 
 from __future__ import annotations
@@ -204,8 +206,11 @@ def start_simulated_device(settings: dict[str, Any]):
 class Daemon:
     """`fdi run`: one config, one loop; signals for stop and reload."""
 
-    def __init__(self, config_path: str | Path | None = None, echo=print) -> None:
+    def __init__(self, config_path: str | Path | None = None, echo=print,
+                 state_dir: str | Path | None = None, hangup_stops: bool = False) -> None:
         self.config_path = config_path
+        self.state_dir = state_dir  # `fdi run --state-dir`: wins over service.state_dir
+        self.hangup_stops = hangup_stops  # `fdi run --dashboard`: SIGHUP = terminal gone
         self.echo = echo
         self.notifier = Notifier()
         self.board = StatusBoard()
@@ -243,6 +248,13 @@ class Daemon:
             sinks.metrics.watch(loop)
         return loop, sinks, link
 
+    def load_config(self) -> RigConfig:
+        """The rig config, with `fdi run --state-dir` applied."""
+        config = load_config(self.config_path)
+        if self.state_dir is not None:
+            config.service["state_dir"] = str(self.state_dir)
+        return config
+
     def link_config(self, config: RigConfig) -> dict[str, Any]:
         if config.simulated_device is None:
             return dict(config.link)
@@ -258,7 +270,7 @@ class Daemon:
 
     # ------------------------------------------------------------------ running
     def run(self, duration_s: float | None = None) -> int:
-        self.config = load_config(self.config_path)
+        self.config = self.load_config()
         try:
             self.loop, self.sinks, self.link = self.assemble(self.config,
                                                              *self.prepare(self.config))
@@ -291,7 +303,7 @@ class Daemon:
         assert self.config is not None and self.sinks is not None
         sinks = self.sinks
         lines = [f"fdi run: config {self.config.source}", f"  model   {self.config.model_path}",
-                 f"  link    {self.link.describe()}"]
+                 f"  link    {self.link.describe()}", f"  state   {self.config.state_dir}/"]
         if sinks.event_log is not None:
             lines.append(f"  events  {sinks.event_log.path}")
         if sinks.recorder is not None:
@@ -317,7 +329,7 @@ class Daemon:
         self.notifier.reloading()
         log.info("SIGHUP: reloading %s", self.config_path or "the default config")
         try:
-            config = load_config(self.config_path)
+            config = self.load_config()
             prepared = self.prepare(config)
         except (UserError, OSError) as exc:
             log.error("reload failed, keeping the previous config: %s", exc)
@@ -374,7 +386,8 @@ class Daemon:
             return {}
         previous = {}
         for signum, handler in ((signal.SIGTERM, self._on_stop), (signal.SIGINT, self._on_stop),
-                                (signal.SIGHUP, self._on_reload)):
+                                (signal.SIGHUP, self._on_stop if self.hangup_stops
+                                 else self._on_reload)):
             previous[signum] = signal.signal(signum, handler)
         return previous
 
@@ -383,9 +396,13 @@ class Daemon:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
 
-    def _on_stop(self, signum, frame) -> None:
+    def stop(self) -> None:
+        """Stop as SIGTERM does; from any thread (the dashboard's `q` or its hangup)."""
         self._stopping = True
         self._wake.set()
+
+    def _on_stop(self, signum, frame) -> None:
+        self.stop()
 
     def _on_reload(self, signum, frame) -> None:
         self._reload = True

@@ -23,6 +23,8 @@ Sections::
     sinks: {event_log, stdout, status_socket, modbus_status: {enabled, host, port, device_id}}
     recorder: {enabled, dir, rotate_seconds, rotate_bytes, fsync_period_s, keep_files}
     service: {fs, deadline_s, status_period_s, queue_size, read_timeout_s, state_dir}
+    alarms: {steps, deadband, raise_delay_s, lower_delay_s, return_delay_s, max_shelve_s,
+             allow_remote_acknowledge, state_file, trend}
 
 Reconnect backoff is the link's: ``link.reconnect: {backoff_initial_s, backoff_max_s,
 stall_timeout_s}`` (see `fdi_daemon.io.links.base`).
@@ -84,6 +86,13 @@ def _fraction(v: Any) -> str | None:
     return None if 0 <= v <= 1 else "must be a fraction in [0, 1]"
 
 
+def _steps(v: Any) -> str | None:
+    ok = (v and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                    and 0 < x < math.inf for x in v)
+          and all(a < b for a, b in zip(v, v[1:])))
+    return None if ok else "must be a list of positive, increasing levels"
+
+
 def _one_of(*choices: str) -> Callable[[Any], str | None]:
     def check(v: Any) -> str | None:
         return None if v in choices else f"must be one of {', '.join(choices)}"
@@ -139,6 +148,27 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "state_dir": Field(STR, None, "base of relative output paths; null = "
                                       "$STATE_DIRECTORY or ./fdi-state", nullable=True),
     },
+    "alarms": {
+        "steps": Field((list,), (0.25, 0.5, 1.0), "friction levels above the baseline (units "
+                                                  "of the signature) that step the alarm "
+                                                  "priority up", _steps),
+        "deadband": Field(NUM, 0.05, "a priority falls only below its step minus this",
+                          _non_negative),
+        "raise_delay_s": Field(NUM, 5.0, "the level stays above a step this long before the "
+                                         "priority rises", _non_negative),
+        "lower_delay_s": Field(NUM, 300.0, "... below step - deadband this long before it "
+                                           "falls", _non_negative),
+        "return_delay_s": Field(NUM, 600.0, "detector cleared and level below the lowest "
+                                            "step this long before the alarm returns to "
+                                            "normal", _non_negative),
+        "max_shelve_s": Field(NUM, 86400.0, "longest shelving", _positive),
+        "allow_remote_acknowledge": Field(BOOL, False, "accept acknowledge/shelve requests "
+                                                       "on the status socket and Modbus"),
+        "state_file": Field(STR, "state.json", "alarm state kept across restarts; null "
+                                               "disables", nullable=True),
+        "trend": Field(STR, "trend.sqlite", "friction trend, one row per minute; null "
+                                            "disables", nullable=True),
+    },
     "simulated_device": {
         "transport": Field(STR, "modbus-tcp", "fake device protocol: modbus-tcp | "
                                               "modbus-rtu | serial (pty)",
@@ -149,7 +179,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
     },
 }
 
-TOP_LEVEL = ("link", "simulated_device", "model", "monitor", "sinks", "recorder", "service")
+TOP_LEVEL = ("link", "simulated_device", "model", "monitor", "sinks", "recorder", "service",
+             "alarms")
 
 
 @dataclass
@@ -165,6 +196,7 @@ class RigConfig:
     sinks: dict[str, Any]
     recorder: dict[str, Any]
     service: dict[str, Any]
+    alarms: dict[str, Any]
 
     @property
     def state_dir(self) -> Path:
@@ -213,7 +245,22 @@ def config_from_dict(data: Any, source: str = "config",
         source=source, base_dir=base_dir, link=link, simulated_device=sim,
         model_path=model_path, monitor=_monitor(data.get("monitor"), source),
         sinks=_section(data, "sinks", source), recorder=_section(data, "recorder", source),
-        service=_section(data, "service", source))
+        service=_section(data, "service", source), alarms=_alarms(data, source))
+
+
+def _alarms(data: Mapping, source: str) -> dict[str, Any]:
+    """The alarms section; its settings checked together (deadband below the lowest step)."""
+    from fdi_daemon.alarms.lifecycle import AlarmSettings
+
+    alarms = _section(data, "alarms", source)
+    alarms["steps"] = tuple(float(x) for x in alarms["steps"])
+    try:
+        alarms["settings"] = AlarmSettings(**{k: alarms[k] for k in (
+            "steps", "deadband", "raise_delay_s", "lower_delay_s", "return_delay_s",
+            "max_shelve_s")})
+    except ValueError as exc:
+        raise ConfigError(f"{source}: alarms: {exc}") from None
+    return alarms
 
 
 def _no_unknown(data: Mapping, known: tuple[str, ...] | Mapping, prefix: str,

@@ -6,6 +6,10 @@ drained, files fsynced, sockets removed, STOPPING=1); SIGHUP reloads the config 
 model: the new set is built first and swapped in only if it builds, otherwise the daemon
 logs why and keeps running on the old one. A reload restarts the monitor (it calibrates
 again) and reopens the link and the sinks; a simulated device keeps running.
+
+The alarm (`AlarmKeeper`: lifecycle, trend minute) and the event counters outlive a reload
+(the same object goes on, unless the new model gives the level another unit) and a restart
+(the state file in the state directory, `fdi_daemon.service.state_file`).
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from __future__ import annotations
 import gc
 import logging
 import signal
+import sqlite3
 import sys
 import threading
 import time
@@ -22,6 +27,7 @@ from typing import Any
 from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.io.model_file import FdiModel, load_model
 from fdi_daemon.io.sample import Sample
+from fdi_daemon.service.alarm_keeper import AlarmKeeper
 from fdi_daemon.service.config import RigConfig, check_link, load_config
 from fdi_daemon.service.loop import ServiceLoop
 from fdi_daemon.service.notify import Notifier, watchdog_period_s
@@ -29,6 +35,8 @@ from fdi_daemon.service.recorder import Recorder
 from fdi_daemon.service.sinks import (EventLog, ModbusStatusServer, PriorityFormatter,
                                       StatusBoard, StatusSocketServer, StdoutLog, Worker,
                                       journald_attached)
+from fdi_daemon.service.state_file import model_identity, read_state, write_state
+from fdi_daemon.service.trend import TrendStore
 
 log = logging.getLogger("fdi.daemon")
 
@@ -47,7 +55,7 @@ class Sinks:
     """The sink worker, the recorder worker and the servers of one config."""
 
     def __init__(self, config: RigConfig, fs_hz: float, link_kind: str,
-                 board: StatusBoard) -> None:
+                 board: StatusBoard, keeper: AlarmKeeper | None = None) -> None:
         self.board = board
         sinks = config.sinks
         self.event_log = None
@@ -57,15 +65,19 @@ class Sinks:
         self.recorder = None
         self.worker = None
         self.recorder_worker = None
+        self.state_path = config.output_path(config.alarms["state_file"])
+        self.trend_store = None
+        requests = None if keeper is None else keeper.handle
         try:
             if (path := config.output_path(sinks["event_log"])) is not None:
                 self.event_log = EventLog(path)
             if (path := config.output_path(sinks["status_socket"])) is not None:
-                self.status_server = StatusSocketServer(path, board)
+                self.status_server = StatusSocketServer(path, board, requests=requests)
             mb = sinks["modbus_status"]
             if mb["enabled"]:
-                self.modbus_server = ModbusStatusServer(board, mb["host"], mb["port"],
-                                                        mb["device_id"])
+                self.modbus_server = ModbusStatusServer(
+                    board, mb["host"], mb["port"], mb["device_id"],
+                    requests=requests if config.alarms["allow_remote_acknowledge"] else None)
                 log.info("Modbus status registers on %s:%d (device id %d)", mb["host"],
                          self.modbus_server.port, mb["device_id"])
             rec = config.recorder
@@ -74,7 +86,11 @@ class Sinks:
                     config.output_path(rec["dir"]), fs_hz, rec["rotate_seconds"],
                     rec["rotate_bytes"], rec["fsync_period_s"], rec["keep_files"],
                     meta={"link": link_kind, "config": config.source})
-        except OSError as exc:
+            if keeper is not None and (path := config.output_path(
+                    config.alarms["trend"])) is not None:
+                self.trend_store = TrendStore(path, {"steps": list(config.alarms["steps"]),
+                                                     "model": keeper.model})
+        except (OSError, sqlite3.Error) as exc:
             self.close()
             raise ConfigError(f"{config.source}: cannot open an output: {exc}") from None
         queue_size = config.service["queue_size"]
@@ -95,6 +111,14 @@ class Sinks:
         if self.recorder_worker is not None:
             self.recorder_worker.put(None)  # an idle recorder still fsyncs on time
 
+    def alarm_state(self, state: dict) -> None:
+        if self.state_path is not None:
+            self.worker.put(("state", state), critical=True)
+
+    def trend(self, row: dict) -> None:
+        if self.trend_store is not None:
+            self.worker.put(("trend", row), critical=True)
+
     def dropped(self) -> int:
         return sum(w.dropped for w in (self.worker, self.recorder_worker) if w is not None)
 
@@ -103,6 +127,12 @@ class Sinks:
         kind, payload = item
         if kind == "status":
             self.board.publish(payload)
+            return
+        if kind == "state":
+            write_state(self.state_path, payload)
+            return
+        if kind == "trend":
+            self.trend_store.append(payload)
             return
         try:
             if self.event_log is not None:
@@ -121,11 +151,12 @@ class Sinks:
         for worker in (self.worker, self.recorder_worker):
             if worker is not None:
                 worker.close()
-        for thing in (self.recorder, self.event_log, self.status_server, self.modbus_server):
+        for thing in (self.recorder, self.event_log, self.status_server, self.modbus_server,
+                      self.trend_store):
             if thing is not None:
                 try:
                     thing.close()
-                except OSError as exc:
+                except (OSError, sqlite3.Error) as exc:
                     log.error("closing %s: %s", type(thing).__name__, exc)
 
 
@@ -188,6 +219,7 @@ class Daemon:
         self.loop: ServiceLoop | None = None
         self.sinks: Sinks | None = None
         self.link = None
+        self.keeper: AlarmKeeper | None = None
         self._wake = threading.Event()
         self._stopping = False
         self._reload = False
@@ -206,14 +238,40 @@ class Daemon:
         from fdi_daemon.io.links.base import make_reconnecting_link
 
         link = make_reconnecting_link(link_config)
-        sinks = Sinks(config, model.fs, link_config["kind"], self.board)
+        keeper = self.alarm_keeper(config, model)
+        sinks = Sinks(config, model.fs, link_config["kind"], self.board, keeper)
         model_info = {"path": str(config.model_path), "provenance": model.provenance}
+        counts = self.loop.event_counts if self.loop is not None else keeper.event_counts
         loop = ServiceLoop(
             link, monitor, sinks, fs_hz=model.fs, deadline_s=config.service["deadline_s"],
             read_timeout_s=config.service["read_timeout_s"],
             status_period_s=config.service["status_period_s"], model_info=model_info,
-            notifier=self.notifier, watchdog_period_s=watchdog_period_s())
+            notifier=self.notifier, watchdog_period_s=watchdog_period_s(), alarms=keeper,
+            event_counts=counts)
+        self.keeper = keeper
         return loop, sinks, link
+
+    def alarm_keeper(self, config: RigConfig, model: FdiModel) -> AlarmKeeper:
+        """The alarm of this model: the running one (a reload), the state file's (a
+        restart), or a fresh one; with the config's settings."""
+        identity = model_identity(model)
+        alarms = config.alarms
+        keeper = self.keeper
+        if keeper is not None and keeper.model == identity:
+            keeper.reconfigure(alarms["settings"], alarms["allow_remote_acknowledge"])
+            return keeper
+        if keeper is not None:
+            log.warning("the reloaded model gives the friction level another unit (fs, plant "
+                        "or fault filter changed): the alarm state starts afresh")
+        path = config.output_path(alarms["state_file"])
+        stored = read_state(path, identity) if path is not None else None
+        try:
+            return AlarmKeeper(alarms["settings"], identity, stored=stored,
+                               allow_remote=alarms["allow_remote_acknowledge"])
+        except ValueError as exc:
+            log.warning("state file %s: %s: refused, starting with a fresh state", path, exc)
+            return AlarmKeeper(alarms["settings"], identity,
+                               allow_remote=alarms["allow_remote_acknowledge"])
 
     def link_config(self, config: RigConfig) -> dict[str, Any]:
         if config.simulated_device is None:

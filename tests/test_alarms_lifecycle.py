@@ -15,6 +15,11 @@ FRICTION = {"kind": "friction_isolated"}
 CLEARED = {"kind": "cleared"}
 
 
+def settings(**changes):
+    """Settings without smoothing (the tests feed exact levels), unless asked."""
+    return AlarmSettings(**{"smoothing_s": 0.0, **changes})
+
+
 def kinds(events):
     return [e["kind"] for e in events]
 
@@ -28,7 +33,7 @@ def feed(lc, times, levels, events=None):
 
 
 def test_a_repeated_detector_fault_is_one_alarm():
-    lc = AlarmLifecycle()
+    lc = AlarmLifecycle(settings())
     out = lc.step(0.0, 0.3, FAULT)
     assert kinds(out) == ["alarm_raised"] and out[0]["alarm_id"] == 1
     assert out[0]["priority"] == 1 and out[0]["state"] == "unacknowledged"
@@ -37,7 +42,7 @@ def test_a_repeated_detector_fault_is_one_alarm():
 
 
 def test_priority_rises_one_event_per_step_after_the_on_delay():
-    lc = AlarmLifecycle(AlarmSettings(raise_delay_s=5.0))
+    lc = AlarmLifecycle(settings(raise_delay_s=5.0))
     lc.step(0.0, 0.1, FAULT)
     assert lc.priority == 1
     assert lc.step(1.0, 0.55) == [] and lc.step(5.9, 0.6) == []  # on-delay not yet over
@@ -48,7 +53,7 @@ def test_priority_rises_one_event_per_step_after_the_on_delay():
     out = lc.step(12.0, 1.5)
     assert [e["priority"] for e in out] == [3]
     # a jump over two steps at once: two events, one per step
-    lc2 = AlarmLifecycle(AlarmSettings(raise_delay_s=0.0))
+    lc2 = AlarmLifecycle(settings(raise_delay_s=0.0))
     lc2.step(0.0, 0.0, FAULT)
     out = lc2.step(1.0, 1.2)
     assert [(e["previous"], e["priority"]) for e in out] == [(1, 2), (2, 3)]
@@ -57,7 +62,7 @@ def test_priority_rises_one_event_per_step_after_the_on_delay():
 
 def test_a_level_that_dithers_around_a_step_does_not_chatter():
     rng = np.random.default_rng(1)
-    lc = AlarmLifecycle(AlarmSettings(raise_delay_s=5.0, lower_delay_s=300.0, deadband=0.05))
+    lc = AlarmLifecycle(settings(raise_delay_s=5.0, lower_delay_s=300.0, deadband=0.05))
     lc.step(0.0, 0.3, FAULT)
     times = np.arange(1.0, 3 * 3600.0, 1.0)
     levels = 0.5 + 0.04 * np.sin(times / 7.0) + 0.01 * rng.standard_normal(times.size)
@@ -65,13 +70,32 @@ def test_a_level_that_dithers_around_a_step_does_not_chatter():
     assert kinds(out) == ["alarm_priority"]  # up once to 2, never back down (within deadband)
     assert lc.priority == 2
     # the same dither without a deadband chatters: the test can fail
-    lc0 = AlarmLifecycle(AlarmSettings(raise_delay_s=0.0, lower_delay_s=0.0, deadband=0.0))
+    lc0 = AlarmLifecycle(settings(raise_delay_s=0.0, lower_delay_s=0.0, deadband=0.0))
     lc0.step(0.0, 0.3, FAULT)
     assert len(feed(lc0, times, levels)) > 100
 
 
+def test_smoothing_keeps_noisy_readings_from_chattering_and_follows_a_step():
+    rng = np.random.default_rng(2)
+    times = np.arange(1.0, 4 * 3600.0, 0.1)   # 10 Hz readings, as the daemon's
+    levels = 0.47 + 0.08 * rng.standard_normal(times.size)
+    counts = {}
+    for smoothing in (0.0, 30.0):
+        lc = AlarmLifecycle(settings(smoothing_s=smoothing, raise_delay_s=0.0,
+                                     lower_delay_s=0.0))
+        lc.step(0.0, 0.3, FAULT)
+        counts[smoothing] = len(feed(lc, times, levels))
+    assert counts[30.0] == 0 and counts[0.0] > 20
+    # a step of the level: the smoothed level crosses 0.5 after 30 s * ln(1/(1 - 0.5/1.4))
+    lc = AlarmLifecycle(settings(smoothing_s=30.0, raise_delay_s=0.0))
+    lc.step(0.0, 0.0, FAULT)
+    out = feed(lc, np.arange(0.1, 60.0, 0.1), np.full(599, 1.4))
+    first = out[0]["time"]
+    assert first == pytest.approx(30.0 * np.log(1 / (1 - 0.5 / 1.4)), abs=0.11)
+
+
 def test_priority_falls_only_below_the_deadband_for_the_off_delay_and_never_below_1():
-    lc = AlarmLifecycle(AlarmSettings(raise_delay_s=0.0, lower_delay_s=60.0))
+    lc = AlarmLifecycle(settings(raise_delay_s=0.0, lower_delay_s=60.0))
     lc.step(0.0, 1.2, FAULT)
     assert lc.priority == 3
     assert lc.step(10.0, 0.97) == []          # below 1.0 but within the deadband
@@ -83,7 +107,7 @@ def test_priority_falls_only_below_the_deadband_for_the_off_delay_and_never_belo
 
 
 def test_cleared_then_a_new_fault_within_the_return_delay_is_the_same_alarm():
-    lc = AlarmLifecycle(AlarmSettings(return_delay_s=600.0))
+    lc = AlarmLifecycle(settings(return_delay_s=600.0))
     lc.step(0.0, 0.4, FAULT)
     out = lc.step(100.0, 0.1, CLEARED) + lc.step(200.0, 0.1) + lc.step(650.0, 0.4, FAULT)
     out += lc.step(700.0, 0.1, CLEARED)
@@ -91,7 +115,7 @@ def test_cleared_then_a_new_fault_within_the_return_delay_is_the_same_alarm():
 
 
 def test_return_needs_the_detector_cleared_and_the_level_low_for_the_delay():
-    lc = AlarmLifecycle(AlarmSettings(return_delay_s=600.0))
+    lc = AlarmLifecycle(settings(return_delay_s=600.0))
     lc.step(0.0, 0.4, FAULT)
     assert lc.step(100.0, 0.4, CLEARED) == []
     assert lc.step(800.0, 0.3) == []          # level still high: no return
@@ -108,7 +132,7 @@ def test_return_needs_the_detector_cleared_and_the_level_low_for_the_delay():
 
 
 def test_acknowledge_states():
-    lc = AlarmLifecycle(AlarmSettings(return_delay_s=10.0))
+    lc = AlarmLifecycle(settings(return_delay_s=10.0))
     ok, reason, events = lc.acknowledge(0.0)
     assert not ok and "nothing to acknowledge" in reason and events == []
     lc.step(1.0, 0.3, FAULT)
@@ -121,7 +145,7 @@ def test_acknowledge_states():
 
 
 def test_shelving_expires_and_is_bounded():
-    lc = AlarmLifecycle(AlarmSettings(max_shelve_s=3600.0))
+    lc = AlarmLifecycle(settings(max_shelve_s=3600.0))
     lc.step(0.0, 0.3, FAULT)
     assert lc.summary(0.0)["annunciated"]
     assert not lc.shelve(1.0, 7200.0)[0] and not lc.shelve(1.0, 0.0)[0]
@@ -150,14 +174,20 @@ def scripted_inputs(seed=3, n=4000):
     return [(float(a), float(b), c) for a, b, c in zip(t, level, events)]
 
 
-def test_batch_equals_step_and_chunks_with_the_same_final_state():
+@pytest.fixture(params=[0.0, 60.0], ids=["raw", "smoothed"])
+def smoothing(request):
+    return request.param
+
+
+def test_batch_equals_step_and_chunks_with_the_same_final_state(smoothing):
     inputs = scripted_inputs()
-    settings = AlarmSettings(raise_delay_s=30.0, lower_delay_s=300.0, return_delay_s=300.0)
-    one = AlarmLifecycle(settings)
+    cfg = settings(raise_delay_s=30.0, lower_delay_s=300.0, return_delay_s=300.0,
+                   smoothing_s=smoothing)
+    one = AlarmLifecycle(cfg)
     stepped = [e for args in inputs for e in one.step(*args)]
-    whole = AlarmLifecycle(settings)
+    whole = AlarmLifecycle(cfg)
     batched = whole.run(inputs)
-    chunked_lc = AlarmLifecycle(settings)
+    chunked_lc = AlarmLifecycle(cfg)
     chunked = []
     cuts = [0, 7, 100, 1500, 1501, 3999, len(inputs)]
     for a, b in zip(cuts[:-1], cuts[1:]):
@@ -167,12 +197,12 @@ def test_batch_equals_step_and_chunks_with_the_same_final_state():
     assert {"alarm_raised", "alarm_priority", "alarm_returned"} <= set(kinds(stepped))
 
 
-def test_state_round_trips_through_json_mid_alarm():
+def test_state_round_trips_through_json_mid_alarm(smoothing):
     inputs = scripted_inputs(seed=5)
-    settings = AlarmSettings(raise_delay_s=30.0, return_delay_s=900.0)
-    straight = AlarmLifecycle(settings)
+    cfg = settings(raise_delay_s=30.0, return_delay_s=900.0, smoothing_s=smoothing)
+    straight = AlarmLifecycle(cfg)
     expected = straight.run(inputs)
-    resumed = AlarmLifecycle(settings)
+    resumed = AlarmLifecycle(cfg)
     out = []
     for a, b in ((0, 1000), (1000, 2500), (2500, len(inputs))):
         out.extend(resumed.run(inputs[a:b]))
@@ -181,7 +211,7 @@ def test_state_round_trips_through_json_mid_alarm():
 
 
 def test_a_restored_alarm_absorbs_the_detectors_renewed_fault():
-    lc = AlarmLifecycle(AlarmSettings(return_delay_s=600.0))
+    lc = AlarmLifecycle(settings(return_delay_s=600.0))
     lc.step(0.0, 0.6, FAULT)
     lc.step(10.0, 0.6, FRICTION)
     restored = AlarmLifecycle.from_dict(json.loads(json.dumps(lc.to_dict())), now=50.0)

@@ -19,6 +19,10 @@ States (ISA-18.2 alarm state model; shelving is a flag on top of any state)::
   the same alarm: nothing new is raised. That is also how a restart or a reload in the
   middle of an alarm is absorbed: the restored state holds the open alarm, the detector's
   renewed ``fault_detected`` joins it.
+- **Level.** Decisions use the level readings smoothed by a first-order filter of time
+  constant ``smoothing_s`` (an exponential moving average whose weight follows the time
+  between readings, so a reading after a long rest counts fully): the per-reading noise
+  of the estimate must not chatter across a step.
 - **Priority** = how many of ``steps`` (friction level, units of the signature; default
   0.25 / 0.5 / 1.0) the level has crossed, at least 1 while the alarm is active. It rises
   one ``alarm_priority`` event per step once the level has stayed at or above the step for
@@ -72,6 +76,7 @@ class AlarmSettings:
     lower_delay_s: float = 300.0
     return_delay_s: float = 600.0
     max_shelve_s: float = 86400.0
+    smoothing_s: float = 30.0
 
     def __post_init__(self) -> None:
         steps = tuple(float(s) for s in self.steps)
@@ -81,7 +86,8 @@ class AlarmSettings:
             raise ValueError("steps must be positive, finite and strictly increasing")
         if not 0 <= self.deadband < steps[0]:
             raise ValueError("deadband must be in [0, the lowest step)")
-        for name in ("raise_delay_s", "lower_delay_s", "return_delay_s", "max_shelve_s"):
+        for name in ("raise_delay_s", "lower_delay_s", "return_delay_s", "max_shelve_s",
+                     "smoothing_s"):
             value = getattr(self, name)
             if not (value >= 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a finite number >= 0")
@@ -95,7 +101,8 @@ class _State:
     classification: str | None = None  # "friction" | "other" | None (not isolated yet)
     priority: int = 0
     peak_priority: int = 0
-    level: float | None = None   # last valid level reading
+    level: float | None = None   # smoothed level (the decisions' input)
+    level_time: float | None = None  # time of the last valid reading
     peak_level: float | None = None
     detector_fault: bool = False
     cleared_at: float | None = None
@@ -271,9 +278,15 @@ class AlarmLifecycle:
     def _crossed(self, level: float, margin: float = 0.0) -> int:
         return sum(level >= step - margin for step in self.settings.steps)
 
-    def _on_level(self, now: float, level: float, out: list) -> None:
+    def _on_level(self, now: float, reading: float, out: list) -> None:
         s, cfg = self._s, self.settings
-        s.level = level
+        if s.level is None or s.level_time is None or cfg.smoothing_s == 0:
+            s.level = reading
+        else:
+            weight = -math.expm1(-(now - s.level_time) / cfg.smoothing_s)
+            s.level += weight * (reading - s.level)
+        s.level_time = now
+        level = s.level
         if level < cfg.steps[0] - cfg.deadband:
             if s.low_since is None:
                 s.low_since = now

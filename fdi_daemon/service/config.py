@@ -43,7 +43,8 @@ from typing import Any
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.yaml_file import read_yaml
 
-__all__ = ["RigConfig", "load_config", "config_from_dict", "default_config_path", "SCHEMA"]
+__all__ = ["RigConfig", "load_config", "config_from_dict", "default_config_path",
+           "default_state_dir", "SCHEMA"]
 
 LINK_KINDS = ("serial", "modbus-tcp", "modbus-rtu", "replay", "sim")
 SIM_TRANSPORTS = ("modbus-tcp", "modbus-rtu", "serial")
@@ -162,6 +163,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                             "step this long before the alarm returns to "
                                             "normal", _non_negative),
         "max_shelve_s": Field(NUM, 86400.0, "longest shelving", _positive),
+        "smoothing_s": Field(NUM, 30.0, "time constant of the level smoothing the alarm "
+                                        "decides on", _non_negative),
         "allow_remote_acknowledge": Field(BOOL, False, "accept acknowledge/shelve requests "
                                                        "on the status socket and Modbus"),
         "state_file": Field(STR, "state.json", "alarm state kept across restarts; null "
@@ -201,9 +204,7 @@ class RigConfig:
     @property
     def state_dir(self) -> Path:
         configured = self.service["state_dir"]
-        if configured:
-            return Path(configured)
-        return Path(os.environ.get("STATE_DIRECTORY", "").split(":")[0] or "fdi-state")
+        return Path(configured) if configured else default_state_dir()
 
     def output_path(self, value: str | None) -> Path | None:
         """An output path from the config, relative ones under ``state_dir``."""
@@ -211,6 +212,11 @@ class RigConfig:
             return None
         path = Path(value).expanduser()
         return path if path.is_absolute() else self.state_dir / path
+
+
+def default_state_dir() -> Path:
+    """``$STATE_DIRECTORY`` (systemd's StateDirectory=) or else ``./fdi-state``."""
+    return Path(os.environ.get("STATE_DIRECTORY", "").split(":")[0] or "fdi-state")
 
 
 def default_config_path() -> Path:
@@ -257,7 +263,7 @@ def _alarms(data: Mapping, source: str) -> dict[str, Any]:
     try:
         alarms["settings"] = AlarmSettings(**{k: alarms[k] for k in (
             "steps", "deadband", "raise_delay_s", "lower_delay_s", "return_delay_s",
-            "max_shelve_s")})
+            "max_shelve_s", "smoothing_s")})
     except ValueError as exc:
         raise ConfigError(f"{source}: alarms: {exc}") from None
     return alarms

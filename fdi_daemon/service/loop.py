@@ -211,6 +211,8 @@ class ServiceLoop:
             self._emit(event)
         self.publish_status(force=True)
         if self.alarms is not None:
+            if (row := self.alarms.trend.flush()) is not None:  # the minute in progress
+                self.outputs.trend(row)
             self.outputs.alarm_state(self.alarms.state(self.event_counts))
 
     def iterate(self) -> int:

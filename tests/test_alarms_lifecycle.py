@@ -95,7 +95,7 @@ def test_smoothing_keeps_noisy_readings_from_chattering_and_follows_a_step():
 
 
 def test_priority_falls_only_below_the_deadband_for_the_off_delay_and_never_below_1():
-    lc = AlarmLifecycle(settings(raise_delay_s=0.0, lower_delay_s=60.0))
+    lc = AlarmLifecycle(settings(raise_delay_s=0.0, lower_delay_s=60.0, deadband=0.05))
     lc.step(0.0, 1.2, FAULT)
     assert lc.priority == 3
     assert lc.step(10.0, 0.97) == []          # below 1.0 but within the deadband
@@ -114,21 +114,37 @@ def test_cleared_then_a_new_fault_within_the_return_delay_is_the_same_alarm():
     assert out == [] and lc.summary(700.0)["alarm_id"] == 1 and lc.active
 
 
-def test_return_needs_the_detector_cleared_and_the_level_low_for_the_delay():
-    lc = AlarmLifecycle(settings(return_delay_s=600.0))
+def every_10_s(lc, start, stop, level):
+    """Readings of ``level`` every 10 s in [start, stop); the events they raised."""
+    return feed(lc, np.arange(start, stop, 10.0), np.full(int(np.ceil((stop - start) / 10)),
+                                                             level))
+
+
+def test_return_needs_the_detector_cleared_and_the_level_back_for_the_delay_of_motion():
+    lc = AlarmLifecycle(settings(return_delay_s=600.0, return_level=0.1))
     lc.step(0.0, 0.4, FAULT)
     assert lc.step(100.0, 0.4, CLEARED) == []
-    assert lc.step(800.0, 0.3) == []          # level still high: no return
-    assert lc.step(900.0, 0.1) == []          # low since 900
-    assert lc.step(1400.0, None) == []        # no reading (rig at rest): time still counts
-    out = lc.step(1500.0, 0.12)
+    assert every_10_s(lc, 110.0, 900.0, 0.15) == []   # below the lowest step, not back
+    assert every_10_s(lc, 900.0, 1200.0, 0.05) == []  # back: 290 s of motion so far
+    assert every_10_s(lc, 5000.0, 5300.0, 0.05) == []  # a rest (no readings), then 580 s
+    assert lc.step(5300.0, 0.05) == []                # 590 s
+    out = lc.step(5310.0, 0.05)
     assert kinds(out) == ["alarm_returned"]
     assert out[0]["state"] == "returned_unacknowledged" and out[0]["priority"] == 0
-    ok, _, events = lc.acknowledge(1600.0, by="test")
+    ok, _, events = lc.acknowledge(5300.0, by="test")
     assert ok and kinds(events) == ["alarm_acknowledged"] and lc.state == "normal"
     # a new fault after the return is a new alarm
-    out = lc.step(2000.0, 0.3, FAULT)
+    out = lc.step(6000.0, 0.3, FAULT)
     assert kinds(out) == ["alarm_raised"] and out[0]["alarm_id"] == 2
+
+
+def test_the_level_back_before_the_detector_clears_still_waits_for_the_delay():
+    lc = AlarmLifecycle(settings(return_delay_s=600.0))
+    lc.step(0.0, 0.0, {"kind": "other_fault"})
+    assert every_10_s(lc, 10.0, 2000.0, 0.0) == []    # low all along, detector still faulty
+    assert lc.step(2000.0, 0.0, CLEARED) == []
+    assert every_10_s(lc, 2010.0, 2600.0, 0.0) == []
+    assert kinds(lc.step(2600.0, 0.0)) == ["alarm_returned"]
 
 
 def test_acknowledge_states():
@@ -219,7 +235,7 @@ def test_a_restored_alarm_absorbs_the_detectors_renewed_fault():
     assert restored.step(60.0, 0.6, FAULT) == []   # the new detector run raises again: joined
     # without a new fault the level decides: low for the return delay after the restore
     quiet = AlarmLifecycle.from_dict(lc.to_dict(), now=50.0)
-    assert quiet.step(100.0, 0.6) == [] and quiet.step(700.0, 0.0) == []
+    assert quiet.step(100.0, 0.6) == [] and every_10_s(quiet, 700.0, 1300.0, 0.0) == []
     assert kinds(quiet.step(1300.0, 0.0))[-1] == "alarm_returned"
 
 
@@ -233,6 +249,7 @@ def test_a_malformed_state_is_refused(data):
 
 @pytest.mark.parametrize("kwargs", [{"steps": ()}, {"steps": (0.5, 0.25)}, {"steps": (-1.0,)},
                                     {"deadband": 0.3}, {"return_delay_s": -1.0},
+                                    {"return_level": 0.0}, {"return_level": 0.22},
                                     {"raise_delay_s": float("nan")}])
 def test_bad_settings_are_refused(kwargs):
     with pytest.raises(ValueError):

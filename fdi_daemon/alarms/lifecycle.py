@@ -27,11 +27,14 @@ States (ISA-18.2 alarm state model; shelving is a flag on top of any state)::
   0.25 / 0.5 / 1.0) the level has crossed, at least 1 while the alarm is active. It rises
   one ``alarm_priority`` event per step once the level has stayed at or above the step for
   ``raise_delay_s`` (on-delay); it falls only once the level has stayed below the step
-  minus ``deadband`` for ``lower_delay_s`` (deadband and off-delay: no chattering).
+  minus ``deadband`` for ``lower_delay_s`` (deadband and off-delay: no chattering). These
+  delays, like the return delay below, count *moving time*: only the time between valid
+  readings at most `READING_GAP_S` apart (a resting rig shows no level, so neither the
+  fault nor its absence).
 - **Return to normal** (``alarm_returned``) when the detector's last word is ``cleared``
-  *and* the level has been below the lowest step minus ``deadband`` for ``return_delay_s``,
-  counted from the later of the two. Level readings count only when valid (the rig moves);
-  a detector fault within that time keeps the same alarm. A state restored after a restart
+  since ``return_delay_s`` *and* the level has been back at the baseline (below
+  ``return_level``) for ``return_delay_s`` of moving time. A detector fault within that time
+  keeps the same alarm. A state restored after a restart
   treats the detector as cleared at the moment of the restore: the new detector run may not
   raise again (it may learn the fault as normal), so the level decides.
 - **Acknowledge** (``alarm_acknowledged``): from ``unacknowledged`` to ``acknowledged``, or
@@ -64,6 +67,8 @@ LIFECYCLE_KINDS = ("alarm_raised", "alarm_priority", "alarm_acknowledged", "alar
                    "alarm_unshelved", "alarm_returned")
 DETECTOR_FAULT_KINDS = ("fault_detected", "friction_isolated", "other_fault")
 STATE_VERSION = 1
+#: readings further apart than this (s) are not moving time for the return to normal
+READING_GAP_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -71,10 +76,11 @@ class AlarmSettings:
     """Alarm-management settings (levels in units of the friction signature, times in s)."""
 
     steps: tuple[float, ...] = (0.25, 0.5, 1.0)
-    deadband: float = 0.05
-    raise_delay_s: float = 5.0
-    lower_delay_s: float = 300.0
+    deadband: float = 0.1
+    raise_delay_s: float = 60.0
+    lower_delay_s: float = 3600.0
     return_delay_s: float = 600.0
+    return_level: float = 0.1
     max_shelve_s: float = 86400.0
     smoothing_s: float = 30.0
 
@@ -86,6 +92,8 @@ class AlarmSettings:
             raise ValueError("steps must be positive, finite and strictly increasing")
         if not 0 <= self.deadband < steps[0]:
             raise ValueError("deadband must be in [0, the lowest step)")
+        if not 0 < self.return_level <= steps[0] - self.deadband:
+            raise ValueError("return_level must be in (0, the lowest step - deadband]")
         for name in ("raise_delay_s", "lower_delay_s", "return_delay_s", "max_shelve_s",
                      "smoothing_s"):
             value = getattr(self, name)
@@ -106,9 +114,11 @@ class _State:
     peak_level: float | None = None
     detector_fault: bool = False
     cleared_at: float | None = None
-    low_since: float | None = None    # level below the lowest step - deadband since
-    up_since: float | None = None     # level above the next step since (on-delay)
-    down_since: float | None = None   # level below the current step - deadband since
+    # moving time (s) for which the level has been: below return_level; above the next
+    # step (on-delay); below the current step - deadband (off-delay). None: not now.
+    low_s: float | None = None
+    up_s: float | None = None
+    down_s: float | None = None
     shelved_until: float | None = None
     acknowledged_at: float | None = None
     last_time: float | None = None
@@ -270,7 +280,7 @@ class AlarmLifecycle:
         s.priority = max(1, self._crossed(s.level)) if s.level is not None else 1
         s.peak_priority = s.priority
         s.peak_level = s.level
-        s.up_since = s.down_since = None
+        s.up_s = s.down_s = None
         s.acknowledged_at = None
         out.append(self._event(now, "alarm_raised", cause=cause,
                                classification=s.classification))
@@ -280,36 +290,27 @@ class AlarmLifecycle:
 
     def _on_level(self, now: float, reading: float, out: list) -> None:
         s, cfg = self._s, self.settings
-        if s.level is None or s.level_time is None or cfg.smoothing_s == 0:
+        dt = math.inf if s.level_time is None else now - s.level_time
+        if s.level is None or cfg.smoothing_s == 0:
             s.level = reading
         else:
-            weight = -math.expm1(-(now - s.level_time) / cfg.smoothing_s)
-            s.level += weight * (reading - s.level)
+            s.level += -math.expm1(-dt / cfg.smoothing_s) * (reading - s.level)
         s.level_time = now
         level = s.level
-        if level < cfg.steps[0] - cfg.deadband:
-            if s.low_since is None:
-                s.low_since = now
-        else:
-            s.low_since = None
+        moving = dt if dt <= READING_GAP_S else 0.0
+        s.low_s = _held(s.low_s, level < cfg.return_level, moving)
         if not self.active:
-            s.up_since = s.down_since = None
+            s.up_s = s.down_s = None
             return
         s.peak_level = level if s.peak_level is None else max(s.peak_level, level)
         up = self._crossed(level)
-        if up > s.priority:
-            s.up_since = now if s.up_since is None else s.up_since
-            if now - s.up_since >= cfg.raise_delay_s:
-                self._set_priority(now, up, out)
-        else:
-            s.up_since = None
+        s.up_s = _held(s.up_s, up > s.priority, moving)
+        if s.up_s is not None and s.up_s >= cfg.raise_delay_s:
+            self._set_priority(now, up, out)
         keep = max(1, self._crossed(level, cfg.deadband))
-        if keep < s.priority:
-            s.down_since = now if s.down_since is None else s.down_since
-            if now - s.down_since >= cfg.lower_delay_s:
-                self._set_priority(now, keep, out)
-        else:
-            s.down_since = None
+        s.down_s = _held(s.down_s, keep < s.priority, moving)
+        if s.down_s is not None and s.down_s >= cfg.lower_delay_s:
+            self._set_priority(now, keep, out)
 
     def _set_priority(self, now: float, target: int, out: list) -> None:
         s = self._s
@@ -320,7 +321,7 @@ class AlarmLifecycle:
             s.peak_priority = max(s.peak_priority, s.priority)
             out.append(self._event(now, "alarm_priority", previous=previous,
                                    step=self.settings.steps[max(s.priority, previous) - 1]))
-        s.up_since = s.down_since = None
+        s.up_s = s.down_s = None
 
     def _on_time(self, now: float, out: list) -> None:
         s, cfg = self._s, self.settings
@@ -328,9 +329,17 @@ class AlarmLifecycle:
             s.shelved_until = None
             out.append(self._event(now, "alarm_unshelved", reason="expired"))
         if (self.active and not s.detector_fault and s.cleared_at is not None
-                and s.low_since is not None
-                and now - max(s.cleared_at, s.low_since) >= cfg.return_delay_s):
+                and now - s.cleared_at >= cfg.return_delay_s
+                and s.low_s is not None and s.low_s >= cfg.return_delay_s):
             s.state = "normal" if s.state == "acknowledged" else "returned_unacknowledged"
             s.priority = 0
-            s.up_since = s.down_since = None
+            s.up_s = s.down_s = None
             out.append(self._event(now, "alarm_returned"))
+
+
+def _held(held_s: float | None, condition: bool, moving_s: float) -> float | None:
+    """Moving time a condition has held: None when it does not hold, 0 at the first
+    reading where it does, then + the moving time since the previous reading."""
+    if not condition:
+        return None
+    return 0.0 if held_s is None else held_s + moving_s

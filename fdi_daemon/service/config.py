@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 
+from fdi_daemon.alarms.lifecycle import AlarmSettings
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.yaml_file import read_yaml
 
@@ -100,6 +101,7 @@ def _one_of(*choices: str) -> Callable[[Any], str | None]:
     return check
 
 
+_ALARM = AlarmSettings()  # the alarm defaults
 NUM = (int, float)
 STR = (str,)
 BOOL = (bool,)
@@ -150,20 +152,22 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                       "$STATE_DIRECTORY or ./fdi-state", nullable=True),
     },
     "alarms": {
-        "steps": Field((list,), (0.25, 0.5, 1.0), "friction levels above the baseline (units "
+        "steps": Field((list,), _ALARM.steps, "friction levels above the baseline (units "
                                                   "of the signature) that step the alarm "
                                                   "priority up", _steps),
-        "deadband": Field(NUM, 0.05, "a priority falls only below its step minus this",
+        "deadband": Field(NUM, _ALARM.deadband, "a priority falls only below its step minus this",
                           _non_negative),
-        "raise_delay_s": Field(NUM, 5.0, "the level stays above a step this long before the "
+        "raise_delay_s": Field(NUM, _ALARM.raise_delay_s, "the level stays above a step this long before the "
                                          "priority rises", _non_negative),
-        "lower_delay_s": Field(NUM, 300.0, "... below step - deadband this long before it "
+        "lower_delay_s": Field(NUM, _ALARM.lower_delay_s, "... below step - deadband this long before it "
                                            "falls", _non_negative),
-        "return_delay_s": Field(NUM, 600.0, "detector cleared and level below the lowest "
-                                            "step this long before the alarm returns to "
-                                            "normal", _non_negative),
-        "max_shelve_s": Field(NUM, 86400.0, "longest shelving", _positive),
-        "smoothing_s": Field(NUM, 30.0, "time constant of the level smoothing the alarm "
+        "return_delay_s": Field(NUM, _ALARM.return_delay_s, "detector cleared and level back at the "
+                                            "baseline (moving time) this long before the "
+                                            "alarm returns to normal", _non_negative),
+        "return_level": Field(NUM, _ALARM.return_level, "level above the baseline under which the fault "
+                                        "counts as gone", _positive),
+        "max_shelve_s": Field(NUM, _ALARM.max_shelve_s, "longest shelving", _positive),
+        "smoothing_s": Field(NUM, _ALARM.smoothing_s, "time constant of the level smoothing the alarm "
                                         "decides on", _non_negative),
         "allow_remote_acknowledge": Field(BOOL, False, "accept acknowledge/shelve requests "
                                                        "on the status socket and Modbus"),
@@ -256,14 +260,12 @@ def config_from_dict(data: Any, source: str = "config",
 
 def _alarms(data: Mapping, source: str) -> dict[str, Any]:
     """The alarms section; its settings checked together (deadband below the lowest step)."""
-    from fdi_daemon.alarms.lifecycle import AlarmSettings
-
     alarms = _section(data, "alarms", source)
     alarms["steps"] = tuple(float(x) for x in alarms["steps"])
     try:
         alarms["settings"] = AlarmSettings(**{k: alarms[k] for k in (
             "steps", "deadband", "raise_delay_s", "lower_delay_s", "return_delay_s",
-            "max_shelve_s", "smoothing_s")})
+            "max_shelve_s", "smoothing_s", "return_level")})
     except ValueError as exc:
         raise ConfigError(f"{source}: alarms: {exc}") from None
     return alarms

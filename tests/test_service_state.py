@@ -190,3 +190,44 @@ def test_state_file_is_fsynced_before_the_rename(tmp_path, monkeypatch):
     write_state(tmp_path / "state.json", {"model": "m"})
     assert calls == ["fsync", "replace", "fsync"]  # file, rename, then the folder
     assert json.loads((tmp_path / "state.json").read_text())["model"] == "m"
+
+
+def test_minutes_past_retention_are_folded_into_hours(tmp_path):
+    rng = np.random.default_rng(9)
+    path = tmp_path / "trend.sqlite"
+    store = TrendStore(path, keep_minutes_days=1.0)
+    first = 29_000_000 - 29_000_000 % 60
+    n = 3 * 1440 + 1
+    rows = []
+    for k in range(n):
+        resting = k % 300 < 40
+        mean = float(rng.uniform(0, 1))
+        rows.append({"minute": first + k, "level_mean": None if resting else mean,
+                     "level_min": None if resting else mean - 0.1,
+                     "level_max": None if resting else mean + 0.1, "baseline": 0.05,
+                     "command_rms_v": float(rng.uniform(0.5, 1.5)),
+                     "readings": 0 if resting else int(rng.integers(100, 600)),
+                     "samples": 15360, "priority": int(k > 2000), "alarm_state": 0})
+        store.append(rows[-1])
+    store.close()
+    with sqlite3.connect(path) as db:
+        minutes = db.execute("SELECT MIN(minute), COUNT(*) FROM trend_minute").fetchone()
+        hours = db.execute("SELECT * FROM trend_hour ORDER BY hour").fetchall()
+    cutoff = (first + n - 1 - 1440) // 60 * 60
+    assert minutes == (cutoff, first + n - cutoff)
+    assert len(hours) == (cutoff - first) // 60
+    for hour in hours[::7]:
+        sel = [r for r in rows if r["minute"] // 60 == hour[0]]
+        m = np.array([round(r["level_mean"] * 1000) if r["readings"] else 0 for r in sel])
+        w = np.array([r["readings"] for r in sel])
+        cmd = np.array([round(r["command_rms_v"] * 1000) for r in sel], dtype=float)
+        expected_mean = round(float((m * w).sum() / w.sum())) if w.sum() else None
+        assert hour[1] == expected_mean
+        lows = [round((r["level_mean"] - 0.1) * 1000) for r in sel if r["readings"]]
+        assert hour[2] == (min(lows) if lows else None)
+        assert hour[5] == round(math.sqrt((cmd ** 2 * 15360).sum() / (15360 * len(sel))))
+        assert hour[6] == w.sum() and hour[7] == 15360 * len(sel)
+        assert hour[8] == max(r["priority"] for r in sel) and hour[4] == 50
+    data = read_trend(path)  # the view: hours, then minutes, one time axis
+    assert np.all(np.diff(data["time_unix"]) > 0)
+    assert set(np.unique(data["period_s"])) == {60.0, 3600.0}

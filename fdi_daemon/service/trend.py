@@ -18,10 +18,18 @@ Table ``trend_minute`` (one row per UTC minute that had data)::
     alarm_state     INTEGER  alarm state code at the end of the minute (lifecycle.STATE_CODES)
 
 Levels are NULL in a minute without a valid reading (the rig at rest). Scaled integers
-keep a row at about 25 bytes (SQLite stores small integers in 1-2 bytes, a REAL in 8); the
-view ``trend`` shows the same rows in plain units (``time_unix`` s, ``level_*`` and
-``baseline`` in signature units, ``command_rms_v`` V). Table ``trend_meta`` (key, value)
-holds the alarm steps (``steps``, JSON) and the model hash.
+keep a row at about 31 bytes (SQLite stores small integers in 1-3 bytes, a REAL in 8).
+
+Retention: minute rows older than ``keep_minutes_days`` (default 90) are folded, once an
+hour, into table ``trend_hour`` (same columns, ``hour`` = unix time // 3600 instead of
+``minute``): level mean weighted by readings, min of the minima, max of the maxima, the
+command RMS over all samples, sums of readings and samples, the highest priority and
+state code, the last baseline. So the file holds 90 days of minutes (about 4 MB) and then
+grows by about 0.3 MB a year (measured: docs/service.md).
+
+The view ``trend`` shows both tables in plain units (``time_unix`` s, ``period_s`` 60 or
+3600, ``level_*`` and ``baseline`` in signature units, ``command_rms_v`` V). Table
+``trend_meta`` (key, value) holds the alarm steps (``steps``, JSON) and the model hash.
 """
 
 from __future__ import annotations
@@ -47,13 +55,38 @@ CREATE TABLE IF NOT EXISTS trend_minute (
     level_mean_m INTEGER, level_min_m INTEGER, level_max_m INTEGER, baseline_m INTEGER,
     command_rms_mv INTEGER, readings INTEGER NOT NULL, samples INTEGER NOT NULL,
     priority INTEGER NOT NULL, alarm_state INTEGER NOT NULL);
+CREATE TABLE IF NOT EXISTS trend_hour (
+    hour INTEGER PRIMARY KEY,
+    level_mean_m INTEGER, level_min_m INTEGER, level_max_m INTEGER, baseline_m INTEGER,
+    command_rms_mv INTEGER, readings INTEGER NOT NULL, samples INTEGER NOT NULL,
+    priority INTEGER NOT NULL, alarm_state INTEGER NOT NULL);
 CREATE TABLE IF NOT EXISTS trend_meta (key TEXT PRIMARY KEY, value TEXT);
-CREATE VIEW IF NOT EXISTS trend AS SELECT
-    minute * 60 AS time_unix, level_mean_m / 1000.0 AS level_mean,
-    level_min_m / 1000.0 AS level_min, level_max_m / 1000.0 AS level_max,
-    baseline_m / 1000.0 AS baseline, command_rms_mv / 1000.0 AS command_rms_v,
-    readings, samples, priority, alarm_state FROM trend_minute;
+CREATE VIEW IF NOT EXISTS trend AS
+    SELECT hour * 3600 AS time_unix, 3600 AS period_s, level_mean_m / 1000.0 AS level_mean,
+        level_min_m / 1000.0 AS level_min, level_max_m / 1000.0 AS level_max,
+        baseline_m / 1000.0 AS baseline, command_rms_mv / 1000.0 AS command_rms_v,
+        readings, samples, priority, alarm_state FROM trend_hour
+    UNION ALL
+    SELECT minute * 60, 60, level_mean_m / 1000.0, level_min_m / 1000.0,
+        level_max_m / 1000.0, baseline_m / 1000.0, command_rms_mv / 1000.0,
+        readings, samples, priority, alarm_state FROM trend_minute;
 """
+#: fold the minutes of whole hours before ``cutoff`` (a minute number) into trend_hour
+_ROLL_UP = """
+INSERT OR REPLACE INTO trend_hour SELECT minute / 60,
+    CAST(ROUND(SUM(level_mean_m * readings) * 1.0
+               / NULLIF(SUM(CASE WHEN level_mean_m IS NOT NULL THEN readings END), 0))
+         AS INTEGER),
+    MIN(level_min_m), MAX(level_max_m),
+    (SELECT baseline_m FROM trend_minute AS last WHERE last.minute / 60 = m.minute / 60
+     ORDER BY last.minute DESC LIMIT 1),
+    CAST(ROUND(sqrt(SUM(command_rms_mv * command_rms_mv * samples) * 1.0
+                    / NULLIF(SUM(CASE WHEN command_rms_mv IS NOT NULL THEN samples END), 0)))
+         AS INTEGER),
+    SUM(readings), SUM(samples), MAX(priority), MAX(alarm_state)
+FROM trend_minute AS m WHERE minute < ? GROUP BY minute / 60
+"""
+KEEP_MINUTES_DAYS = 90.0
 COLUMNS = ("minute", "level_mean", "level_min", "level_max", "baseline", "command_rms_v",
            "readings", "samples", "priority", "alarm_state")
 
@@ -126,6 +159,10 @@ class MinuteAggregator:
                 "alarm_state": self.alarm_state}
 
 
+def _sqrt(value: float | None) -> float | None:
+    return None if value is None else math.sqrt(value)
+
+
 def _scaled(value: float | None, scale: float) -> int | None:
     return None if value is None or not math.isfinite(value) else int(round(value * scale))
 
@@ -133,11 +170,14 @@ def _scaled(value: float | None, scale: float) -> int | None:
 class TrendStore:
     """``trend.sqlite``: append rows (one transaction each: a row a minute)."""
 
-    def __init__(self, path: str | Path, meta: dict[str, Any] | None = None) -> None:
+    def __init__(self, path: str | Path, meta: dict[str, Any] | None = None,
+                 keep_minutes_days: float = KEEP_MINUTES_DAYS) -> None:
         self.path = Path(path)
+        self.keep_minutes = int(round(keep_minutes_days * 1440))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # written from the sink thread only; made on the main thread
         self._db = sqlite3.connect(self.path, check_same_thread=False)
+        self._db.create_function("sqrt", 1, _sqrt, deterministic=True)
         # WAL with synchronous=NORMAL: a commit (a row a minute) costs no fsync; a crash of
         # the process loses nothing committed, a power loss at most the last rows
         self._db.execute("PRAGMA journal_mode=WAL")
@@ -166,6 +206,10 @@ class TrendStore:
                 "readings=excluded.readings, samples=excluded.samples, "
                 "priority=excluded.priority, alarm_state=excluded.alarm_state "
                 "WHERE excluded.readings > trend_minute.readings", values)
+            if row["minute"] % 60 == 0:  # once an hour: fold what is past retention
+                cutoff = (row["minute"] - self.keep_minutes) // 60 * 60
+                self._db.execute(_ROLL_UP, (cutoff,))
+                self._db.execute("DELETE FROM trend_minute WHERE minute < ?", (cutoff,))
         self.written += 1
 
     def close(self) -> None:
@@ -174,16 +218,18 @@ class TrendStore:
 
 def read_trend(path: str | Path, since_unix: float | None = None) -> dict[str, np.ndarray]:
     """The rows (from ``since_unix`` on) as arrays in plain units (`COLUMNS`, NaN = NULL);
-    ``time_unix`` (s, the minute's start) replaces ``minute``."""
+    ``time_unix`` (s, the start of the minute or hour) replaces ``minute``, ``period_s``
+    says which (60 or 3600)."""
     db = sqlite3.connect(f"file:{Path(path)}?mode=ro", uri=True)
     try:
         rows = db.execute(
-            "SELECT time_unix, level_mean, level_min, level_max, baseline, command_rms_v, "
+            "SELECT time_unix, period_s, level_mean, level_min, level_max, baseline, "
+            "command_rms_v, "
             "readings, samples, priority, alarm_state FROM trend WHERE time_unix >= ? "
             "ORDER BY time_unix", (-math.inf if since_unix is None else since_unix,)).fetchall()
     finally:
         db.close()
-    names = ("time_unix",) + COLUMNS[1:]
+    names = ("time_unix", "period_s") + COLUMNS[1:]
     data = np.array(rows, dtype=float).reshape(-1, len(names))  # None -> nan
     return {name: data[:, i] for i, name in enumerate(names)}
 

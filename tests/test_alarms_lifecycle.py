@@ -52,6 +52,12 @@ def test_priority_rises_one_event_per_step_after_the_on_delay():
     lc.step(7.0, 1.5)
     out = lc.step(12.0, 1.5)
     assert [e["priority"] for e in out] == [3]
+    # each step has its own on-delay: above 1.0 for 3 s of 5 is step 2 only
+    lc3 = AlarmLifecycle(settings(raise_delay_s=5.0))
+    lc3.step(0.0, 0.0, FAULT)
+    assert lc3.step(1.0, 0.6) == [] and lc3.step(3.0, 1.2) == []
+    assert [e["priority"] for e in lc3.step(6.0, 1.2)] == [2]
+    assert [e["priority"] for e in lc3.step(8.0, 1.2)] == [3]
     # a jump over two steps at once: two events, one per step
     lc2 = AlarmLifecycle(settings(raise_delay_s=0.0))
     lc2.step(0.0, 0.0, FAULT)
@@ -101,9 +107,13 @@ def test_priority_falls_only_below_the_deadband_for_the_off_delay_and_never_belo
     assert lc.step(10.0, 0.97) == []          # below 1.0 but within the deadband
     assert lc.step(20.0, 0.9) == []           # off-delay starts
     assert lc.step(79.0, 0.9) == []
-    out = lc.step(80.0, 0.0)
-    assert [(e["previous"], e["priority"]) for e in out] == [(3, 2), (2, 1)]
+    out = lc.step(80.0, 0.0)                  # below 0.95 for 60 s; below 0.45 just now
+    assert [(e["previous"], e["priority"]) for e in out] == [(3, 2)]
+    assert lc.step(110.0, 0.0) == [] and lc.step(139.0, 0.0) == []
+    out = lc.step(140.0, 0.0)                 # each step keeps its own off-delay
+    assert [(e["previous"], e["priority"]) for e in out] == [(2, 1)]
     assert lc.active and lc.priority == 1
+    assert lc.step(300.0, 0.0) == []          # never below 1 while active
 
 
 def test_cleared_then_a_new_fault_within_the_return_delay_is_the_same_alarm():

@@ -114,11 +114,11 @@ class _State:
     peak_level: float | None = None
     detector_fault: bool = False
     cleared_at: float | None = None
-    # moving time (s) for which the level has been: below return_level; above the next
-    # step (on-delay); below the current step - deadband (off-delay). None: not now.
+    # moving time (s) for which the level has been: below return_level; at or above each
+    # step (on-delays); below each step - deadband (off-delays). None: not now.
     low_s: float | None = None
-    up_s: float | None = None
-    down_s: float | None = None
+    above_s: list = field(default_factory=list)
+    below_s: list = field(default_factory=list)
     shelved_until: float | None = None
     acknowledged_at: float | None = None
     last_time: float | None = None
@@ -280,13 +280,12 @@ class AlarmLifecycle:
         s.priority = max(1, self._crossed(s.level)) if s.level is not None else 1
         s.peak_priority = s.priority
         s.peak_level = s.level
-        s.up_s = s.down_s = None
         s.acknowledged_at = None
         out.append(self._event(now, "alarm_raised", cause=cause,
                                classification=s.classification))
 
-    def _crossed(self, level: float, margin: float = 0.0) -> int:
-        return sum(level >= step - margin for step in self.settings.steps)
+    def _crossed(self, level: float) -> int:
+        return sum(level >= step for step in self.settings.steps)
 
     def _on_level(self, now: float, reading: float, out: list) -> None:
         s, cfg = self._s, self.settings
@@ -299,18 +298,20 @@ class AlarmLifecycle:
         level = s.level
         moving = dt if dt <= READING_GAP_S else 0.0
         s.low_s = _held(s.low_s, level < cfg.return_level, moving)
+        if len(s.above_s) != len(cfg.steps):  # first reading, or the steps were changed
+            s.above_s, s.below_s = [None] * len(cfg.steps), [None] * len(cfg.steps)
+        for i, step in enumerate(cfg.steps):
+            s.above_s[i] = _held(s.above_s[i], level >= step, moving)
+            s.below_s[i] = _held(s.below_s[i], level < step - cfg.deadband, moving)
         if not self.active:
-            s.up_s = s.down_s = None
             return
         s.peak_level = level if s.peak_level is None else max(s.peak_level, level)
-        up = self._crossed(level)
-        s.up_s = _held(s.up_s, up > s.priority, moving)
-        if s.up_s is not None and s.up_s >= cfg.raise_delay_s:
-            self._set_priority(now, up, out)
-        keep = max(1, self._crossed(level, cfg.deadband))
-        s.down_s = _held(s.down_s, keep < s.priority, moving)
-        if s.down_s is not None and s.down_s >= cfg.lower_delay_s:
-            self._set_priority(now, keep, out)
+        risen = sum(h is not None and h >= cfg.raise_delay_s for h in s.above_s)
+        kept = max(1, sum(not (h is not None and h >= cfg.lower_delay_s) for h in s.below_s))
+        if risen > s.priority:
+            self._set_priority(now, risen, out)
+        elif kept < s.priority:
+            self._set_priority(now, kept, out)
 
     def _set_priority(self, now: float, target: int, out: list) -> None:
         s = self._s
@@ -321,7 +322,6 @@ class AlarmLifecycle:
             s.peak_priority = max(s.peak_priority, s.priority)
             out.append(self._event(now, "alarm_priority", previous=previous,
                                    step=self.settings.steps[max(s.priority, previous) - 1]))
-        s.up_s = s.down_s = None
 
     def _on_time(self, now: float, out: list) -> None:
         s, cfg = self._s, self.settings
@@ -333,7 +333,6 @@ class AlarmLifecycle:
                 and s.low_s is not None and s.low_s >= cfg.return_delay_s):
             s.state = "normal" if s.state == "acknowledged" else "returned_unacknowledged"
             s.priority = 0
-            s.up_s = s.down_s = None
             out.append(self._event(now, "alarm_returned"))
 
 

@@ -231,3 +231,16 @@ def test_minutes_past_retention_are_folded_into_hours(tmp_path):
     data = read_trend(path)  # the view: hours, then minutes, one time axis
     assert np.all(np.diff(data["time_unix"]) > 0)
     assert set(np.unique(data["period_s"])) == {60.0, 3600.0}
+
+
+def test_a_file_that_is_not_a_trend_database_is_moved_aside(tmp_path, caplog):
+    from fdi_daemon.service.trend import open_trend_store
+
+    path = tmp_path / "trend.sqlite"
+    path.write_bytes(b"this is not SQLite" * 100)
+    with caplog.at_level(logging.WARNING, logger="fdi.trend"):
+        store = open_trend_store(path, {"steps": [0.25]})
+    store.close()
+    assert len(caplog.records) == 1 and "not a trend database" in caplog.text
+    assert (tmp_path / "trend.sqlite.refused").read_bytes().startswith(b"this is not")
+    assert trend_meta(path) == {"steps": [0.25]}

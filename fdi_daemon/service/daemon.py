@@ -36,7 +36,7 @@ from fdi_daemon.service.sinks import (EventLog, ModbusStatusServer, PriorityForm
                                       StatusBoard, StatusSocketServer, StdoutLog, Worker,
                                       journald_attached)
 from fdi_daemon.service.state_file import model_identity, read_state, write_state
-from fdi_daemon.service.trend import TrendStore
+from fdi_daemon.service.trend import open_trend_store
 
 log = logging.getLogger("fdi.daemon")
 
@@ -88,8 +88,8 @@ class Sinks:
                     meta={"link": link_kind, "config": config.source})
             if keeper is not None and (path := config.output_path(
                     config.alarms["trend"])) is not None:
-                self.trend_store = TrendStore(path, {"steps": list(config.alarms["steps"]),
-                                                     "model": keeper.model})
+                self.trend_store = open_trend_store(
+                    path, {"steps": list(config.alarms["steps"]), "model": keeper.model})
         except (OSError, sqlite3.Error) as exc:
             self.close()
             raise ConfigError(f"{config.source}: cannot open an output: {exc}") from None
@@ -128,11 +128,15 @@ class Sinks:
         if kind == "status":
             self.board.publish(payload)
             return
-        if kind == "state":
-            write_state(self.state_path, payload)
-            return
-        if kind == "trend":
-            self.trend_store.append(payload)
+        if kind in ("state", "trend"):
+            try:
+                if kind == "state":
+                    write_state(self.state_path, payload)
+                else:
+                    self.trend_store.append(payload)
+            except (OSError, sqlite3.Error) as exc:  # the disk failed: say so, go on
+                log.error("cannot write the %s: %s", "state file" if kind == "state"
+                          else "trend", exc)
             return
         try:
             if self.event_log is not None:

@@ -35,7 +35,9 @@ The view ``trend`` shows both tables in plain units (``time_unix`` s, ``period_s
 from __future__ import annotations
 
 import json
+import logging
 import math
+import os
 import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,7 +45,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MinuteAggregator", "TrendStore", "read_trend", "trend_meta", "TREND_FILE"]
+__all__ = ["MinuteAggregator", "TrendStore", "open_trend_store", "read_trend", "trend_meta",
+           "TREND_FILE"]
+
+log = logging.getLogger("fdi.trend")
 
 TREND_FILE = "trend.sqlite"
 LEVEL_SCALE = 1000.0   # stored unit: 1/1000 of the signature
@@ -157,6 +162,19 @@ class MinuteAggregator:
                 else None,
                 "readings": cur.count, "samples": cur.samples, "priority": self.priority,
                 "alarm_state": self.alarm_state}
+
+
+def open_trend_store(path: str | Path, meta: dict[str, Any]) -> TrendStore:
+    """The store at ``path``; a file that is not a trend database is moved aside
+    (``trend.sqlite.refused``, one log line) and a new one started."""
+    try:
+        return TrendStore(path, meta)
+    except sqlite3.DatabaseError as exc:
+        aside = Path(f"{path}.refused")
+        os.replace(path, aside)
+        log.warning("trend %s is not a trend database (%s): kept as %s, starting a new one",
+                    path, exc, aside.name)
+        return TrendStore(path, meta)
 
 
 def _sqrt(value: float | None) -> float | None:

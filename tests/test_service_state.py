@@ -244,3 +244,26 @@ def test_a_file_that_is_not_a_trend_database_is_moved_aside(tmp_path, caplog):
     assert len(caplog.records) == 1 and "not a trend database" in caplog.text
     assert (tmp_path / "trend.sqlite.refused").read_bytes().startswith(b"this is not")
     assert trend_meta(path) == {"steps": [0.25]}
+
+
+def test_a_reload_keeps_the_alarm_unless_the_model_changes_its_unit(tmp_path, caplog):
+    from fdi_daemon.service.config import config_from_dict
+    from fdi_daemon.service.daemon import Daemon
+    from reliability_support import model_path
+
+    config = config_from_dict({"link": {"kind": "replay", "path": "rec.csv"},
+                               "model": {"path": str(model_path())},
+                               "service": {"state_dir": str(tmp_path)},
+                               "alarms": {"steps": [0.3, 0.6]}}, "rig.yaml", tmp_path)
+    daemon = Daemon()
+    first = daemon.alarm_keeper(config, load_test_model())
+    first.detector_event({"kind": "fault_detected"})
+    daemon.keeper = first
+    same = daemon.alarm_keeper(config, load_test_model(detector={"threshold": 40.0}))
+    assert same is first and same.lifecycle.settings.steps == (0.3, 0.6)
+    other = load_test_model()
+    other.fault_filter.gamma_f += 1.0
+    with caplog.at_level(logging.WARNING, logger="fdi.daemon"):
+        fresh = daemon.alarm_keeper(config, other)
+    assert fresh is not first and fresh.lifecycle.state == "normal"
+    assert "another unit" in caplog.text

@@ -289,12 +289,10 @@ def test_serial_corruption_stall_friction_reload_and_sigterm(tmp_path):
         daemon.wait_event("link_restored", after=n_events)
         gap = daemon.wait_event("data_gap", after=n_events)
         assert gap["missing_samples"] >= 256
-        # no watchdog pings while no samples came (the period is 0.5 s; allow one late one)
+        # the watchdog is fed while no samples come: the loop is alive (a dead field link
+        # is a status and a link_lost/link_restored pair, never a restart by systemd)
         pings = notify.times("WATCHDOG=1")
-        assert not [t for t in pings if stall_start + 0.8 < t < stall_start + 2.3], pings
-        daemon.wait_for(lambda s: any(t > stall_start + 2.5
-                                      for t in notify.times("WATCHDOG=1")), 30.0,
-                        "watchdog pings again after the stall")
+        assert [t for t in pings if stall_start + 0.8 < t < stall_start + 2.3], pings
         # the monitor holds its decisions until its windows are full again after a gap:
         # inject the fault once that is over (a fault starting within ~1 s after a gap is
         # not detected at all; reported to the monitor's owner)

@@ -29,6 +29,8 @@ Sections::
 
 Secrets (the MQTT password) are never read from the YAML: ``mqtt.password`` is refused;
 ``mqtt.password_file`` or ``mqtt.password_env`` name where the daemon reads it.
+    alarms: {steps, deadband, raise_delay_s, lower_delay_s, return_delay_s, max_shelve_s,
+             allow_remote_acknowledge, state_file, trend}
 
 Reconnect backoff is the link's: ``link.reconnect: {backoff_initial_s, backoff_max_s,
 stall_timeout_s}`` (see `fdi_daemon.io.links.base`).
@@ -44,10 +46,12 @@ from pathlib import Path
 from typing import Any
 
 
+from fdi_daemon.alarms.lifecycle import AlarmSettings
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.yaml_file import read_yaml
 
-__all__ = ["RigConfig", "load_config", "config_from_dict", "default_config_path", "SCHEMA"]
+__all__ = ["RigConfig", "load_config", "config_from_dict", "default_config_path",
+           "default_state_dir", "SCHEMA"]
 
 LINK_KINDS = ("serial", "modbus-tcp", "modbus-rtu", "replay", "sim")
 SIM_TRANSPORTS = ("modbus-tcp", "modbus-rtu", "serial")
@@ -100,6 +104,11 @@ def _listen(v: Any) -> str | None:
     if sep and host and port.isdigit() and int(port) <= 65535:
         return None
     return "must be HOST:PORT, e.g. 127.0.0.1:9108 (port 0 = any free port)"
+def _steps(v: Any) -> str | None:
+    ok = (v and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                    and 0 < x < math.inf for x in v)
+          and all(a < b for a, b in zip(v, v[1:])))
+    return None if ok else "must be a list of positive, increasing levels"
 
 
 def _one_of(*choices: str) -> Callable[[Any], str | None]:
@@ -108,6 +117,7 @@ def _one_of(*choices: str) -> Callable[[Any], str | None]:
     return check
 
 
+_ALARM = AlarmSettings()  # the alarm defaults
 NUM = (int, float)
 STR = (str,)
 BOOL = (bool,)
@@ -194,6 +204,31 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "listen": Field(STR, None, "HOST:PORT of the Prometheus exporter; null = off",
                         _listen, nullable=True),
     },
+    "alarms": {
+        "steps": Field((list,), _ALARM.steps, "friction levels above the baseline (units "
+                                                  "of the signature) that step the alarm "
+                                                  "priority up", _steps),
+        "deadband": Field(NUM, _ALARM.deadband, "a priority falls only below its step minus this",
+                          _non_negative),
+        "raise_delay_s": Field(NUM, _ALARM.raise_delay_s, "the level stays above a step this long before the "
+                                         "priority rises", _non_negative),
+        "lower_delay_s": Field(NUM, _ALARM.lower_delay_s, "... below step - deadband this long before it "
+                                           "falls", _non_negative),
+        "return_delay_s": Field(NUM, _ALARM.return_delay_s, "detector cleared and level back at the "
+                                            "baseline (moving time) this long before the "
+                                            "alarm returns to normal", _non_negative),
+        "return_level": Field(NUM, _ALARM.return_level, "level above the baseline under which the fault "
+                                        "counts as gone", _positive),
+        "max_shelve_s": Field(NUM, _ALARM.max_shelve_s, "longest shelving", _positive),
+        "smoothing_s": Field(NUM, _ALARM.smoothing_s, "time constant of the level smoothing the alarm "
+                                        "decides on", _non_negative),
+        "allow_remote_acknowledge": Field(BOOL, False, "accept acknowledge/shelve requests "
+                                                       "on the status socket and Modbus"),
+        "state_file": Field(STR, "state.json", "alarm state kept across restarts; null "
+                                               "disables", nullable=True),
+        "trend": Field(STR, "trend.sqlite", "friction trend, one row per minute; null "
+                                            "disables", nullable=True),
+    },
     "simulated_device": {
         "transport": Field(STR, "modbus-tcp", "fake device protocol: modbus-tcp | "
                                               "modbus-rtu | serial (pty)",
@@ -205,7 +240,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
 }
 
 TOP_LEVEL = ("link", "simulated_device", "model", "monitor", "sinks", "recorder", "service",
-             "mqtt", "metrics")
+             "mqtt", "metrics", "alarms")
 #: keys that would put a secret into the YAML, refused with where to put it instead
 SECRET_KEYS = ("password", "passwd", "secret")
 
@@ -225,6 +260,7 @@ class RigConfig:
     service: dict[str, Any]
     mqtt: dict[str, Any]
     metrics: dict[str, Any]
+    alarms: dict[str, Any]
 
     @property
     def state_dir(self) -> Path:
@@ -287,7 +323,7 @@ def config_from_dict(data: Any, source: str = "config",
         model_path=model_path, monitor=_monitor(data.get("monitor"), source),
         sinks=_section(data, "sinks", source), recorder=_section(data, "recorder", source),
         service=_section(data, "service", source), mqtt=_mqtt(data, source, base_dir),
-        metrics=_section(data, "metrics", source))
+        metrics=_section(data, "metrics", source), alarms=_alarms(data, source))
 
 
 def _mqtt(data: Mapping, source: str, base_dir: Path) -> dict[str, Any]:
@@ -313,6 +349,19 @@ def _beside(value: str | None, base_dir: Path) -> str | None:
         return None
     path = Path(value).expanduser()
     return str(path if path.is_absolute() else base_dir / path)
+
+
+def _alarms(data: Mapping, source: str) -> dict[str, Any]:
+    """The alarms section; its settings checked together (deadband below the lowest step)."""
+    alarms = _section(data, "alarms", source)
+    alarms["steps"] = tuple(float(x) for x in alarms["steps"])
+    try:
+        alarms["settings"] = AlarmSettings(**{k: alarms[k] for k in (
+            "steps", "deadband", "raise_delay_s", "lower_delay_s", "return_delay_s",
+            "max_shelve_s", "smoothing_s", "return_level")})
+    except ValueError as exc:
+        raise ConfigError(f"{source}: alarms: {exc}") from None
+    return alarms
 
 
 def _no_unknown(data: Mapping, known: tuple[str, ...] | Mapping, prefix: str,

@@ -8,6 +8,10 @@ config and the model: the new set is built first and swapped in only if it build
 otherwise the daemon logs why and keeps running on the old one. A reload restarts the
 monitor (it calibrates again) and reopens the link and the sinks; a simulated device keeps
 running.
+
+The alarm (`AlarmKeeper`: lifecycle, trend minute) and the event counters outlive a reload
+(the same object goes on, unless the new model gives the level another unit) and a restart
+(the state file in the state directory, `fdi_daemon.service.state_file`).
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from __future__ import annotations
 import gc
 import logging
 import signal
+import sqlite3
 import sys
 import threading
 import time
@@ -24,6 +29,7 @@ from typing import Any
 from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.io.model_file import FdiModel, load_model
 from fdi_daemon.io.sample import Sample
+from fdi_daemon.service.alarm_keeper import AlarmKeeper
 from fdi_daemon.service.config import RigConfig, check_link, load_config
 from fdi_daemon.service.loop import ServiceLoop
 from fdi_daemon.service.notify import Notifier, watchdog_period_s
@@ -31,6 +37,8 @@ from fdi_daemon.service.recorder import Recorder
 from fdi_daemon.service.sinks import (EventLog, ModbusStatusServer, PriorityFormatter,
                                       StatusBoard, StatusSocketServer, StdoutLog, Worker,
                                       journald_attached, stamp_event)
+from fdi_daemon.service.state_file import model_identity, read_state, write_state
+from fdi_daemon.service.trend import open_trend_store
 
 log = logging.getLogger("fdi.daemon")
 
@@ -53,7 +61,7 @@ class Sinks:
     """
 
     def __init__(self, config: RigConfig, fs_hz: float, link_kind: str,
-                 board: StatusBoard) -> None:
+                 board: StatusBoard, keeper: AlarmKeeper | None = None) -> None:
         self.board = board
         sinks = config.sinks
         self.event_log = None
@@ -65,15 +73,19 @@ class Sinks:
         self.recorder_worker = None
         self.mqtt = None
         self.metrics = None
+        self.state_path = config.output_path(config.alarms["state_file"])
+        self.trend_store = None
+        requests = None if keeper is None else keeper.handle
         try:
             if (path := config.output_path(sinks["event_log"])) is not None:
                 self.event_log = EventLog(path)
             if (path := config.output_path(sinks["status_socket"])) is not None:
-                self.status_server = StatusSocketServer(path, board)
+                self.status_server = StatusSocketServer(path, board, requests=requests)
             mb = sinks["modbus_status"]
             if mb["enabled"]:
-                self.modbus_server = ModbusStatusServer(board, mb["host"], mb["port"],
-                                                        mb["device_id"])
+                self.modbus_server = ModbusStatusServer(
+                    board, mb["host"], mb["port"], mb["device_id"],
+                    requests=requests if config.alarms["allow_remote_acknowledge"] else None)
                 log.info("Modbus status registers on %s:%d (device id %d)", mb["host"],
                          self.modbus_server.port, mb["device_id"])
             rec = config.recorder
@@ -92,7 +104,11 @@ class Sinks:
 
                 self.metrics = MetricsServer(board, config.metrics["listen"], self.mqtt,
                                              config.source)
-        except OSError as exc:
+            if keeper is not None and (path := config.output_path(
+                    config.alarms["trend"])) is not None:
+                self.trend_store = open_trend_store(
+                    path, {"steps": list(config.alarms["steps"]), "model": keeper.model})
+        except (OSError, sqlite3.Error) as exc:
             self.close()
             raise ConfigError(f"{config.source}: cannot open an output: {exc}") from None
         except UserError:
@@ -116,6 +132,14 @@ class Sinks:
         if self.recorder_worker is not None:
             self.recorder_worker.put(None)  # an idle recorder still fsyncs on time
 
+    def alarm_state(self, state: dict) -> None:
+        if self.state_path is not None:
+            self.worker.put(("state", state), critical=True)
+
+    def trend(self, row: dict) -> None:
+        if self.trend_store is not None:
+            self.worker.put(("trend", row), critical=True)
+
     def dropped(self) -> int:
         return (sum(w.dropped for w in (self.worker, self.recorder_worker) if w is not None)
                 + (self.mqtt.dropped() if self.mqtt is not None else 0))
@@ -127,6 +151,16 @@ class Sinks:
             self.board.publish(payload)
             if self.mqtt is not None:
                 self.mqtt.status(payload)
+            return
+        if kind in ("state", "trend"):
+            try:
+                if kind == "state":
+                    write_state(self.state_path, payload)
+                else:
+                    self.trend_store.append(payload)
+            except (OSError, sqlite3.Error) as exc:  # the disk failed: say so, go on
+                log.error("cannot write the %s: %s", "state file" if kind == "state"
+                          else "trend", exc)
             return
         stamped = stamp_event(payload)
         if self.mqtt is not None:
@@ -149,11 +183,11 @@ class Sinks:
             if worker is not None:
                 worker.close()
         for thing in (self.recorder, self.event_log, self.status_server, self.modbus_server,
-                      self.mqtt, self.metrics):
+                      self.mqtt, self.metrics, self.trend_store):
             if thing is not None:
                 try:
                     thing.close()
-                except OSError as exc:
+                except (OSError, sqlite3.Error) as exc:
                     log.error("closing %s: %s", type(thing).__name__, exc)
 
 
@@ -219,6 +253,7 @@ class Daemon:
         self.loop: ServiceLoop | None = None
         self.sinks: Sinks | None = None
         self.link = None
+        self.keeper: AlarmKeeper | None = None
         self._wake = threading.Event()
         self._stopping = False
         self._reload = False
@@ -237,13 +272,17 @@ class Daemon:
         from fdi_daemon.io.links.base import make_reconnecting_link
 
         link = make_reconnecting_link(link_config)
-        sinks = Sinks(config, model.fs, link_config["kind"], self.board)
+        keeper = self.alarm_keeper(config, model)
+        sinks = Sinks(config, model.fs, link_config["kind"], self.board, keeper)
         model_info = {"path": str(config.model_path), "provenance": model.provenance}
+        counts = self.loop.event_counts if self.loop is not None else keeper.event_counts
         loop = ServiceLoop(
             link, monitor, sinks, fs_hz=model.fs, deadline_s=config.service["deadline_s"],
             read_timeout_s=config.service["read_timeout_s"],
             status_period_s=config.service["status_period_s"], model_info=model_info,
-            notifier=self.notifier, watchdog_period_s=watchdog_period_s())
+            notifier=self.notifier, watchdog_period_s=watchdog_period_s(), alarms=keeper,
+            event_counts=counts)
+        self.keeper = keeper
         if sinks.metrics is not None:
             sinks.metrics.watch(loop)
         return loop, sinks, link
@@ -254,6 +293,28 @@ class Daemon:
         if self.state_dir is not None:
             config.service["state_dir"] = str(self.state_dir)
         return config
+
+    def alarm_keeper(self, config: RigConfig, model: FdiModel) -> AlarmKeeper:
+        """The alarm of this model: the running one (a reload), the state file's (a
+        restart), or a fresh one; with the config's settings."""
+        identity = model_identity(model)
+        alarms = config.alarms
+        keeper = self.keeper
+        if keeper is not None and keeper.model == identity:
+            keeper.reconfigure(alarms["settings"], alarms["allow_remote_acknowledge"])
+            return keeper
+        if keeper is not None:
+            log.warning("the reloaded model gives the friction level another unit (fs, plant "
+                        "or fault filter changed): the alarm state starts afresh")
+        path = config.output_path(alarms["state_file"])
+        stored = read_state(path, identity) if path is not None else None
+        try:
+            return AlarmKeeper(alarms["settings"], identity, stored=stored,
+                               allow_remote=alarms["allow_remote_acknowledge"])
+        except ValueError as exc:
+            log.warning("state file %s: %s: refused, starting with a fresh state", path, exc)
+            return AlarmKeeper(alarms["settings"], identity,
+                               allow_remote=alarms["allow_remote_acknowledge"])
 
     def link_config(self, config: RigConfig) -> dict[str, Any]:
         if config.simulated_device is None:

@@ -18,6 +18,18 @@ Timing (monotonic clock only):
   `MISS_LOG_PERIOD_S`, with both figures.
 Both go into log-spaced histograms (p50/p99 in the status snapshot).
 
+Alarms. With an `AlarmKeeper` (``alarms=``), every detector event and every status
+refresh also feed the alarm lifecycle; its events go out like the monitor's (critical
+lane), followed by the state to persist (``outputs.alarm_state``); a finished trend minute
+goes to ``outputs.trend``. Acknowledge/shelve requests answered by the servers are emitted
+from here too (`AlarmKeeper.take_pending`). ``event_counts`` continue the counts of the
+previous run (the state file) or of the loop before a reload.
+
+Watchdog. ``WATCHDOG=1`` every ``watchdog_period_s`` for as long as the loop iterates,
+samples or not: it means "the process and its loop are alive". A link that delivers
+nothing is a status (``link.connected``) and a ``link_lost`` / ``link_restored`` pair,
+never a restart by systemd.
+
 Sequence check. Gaps and duplicates are the monitor's to handle (`Monitor.step` sees
 ``seq``: a jump forward gives a ``data_gap`` event and restarts its estimator, a repeat or
 small step back is a ``bad_sample`` and skipped); the loop counts them for the status. A step
@@ -48,6 +60,8 @@ RESTART_STEP_SAMPLES = 256
 #: a deadline miss is logged at most this often (s); the counters count every one
 MISS_LOG_PERIOD_S = 10.0
 ALARM_STATES = ("fault_detected", "friction_isolated", "other_fault")
+#: monitor events that drive the alarm lifecycle
+ALARM_INPUTS = frozenset(ALARM_STATES + ("cleared",))
 
 
 class LatencyHistogram:
@@ -133,6 +147,9 @@ class Outputs(Protocol):
     def samples(self, samples: list[Sample]) -> None: ...
     def status(self, snapshot: dict) -> None: ...
     def dropped(self) -> int: ...
+    # only called when the loop has an AlarmKeeper:
+    def alarm_state(self, state: dict) -> None: ...
+    def trend(self, row: dict) -> None: ...
 
 
 class ServiceLoop:
@@ -142,6 +159,7 @@ class ServiceLoop:
                  deadline_s: float = 0.05, read_timeout_s: float = 0.05,
                  status_period_s: float = 0.1, model_info: dict | None = None,
                  notifier: Any = None, watchdog_period_s: float | None = None,
+                 alarms: Any = None, event_counts: dict[str, int] | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.link = link
         self.monitor = monitor
@@ -153,6 +171,7 @@ class ServiceLoop:
         self.model_info = model_info or {}
         self.notifier = notifier
         self.watchdog_period_s = watchdog_period_s
+        self.alarms = alarms
         self._clock = clock
         self.started_mono = clock()
         self.tick_latency = LatencyHistogram()
@@ -167,7 +186,7 @@ class ServiceLoop:
         self.deadline_misses = 0
         self.late_arrivals = 0
         self._next_miss_log = -math.inf
-        self.event_counts: collections.Counter = collections.Counter()
+        self.event_counts: collections.Counter = collections.Counter(event_counts or {})
         self.recent_events: collections.deque = collections.deque(maxlen=20)
         self.last_t = math.nan
         self._last_seq: int | None = None
@@ -193,6 +212,10 @@ class ServiceLoop:
         for event in self.monitor.finish():  # e.g. a run of bad samples still open
             self._emit(event)
         self.publish_status(force=True)
+        if self.alarms is not None:
+            if (row := self.alarms.trend.flush()) is not None:  # the minute in progress
+                self.outputs.trend(row)
+            self.outputs.alarm_state(self.alarms.state(self.event_counts))
 
     def iterate(self) -> int:
         """One read and everything that follows; returns the number of samples handled."""
@@ -202,8 +225,12 @@ class ServiceLoop:
             self._emit(event)
         for sample in batch:
             self._handle(self._renumbered(sample), received)
+        if self.alarms is not None:
+            self._emit_alarm_events(self.alarms.take_pending())
         if batch:
             self.outputs.samples(batch)
+            if self.alarms is not None and (row := self.alarms.samples(batch)) is not None:
+                self._trend(row)
             self._last_sample_mono = self._clock()
             self._rate_marks.append((self._last_sample_mono, self.samples))
         now = self._clock()
@@ -271,13 +298,26 @@ class ServiceLoop:
         self.event_counts[kind] += 1
         self.recent_events.append(event)
         self.outputs.event(event)
+        if self.alarms is not None and kind in ALARM_INPUTS:
+            self._emit_alarm_events(self.alarms.detector_event(event))
+
+    def _emit_alarm_events(self, events: list[dict]) -> None:
+        """Lifecycle events, then the state that includes them (critical lane)."""
+        for event in events:
+            self._emit(event)
+        if events:
+            self.outputs.alarm_state(self.alarms.state(self.event_counts))
+
+    def _trend(self, row: dict) -> None:
+        """A finished trend minute, and the state once a minute with it."""
+        self.outputs.trend(row)
+        self.outputs.alarm_state(self.alarms.state(self.event_counts))
 
     # ------------------------------------------------------------------ watchdog, status
     def _feed_watchdog(self, now: float) -> None:
         if self.notifier is None or not self.watchdog_period_s:
             return
-        if (now - self._last_watchdog >= self.watchdog_period_s
-                and now - self._last_sample_mono < self.watchdog_period_s):
+        if now - self._last_watchdog >= self.watchdog_period_s:
             self.notifier.watchdog()
             self._last_watchdog = now
 
@@ -325,6 +365,7 @@ class ServiceLoop:
             "monitor": monitor,
             "alarms": list(self.recent_events),
             "model": self.model_info,
+            "alarm": self.alarms.summary() if self.alarms is not None else None,
             "counters": dict(self.event_counts),
             "uptime_s": self._clock() - self.started_mono,
             "dropped_outputs": self.outputs.dropped(),
@@ -334,6 +375,11 @@ class ServiceLoop:
         now = self._clock()
         self._next_status = now + self.status_period_s
         snap = self.snapshot()
+        if self.alarms is not None:
+            events, row = self.alarms.status(snap)
+            self._emit_alarm_events(events)
+            if row is not None:
+                self._trend(row)
         self.outputs.status(snap)
         if self.notifier is not None:
             text = self.status_text(snap)

@@ -6,8 +6,9 @@ Without ``NOTIFY_SOCKET`` (not started by systemd) every call is a no-op. A fail
 logged (once per kind of failure, then counted), never silently swallowed.
 
 The watchdog (``WatchdogSec=`` in the unit, ``$WATCHDOG_USEC`` here) is fed by the loop
-only while samples flow: a daemon that is alive but receives no data stops pinging, and
-systemd restarts it.
+every half period for as long as it runs, samples or not: it means "the process and its
+loop are alive". A field link that delivers nothing is a status and a ``link_lost`` event,
+not a reason for systemd to restart the daemon.
 """
 
 from __future__ import annotations

@@ -8,11 +8,16 @@ status snapshots to a `StatusBoard`, and the two servers answer from the board.
 - `EventLog`: JSON Lines, append-only; every line is flushed, alarm lines are also
   fsynced, and the file is fsynced at least once a second otherwise. Lines are events
   stamped by `stamp_event` (``time``: RFC 3339 wall clock; ``schema``).
+  fsynced, and the file is fsynced at least once a second otherwise. Before each line it
+  checks that its path still names the open file (logrotate renamed or removed it: the
+  file is reopened, no reload needed); ``reopen()`` does it on request (SIGUSR1).
 - `StdoutLog`: one clear line per event; under journald (``$JOURNAL_STREAM`` set) each line
   starts with a ``<N>`` syslog priority so that ``journalctl -p warning`` finds alarms.
 - `StatusSocketServer`: a Unix stream socket (mode 0660). On connect the server sends one
   JSON line (the latest status snapshot, TEAM.md schema); every line the client sends
-  afterwards is answered with one more; the server closes when the client does.
+  afterwards is answered with one more; the server closes when the client does. A line
+  that is a JSON object with a ``request`` (acknowledge, shelve, unshelve) is answered with
+  the request's JSON result instead (`StatusSocketServer.requests`).
 - `ModbusStatusServer`: Modbus TCP (pymodbus), bound to 127.0.0.1 unless configured;
   registers in `STATUS_REGISTERS`, documented in ``docs/status_registers.md``.
 """
@@ -35,17 +40,20 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TextIO
 
+from fdi_daemon.alarms.lifecycle import LIFECYCLE_KINDS
 from fdi_daemon.detect.events import ALARM_KINDS as EVENT_ALARM_KINDS
 from fdi_daemon.detect.events import EVENT_SCHEMA
 
 log = logging.getLogger("fdi.sinks")
 
 #: events that are alarms: fsynced at once, never dropped, logged as warnings
-ALARM_KINDS = frozenset(EVENT_ALARM_KINDS)
+ALARM_KINDS = frozenset(EVENT_ALARM_KINDS) | frozenset(LIFECYCLE_KINDS)
 #: syslog priorities for the journald prefix
 PRIORITY = {"fault_detected": 4, "friction_isolated": 4, "other_fault": 4, "link_lost": 4,
             "cleared": 5, "link_restored": 5, "data_gap": 5, "bad_sample": 5,
-            "calibrated": 6}
+            "calibrated": 6, "alarm_raised": 4, "alarm_priority": 4,
+            "alarm_acknowledged": 5, "alarm_shelved": 5, "alarm_unshelved": 5,
+            "alarm_returned": 5}
 
 
 def json_safe(value: Any) -> Any:
@@ -171,8 +179,27 @@ class EventLog:
         self.fsync_period_s = fsync_period_s
         self._last_fsync = time.monotonic()
         self.written = 0
+        self.reopened = 0
+
+    def _rotated(self) -> bool:
+        """True when the path no longer names the open file (renamed or removed)."""
+        try:
+            on_disk = os.stat(self.path)
+        except FileNotFoundError:
+            return True
+        here = os.fstat(self._fh.fileno())
+        return (on_disk.st_dev, on_disk.st_ino) != (here.st_dev, here.st_ino)
+
+    def reopen(self) -> None:
+        """Close the open file (flushed, fsynced) and open the path again (append)."""
+        self.close()
+        self._fh = open(self.path, "a", encoding="utf-8")
+        self.reopened += 1
+        log.info("event log %s reopened", self.path)
 
     def write(self, event: dict) -> None:
+        if self._rotated():
+            self.reopen()
         self._fh.write(json_line(event))
         self._fh.flush()
         self.written += 1
@@ -292,9 +319,11 @@ class StatusSocketServer:
 
     CLIENT_TIMEOUT_S = 30.0
 
-    def __init__(self, path: str | Path, board: StatusBoard, mode: int = 0o660) -> None:
+    def __init__(self, path: str | Path, board: StatusBoard, mode: int = 0o660,
+                 requests: Callable[[dict[str, Any]], dict[str, Any]] | None = None) -> None:
         self.path = Path(path)
         self.board = board
+        self.requests_handler = requests
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.is_socket():
             self.path.unlink()  # a stale socket from a previous run
@@ -336,15 +365,32 @@ class StatusSocketServer:
                         return
                     buffer += chunk
                     while b"\n" in buffer:
-                        _, buffer = buffer.split(b"\n", 1)
+                        line, buffer = buffer.split(b"\n", 1)
                         self.requests += 1
-                        conn.sendall(self.board.line())
+                        conn.sendall(self._answer(line))
                     if len(buffer) > 65536:
                         return  # not a status client
         except (TimeoutError, ConnectionError, BrokenPipeError):
             return
         except OSError as exc:
             log.warning("status socket client: %s", exc)
+
+    def _answer(self, line: bytes) -> bytes:
+        """The snapshot, or the result of a ``{"request": ...}`` line."""
+        if not line.lstrip().startswith(b"{"):
+            return self.board.line()
+        try:
+            request = json.loads(line)
+            action = request["request"]
+        except (ValueError, TypeError, KeyError):
+            return json_line({"ok": False, "error": "a request is a JSON object with "
+                                                    "\"request\": acknowledge | shelve | "
+                                                    "unshelve"}).encode()
+        if self.requests_handler is None:
+            return json_line({"ok": False, "error": "this daemon takes no requests"}).encode()
+        duration = request.get("duration_s")
+        return json_line(self.requests_handler(
+            {"request": action, "duration_s": duration, "by": "status socket"})).encode()
 
     def close(self) -> None:
         self._stop.set()
@@ -365,12 +411,12 @@ STATE_CODES = {"starting": 0, "calibrating": 1, "monitoring": 2, "fault_detected
 #: (name, first register, type, meaning). Types: u16; u32/f32 in 2 registers and f64 in 4,
 #: high word first; bytes within a register big endian (Modbus). NaN: value not available.
 STATUS_REGISTERS: tuple[tuple[str, int, str, str], ...] = (
-    ("map_version", 0, "u16", "version of this register map (1)"),
+    ("map_version", 0, "u16", "version of this register map (2)"),
     ("state", 1, "u16", "0 starting, 1 calibrating, 2 monitoring, 3 fault_detected, "
                         "4 friction_isolated, 5 other_fault"),
     ("link_connected", 2, "u16", "1 while the data link is up"),
     ("heartbeat", 3, "u16", "+1 at every status refresh (10 Hz by default), wraps at 65536"),
-    ("alarm_active", 4, "u16", "1 in states fault_detected, friction_isolated, other_fault"),
+    ("alarm_active", 4, "u16", "1 while an alarm is raised and not shelved"),
     ("theta1", 5, "f32", "θ1 estimate (Coulomb term, eq. 15)"),
     ("theta2", 7, "f32", "θ2 estimate (viscous term, eq. 15)"),
     ("friction_level", 9, "f32", "friction level from the monitor"),
@@ -390,8 +436,20 @@ STATUS_REGISTERS: tuple[tuple[str, int, str, str], ...] = (
     ("link_lost_count", 39, "u32", "link_lost events since start"),
     ("uptime_s", 41, "u32", "seconds since the daemon started"),
     ("dropped_outputs", 43, "u32", "non-critical sink items dropped (queue full)"),
+    ("baseline_level", 45, "f32", "fault-free friction level of the model's baseline, "
+                                  "units of the signature (NaN: the model has none)"),
+    ("alarm_state", 47, "u16", "0 normal, 1 unacknowledged, 2 acknowledged, "
+                               "3 returned unacknowledged, 4 shelved"),
+    ("alarm_priority", 48, "u16", "0 none, 1..3: alarm steps crossed (alarms.steps)"),
+    ("alarm_id", 49, "u32", "number of the current (or last) alarm; +1 at every new alarm"),
+    ("alarm_command", 51, "u16", "write 1 = acknowledge, 2 = unshelve (if "
+                                 "alarms.allow_remote_acknowledge); reads 0"),
+    ("shelve_minutes", 52, "u16", "write N = shelve the alarm N minutes; reads the "
+                                  "minutes of shelving left"),
 )
-STATUS_REGISTER_COUNT = 45
+STATUS_REGISTER_COUNT = 53
+#: writable registers: name -> address
+COMMAND_REGISTERS = {"alarm_command": 51, "shelve_minutes": 52}
 _SIZES = {"u16": 1, "u32": 2, "f32": 2, "f64": 4}
 _FORMATS = {"u16": ">H", "u32": ">I", "f32": ">f", "f64": ">d"}
 
@@ -403,12 +461,15 @@ def status_values(snapshot: dict[str, Any], heartbeat: int) -> dict[str, float |
     counters = snapshot.get("counters") or {}
     state = snapshot.get("state", "starting")
     latency = link.get("tick_latency_us") or {}
+    alarm = snapshot.get("alarm")
+    shelved_until = (alarm or {}).get("shelved_until")
     return {
-        "map_version": 1,
+        "map_version": 2,
         "state": STATE_CODES.get(state, 0),
         "link_connected": int(bool(link.get("connected"))),
         "heartbeat": heartbeat,
-        "alarm_active": int(state in ("fault_detected", "friction_isolated", "other_fault")),
+        "alarm_active": (int(bool(alarm.get("annunciated"))) if alarm else
+                         int(state in ("fault_detected", "friction_isolated", "other_fault"))),
         "theta1": monitor.get("theta1"),
         "theta2": monitor.get("theta2"),
         "friction_level": monitor.get("friction_level"),
@@ -428,6 +489,13 @@ def status_values(snapshot: dict[str, Any], heartbeat: int) -> dict[str, float |
         "link_lost_count": counters.get("link_lost", 0),
         "uptime_s": snapshot.get("uptime_s", 0),
         "dropped_outputs": snapshot.get("dropped_outputs", 0),
+        "baseline_level": (alarm or {}).get("baseline_level"),
+        "alarm_state": (alarm or {}).get("state_code", 0),
+        "alarm_priority": (alarm or {}).get("priority", 0),
+        "alarm_id": (alarm or {}).get("alarm_id", 0),
+        "alarm_command": 0,
+        "shelve_minutes": (math.ceil(max(0.0, shelved_until - snapshot.get("time", 0)) / 60)
+                           if isinstance(shelved_until, (int, float)) else 0),
     }
 
 
@@ -459,12 +527,17 @@ class ModbusStatusServer:
     """Modbus TCP server of the status registers (holding and input registers alike).
 
     Every read refreshes the block from the status board, so a client always sees the
-    latest snapshot. Writes are refused (read-only registers).
+    latest snapshot. Writes are refused (exception 1), except to `COMMAND_REGISTERS` when
+    ``requests`` is given: 1 to ``alarm_command`` acknowledges, 2 unshelves, N > 0 to
+    ``shelve_minutes`` shelves for N minutes; a request refused by the alarm is answered
+    with exception 3 (illegal data value).
     """
 
     def __init__(self, board: StatusBoard, host: str = "127.0.0.1", port: int = 5020,
-                 device_id: int = 1) -> None:
+                 device_id: int = 1,
+                 requests: Callable[[dict[str, Any]], dict[str, Any]] | None = None) -> None:
         self.board = board
+        self.requests_handler = requests
         self.host = host
         self.device_id = device_id
         self.port = port
@@ -495,10 +568,33 @@ class ModbusStatusServer:
         from pymodbus.constants import ExcCodes
 
         if set_values is not None:
-            return ExcCodes.ILLEGAL_FUNCTION
+            return self._command(address, list(set_values))
         values = status_values(self.board.snapshot(), self.board.updates & 0xFFFF)
         registers[:STATUS_REGISTER_COUNT] = encode_status(values)
         self.reads += 1
+        return None
+
+    def _command(self, address: int, values: list[int]):
+        """A write to the command registers (see the class docstring)."""
+        from pymodbus.constants import ExcCodes
+
+        commands = {COMMAND_REGISTERS["alarm_command"]: {1: "acknowledge", 2: "unshelve"}}
+        if self.requests_handler is None or len(values) != 1 \
+                or address not in COMMAND_REGISTERS.values():
+            return ExcCodes.ILLEGAL_FUNCTION
+        value = int(values[0])
+        if address == COMMAND_REGISTERS["shelve_minutes"]:
+            request = {"request": "shelve", "duration_s": 60.0 * value} if value > 0 else None
+        else:
+            action = commands[address].get(value)
+            request = None if action is None else {"request": action, "duration_s": None}
+        if request is None:
+            return ExcCodes.ILLEGAL_VALUE
+        answer = self.requests_handler({**request, "by": "modbus"})
+        if not answer.get("ok"):
+            log.info("Modbus alarm request %s refused: %s", request["request"],
+                     answer.get("error"))
+            return ExcCodes.ILLEGAL_VALUE
         return None
 
     def _run(self) -> None:

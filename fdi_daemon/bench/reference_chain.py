@@ -33,6 +33,17 @@ def _iir(b, a, z, x):
     return y
 
 
+@njit(cache=True, inline="always")
+def _accumulate(sums, q1, q2, qy, weight):
+    """Add (weight 1) or remove (weight -1) one sample's products to the six sums."""
+    sums[0] += weight * q1 * q1
+    sums[1] += weight * q1 * q2
+    sums[2] += weight * q2 * q2
+    sums[3] += weight * q1 * qy
+    sums[4] += weight * q2 * qy
+    sums[5] += weight * qy * qy
+
+
 @njit(cache=True)
 def _tick(b, a, z, ring, sums, idx, v_in, accel, out):
     """One sample of the chain; θ in out[0], out[1] (NaN until the window is full)."""
@@ -45,35 +56,18 @@ def _tick(b, a, z, ring, sums, idx, v_in, accel, out):
     n = ring.shape[0]
     pos = idx[0]
     if idx[1] == n:  # drop the oldest sample's products
-        o1, o2, oy = ring[pos, 0], ring[pos, 1], ring[pos, 2]
-        sums[0] -= o1 * o1
-        sums[1] -= o1 * o2
-        sums[2] -= o2 * o2
-        sums[3] -= o1 * oy
-        sums[4] -= o2 * oy
-        sums[5] -= oy * oy
+        _accumulate(sums, ring[pos, 0], ring[pos, 1], ring[pos, 2], -1.0)
     else:
         idx[1] += 1
     ring[pos, 0], ring[pos, 1], ring[pos, 2] = g1, g2, r
-    sums[0] += g1 * g1
-    sums[1] += g1 * g2
-    sums[2] += g2 * g2
-    sums[3] += g1 * r
-    sums[4] += g2 * r
-    sums[5] += r * r
+    _accumulate(sums, g1, g2, r, 1.0)
     pos += 1
     if pos == n:  # exact refresh once per window: no drift
         pos = 0
         for j in range(6):
             sums[j] = 0.0
         for k in range(n):
-            q1, q2, qy = ring[k, 0], ring[k, 1], ring[k, 2]
-            sums[0] += q1 * q1
-            sums[1] += q1 * q2
-            sums[2] += q2 * q2
-            sums[3] += q1 * qy
-            sums[4] += q2 * qy
-            sums[5] += qy * qy
+            _accumulate(sums, ring[k, 0], ring[k, 1], ring[k, 2], 1.0)
     idx[0] = pos
     det = sums[0] * sums[2] - sums[1] * sums[1]
     if idx[1] < n or det <= 0.0:

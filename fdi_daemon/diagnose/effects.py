@@ -41,7 +41,7 @@ from scipy.optimize import minimize_scalar
 
 EFFECT_NAMES = ("coulomb_friction", "viscous_friction", "stribeck_friction", "cubic_stiffness",
                 "dead_time", "input_saturation", "output_saturation", "dead_zone", "backlash",
-                "sensor_offset")
+                "sensor_offset", "force_offset")
 
 
 # ----------------------------------------------------------------------------- regressor blocks
@@ -208,14 +208,22 @@ SPECS: dict[str, EffectSpec] = {
         lambda p, c: BacklashRegressor(p),
         lambda c: np.ptp(c.u[c.split.fit]) * np.array([0.005, 0.01, 0.02, 0.04, 0.07, 0.1,
                                                        0.15, 0.2, 0.3])),
+    "force_offset": EffectSpec("force_offset", "state", True, None, "",
+                               lambda p, c: _Static(lambda u, v, x, y0: [np.ones_like(u)])),
     "sensor_offset": EffectSpec("sensor_offset", "output", False, None, "",
                                 lambda p, c: _Static(lambda u, v, x, y0: [np.ones_like(u)])),
+    # not a candidate: in the force loop with any force effect (`force.in_the_loop`)
+    "loop_stiffness": EffectSpec("loop_stiffness", "state", True, None, "",
+                                 lambda p, c: _Static(lambda u, v, x, y0: [x])),
     # not a candidate: with a fitted linear baseline, the baseline's numerator is refitted
     # together with every candidate (the baseline absorbed part of the missing effect)
     "linear_refit": EffectSpec("linear_refit", "input", True, None, "",
                                lambda p, c: _Static(lambda u, v, x, y0: [u])),
 }
 
+
+#: terms of the base, never named: the nominal numerator refit and the force loop's spring
+BASE_TERMS = ("linear_refit", "loop_stiffness")
 
 #: static input maps that act around the input's operating point (its training median)
 CENTRED = ("input_saturation", "dead_zone")
@@ -239,6 +247,8 @@ class Context:
     max_delay_samples: int
     u_centre: float = 0.0  # operating point of the input maps (median training input)
     candidates: tuple[str, ...] = EFFECT_NAMES
+    chain: tuple = ()  # (n, b, a, fs) of the state chain (`signals.StateChain.coefficients`)
+    highpass_hz: float = 1.0
     cache: dict = field(default_factory=dict, repr=False)
 
     def centre(self, spec: "EffectSpec") -> float:
@@ -280,6 +290,7 @@ class FittedEffect:
     n_linear: int = 0
     physical: dict[str, Any] = field(default_factory=dict)
     centre: float = 0.0  # operating point of a centred static map
+    n_free: int | None = None  # fitted numbers when fewer than the coefficients (force loop)
 
     def regressor(self) -> Regressor:
         """A fresh streaming regressor block with this effect's parameters."""
@@ -287,7 +298,8 @@ class FittedEffect:
 
     @property
     def n_params(self) -> int:
-        return self.n_linear + (0 if self.param is None else 1)
+        free = self.n_linear if self.n_free is None else self.n_free
+        return free + (0 if self.param is None else 1)
 
 
 def stored_param(spec: EffectSpec, param: float | None, fs_hz: float) -> float | None:

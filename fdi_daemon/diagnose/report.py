@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from fdi_daemon.diagnose.effects import BASE_TERMS
+
 from typing import Any
 
 from fdi_daemon.diagnose.select import ALPHA
@@ -14,7 +16,7 @@ def build_report(result, source: str = "") -> dict[str, Any]:
     ctx = result.ctx
     test = ctx.split.test
     y = result.y_measured
-    named = [e for e in result.selection.chosen if e.name != "linear_refit"]
+    named = [e for e in result.selection.chosen if e.name not in BASE_TERMS]
     rounds = []
     for candidates in result.selection.rounds:
         rows = []

@@ -30,6 +30,7 @@ from scipy import stats
 
 from fdi_daemon.diagnose.effects import (SPECS, Context, FittedEffect, NotApplicable, columns,
                                          fit_effect)
+from fdi_daemon.diagnose.force import FORCE_EFFECTS, in_the_loop
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
 #: effect in pure noise near 2 %
@@ -83,16 +84,24 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
     """Fit ``name`` on top of ``base`` and judge it on the held-out part (n_eff: effective
     samples of the residual it has to explain, the same for every candidate of a round)."""
     eff, refitted = fit_effect(name, ctx, base, base_cols)
-    x_new = columns(SPECS[name], eff.param, ctx, ctx.regressors(SPECS[name], eff.param))
-    xx = x_new if base_cols is None else np.column_stack([base_cols, x_new])
-    theta = np.concatenate([np.concatenate([np.ravel(c) for c in e.coefficients])
-                            for e in refitted + [eff]])
-    prediction = xx @ theta
+    effects = refitted + [eff]
+    if any(e.name in FORCE_EFFECTS for e in effects):
+        if SPECS[name].param is not None and name in FORCE_EFFECTS:
+            eff = _search_in_the_loop(ctx, effects)
+            effects = refitted + [eff]
+        effects, prediction = in_the_loop(ctx, effects)
+        refitted, eff = effects[:-1], effects[-1]
+    else:
+        x_new = columns(SPECS[name], eff.param, ctx, ctx.regressors(SPECS[name], eff.param))
+        xx = x_new if base_cols is None else np.column_stack([base_cols, x_new])
+        theta = np.concatenate([np.concatenate([np.ravel(c) for c in e.coefficients])
+                                for e in effects])
+        prediction = xx @ theta
     test = ctx.split.test
     e1 = ctx.target[test] - prediction[test]
     sse1 = float(e1 @ e1)
-    k = eff.n_params
-    k_total = k + sum(b.n_params for b in refitted)
+    k = eff.n_params + sum(e.n_params for e in refitted if e.name not in {b.name for b in base})
+    k_total = eff.n_params + sum(b.n_params for b in refitted)
     dof = n_eff - k_total
     if sse1 <= 0.0:
         score, p = -math.inf, 0.0
@@ -107,6 +116,25 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
     return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, float(score), p,
                      bool(p < ALPHA and score < 0.0 and plausible
                           and sse1 <= (1.0 - MIN_REDUCTION) * sse_reference), prediction)
+
+
+def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffect:
+    """The searched parameter of a force effect (the last of ``effects``) again, with the
+    motion in the loop: its feed-forward search saw the nominal motion only. Each grid
+    value gets a short loop fit (one pass); the lowest training error wins."""
+    from dataclasses import replace
+
+    new = effects[-1]
+    spec = SPECS[new.name]
+    fit = ctx.split.fit
+    best = (math.inf, new)
+    for value in np.append(spec.grid(ctx), new.param):
+        trial = replace(new, param=float(value))
+        _, pred = in_the_loop(ctx, effects[:-1] + [trial], passes=1)
+        sse = float(np.sum((ctx.target - pred)[fit] ** 2))
+        if sse < best[0]:
+            best = (sse, trial)
+    return best[1]
 
 
 def nested_p_value(larger: Candidate, smaller: Candidate, n_eff: float) -> float:

@@ -118,7 +118,8 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
                   a_dom=nominal.a_dom, b_dom=nominal.b_dom, split=split, fs_hz=fs_hz,
                   output_kind=output_kind, ref_hz=ref_hz,
                   max_delay_samples=max_delay,
-                  u_centre=float(np.median(u[split.fit])), candidates=candidates)
+                  u_centre=float(np.median(u[split.fit])), candidates=candidates,
+                  chain=signals.StateChain(n_kind, fs_hz, hp).coefficients, highpass_hz=hp)
     info["y_dom"] = y_dom
     info["plant_b"] = np.asarray(plant_b, float)
     info["plant_a"] = np.asarray(plant_a, float)

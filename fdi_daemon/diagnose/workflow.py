@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from fdi_daemon.diagnose.effects import BASE_TERMS
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +32,7 @@ class DiagnoseResult:
 
     @property
     def named(self) -> list[str]:
-        return [e.name for e in self.selection.chosen if e.name != "linear_refit"]
+        return [e.name for e in self.selection.chosen if e.name not in BASE_TERMS]
 
 
 def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = "acceleration",

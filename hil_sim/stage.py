@@ -32,7 +32,7 @@ class StageParams:
     offset_n: float = 1.0
     kp_n_s_per_m: float = 400.0
     ki_n_per_m: float = 4000.0
-    velocity_noise_m_s: float = 5e-4  # standard deviation
+    velocity_noise_m_s: float = 2e-4  # standard deviation
     force_noise_n: float = 0.5  # standard deviation of the force disturbance
     fs_hz: float = 500.0
     substeps: int = 10

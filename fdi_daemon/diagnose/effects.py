@@ -212,6 +212,9 @@ SPECS: dict[str, EffectSpec] = {
                                lambda p, c: _Static(lambda u, v, x, y0: [np.ones_like(u)])),
     "sensor_offset": EffectSpec("sensor_offset", "output", False, None, "",
                                 lambda p, c: _Static(lambda u, v, x, y0: [np.ones_like(u)])),
+    # not a candidate: corrections of the inverse-dynamics form's mass, damping [, stiffness]
+    # refitted with every candidate (columns from `Context.base_columns`)
+    "force_balance": EffectSpec("force_balance", "state", False, None, "", lambda p, c: None),
     # not a candidate: in the force loop with any force effect (`force.in_the_loop`)
     "loop_stiffness": EffectSpec("loop_stiffness", "state", True, None, "",
                                  lambda p, c: _Static(lambda u, v, x, y0: [x])),
@@ -223,7 +226,7 @@ SPECS: dict[str, EffectSpec] = {
 
 
 #: terms of the base, never named: the nominal numerator refit and the force loop's spring
-BASE_TERMS = ("linear_refit", "loop_stiffness")
+BASE_TERMS = ("linear_refit", "loop_stiffness", "force_balance")
 
 #: static input maps that act around the input's operating point (its training median)
 CENTRED = ("input_saturation", "dead_zone")
@@ -248,6 +251,10 @@ class Context:
     u_centre: float = 0.0  # operating point of the input maps (median training input)
     candidates: tuple[str, ...] = EFFECT_NAMES
     chain: tuple = ()  # (n, b, a, fs) of the state chain (`signals.StateChain.coefficients`)
+    form: str = "simulation"  # or "inverse_dynamics" (`inverse`): φ of the measured motion
+    lowpass: tuple = ()  # (b, a) of L in the inverse-dynamics form
+    base_columns: Any = None  # L a, L v [, L x] (inverse dynamics: the force balance)
+    inverse_base: dict = field(default_factory=dict)  # its fitted mass, damping [, stiffness]
     highpass_hz: float = 1.0
     cache: dict = field(default_factory=dict, repr=False)
 
@@ -257,6 +264,8 @@ class Context:
 
     def regressors(self, spec: "EffectSpec", param: float | None) -> np.ndarray:
         """φ of one effect over the record (the last few are cached: some are slow loops)."""
+        if spec.name == "force_balance":
+            return self.base_columns
         key = (spec.name, param)
         if key not in self.cache:
             if len(self.cache) >= 8:
@@ -319,8 +328,12 @@ def regressor_param(spec: EffectSpec, value: float | None, fs_hz: float) -> floa
 def columns(spec: EffectSpec, param: float | None, ctx: Context,
             phi: np.ndarray | None = None) -> np.ndarray:
     """Design-matrix columns of one effect over the whole record (φ computed if not given)."""
+    if spec.name == "force_balance":
+        return ctx.base_columns
     if phi is None:
         phi = spec.build(param, ctx.centre(spec)).run(ctx.u, ctx.v, ctx.x, ctx.y0)
+    if ctx.form == "inverse_dynamics":  # L φ at the moving samples: one force per regressor
+        return signal.lfilter(*ctx.lowpass, phi, axis=0) * (ctx.base_columns[:, :1] != 0)
     if not spec.dynamic:
         return phi
     order = len(ctx.a_dom) - 1
@@ -473,6 +486,10 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
     The sign of a single friction term cannot be judged without knowing how force enters.
     """
     spec = SPECS[eff.name]
+    if ctx.form == "inverse_dynamics":
+        from fdi_daemon.diagnose.inverse import physical
+
+        return physical(eff.name, np.concatenate(eff.coefficients), eff.param, ctx)
     out: dict[str, Any] = {}
     if spec.param is not None:
         out[spec.param] = stored_param(spec, eff.param, ctx.fs_hz)

@@ -85,7 +85,7 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
     samples of the residual it has to explain, the same for every candidate of a round)."""
     eff, refitted = fit_effect(name, ctx, base, base_cols)
     effects = refitted + [eff]
-    if any(e.name in FORCE_EFFECTS for e in effects):
+    if ctx.form == "simulation" and any(e.name in FORCE_EFFECTS for e in effects):
         if SPECS[name].param is not None and name in FORCE_EFFECTS:
             eff = _search_in_the_loop(ctx, effects)
             effects = refitted + [eff]
@@ -176,9 +176,10 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     base_cols = None
     prediction = np.zeros_like(ctx.target)
     if refit_linear:
-        linear, _ = fit_effect("linear_refit", ctx)
+        base_name = "force_balance" if ctx.form == "inverse_dynamics" else "linear_refit"
+        linear, _ = fit_effect(base_name, ctx)
         chosen = [linear]
-        base_cols = columns(SPECS["linear_refit"], None, ctx)
+        base_cols = columns(SPECS[base_name], None, ctx)
         prediction = base_cols @ np.concatenate(linear.coefficients)
     max_effects += len(chosen)
     rounds: list[list[Candidate]] = []

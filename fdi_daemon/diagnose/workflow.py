@@ -37,14 +37,16 @@ class DiagnoseResult:
 
 def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = "acceleration",
                  plant_b: np.ndarray | None = None, plant_a: np.ndarray | None = None,
-                 order: int | None = None, progress=None) -> DiagnoseResult:
+                 order: int | None = None, progress=None, form: str = "auto") -> DiagnoseResult:
     """plant_b/plant_a: Ĝ (acceleration) from a model file; None: fit a linear baseline
-    (of ``order``, None: chosen from the data)."""
-    ctx, _, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order)
+    (of ``order``, None: chosen from the data). form: see `simulate.prepare`."""
+    ctx, _, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order, form)
+    simulated = ctx.form == "simulation"
     selection = select_effects(ctx, progress=progress, refit_linear=True)
     plant = AugmentedPlant(fs_hz, info["plant_b"], info["plant_a"], output_kind,
-                           info["highpass_hz"], selection.chosen, domain=info["domain"])
-    y_after = plant.run(ctx.u)
+                           info["highpass_hz"], selection.chosen if simulated else [],
+                           domain=info["domain"])
+    y_after = plant.run(ctx.u) if simulated else ctx.y0 + selection.prediction
     y_meas = info["y_dom"]
     test = ctx.split.test
     e_before = y_meas - ctx.y0

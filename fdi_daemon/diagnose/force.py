@@ -262,7 +262,7 @@ def in_the_loop(ctx, effects: list, passes: int = PASSES) -> tuple[list, np.ndar
     best_ff, best_nums = theta[:n_ff], np.outer(theta[n_ff:], b_path)
     y, best = run(best_ff, best_nums)
     # 3. free numerators, passes on the loop's own motion
-    for _ in range(passes):
+    for _ in range(passes if np.all(np.isfinite(y)) else 0):
         v, x = StateChain(ctx.chain[0], ctx.chain[3], ctx.highpass_hz).run(y)
         xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, _phi(k, p, v, x)), width)
                        for k, p in cols]
@@ -321,6 +321,8 @@ def force_report(eff, ctx, y: np.ndarray) -> dict:
     """
     from fdi_daemon.diagnose.signals import StateChain
 
+    if not np.all(np.isfinite(y)):
+        return {"diverged": True, "plausible": False}
     n, vb, va, fs = ctx.chain
     v, x = StateChain(n, fs, ctx.highpass_hz).run(y)
     fit = ctx.split.fit

@@ -100,11 +100,15 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
     test = ctx.split.test
     e1 = ctx.target[test] - prediction[test]
     sse1 = float(e1 @ e1)
+    if not math.isfinite(sse1):  # a force loop that diverges on the held-out part
+        sse1 = math.inf
     k = eff.n_params + sum(e.n_params for e in refitted if e.name not in {b.name for b in base})
     k_total = eff.n_params + sum(b.n_params for b in refitted)
     dof = n_eff - k_total
     if sse1 <= 0.0:
         score, p = -math.inf, 0.0
+    elif math.isinf(sse1):
+        score, p = math.inf, 1.0
     else:
         score = n_eff * math.log(sse1 / sse_reference) + k * math.log(max(n_eff, 2.0))
         if dof > 1 and sse1 < sse_reference:
@@ -128,7 +132,8 @@ def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffe
     spec = SPECS[new.name]
     fit = ctx.split.fit
     best = (math.inf, new)
-    for value in np.append(spec.grid(ctx), new.param):
+    grid = np.append(spec.grid(ctx), new.param)
+    for value in grid[np.isfinite(grid) & (grid > 0)]:
         trial = replace(new, param=float(value))
         _, pred = in_the_loop(ctx, effects[:-1] + [trial], passes=1)
         sse = float(np.sum((ctx.target - pred)[fit] ** 2))

@@ -56,12 +56,17 @@ def measured_motion(y: np.ndarray, output_kind: str, fs_hz: float) -> dict[str, 
     raise ValueError("the inverse-dynamics form needs a velocity or position output")
 
 
+def velocity_noise(v: np.ndarray) -> float:
+    """σ of white noise on v, from the median absolute second difference (σ√6 for white
+    noise; a smooth motion hardly contributes)."""
+    d2 = np.diff(np.asarray(v, float), 2)
+    return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0)
+
+
 def at_rest(v: np.ndarray) -> np.ndarray:
-    """Samples where the velocity is within 3σ of its noise (σ from the median absolute
-    sample-to-sample difference): at rest, friction is whatever holds the mass."""
-    d = np.diff(v)
-    sigma = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
-    return np.abs(v) <= 3.0 * sigma
+    """Samples where the velocity is within 3σ of its noise (`velocity_noise`): at rest,
+    friction is whatever holds the mass."""
+    return np.abs(v) <= 3.0 * velocity_noise(v)
 
 
 def settle_samples(b: np.ndarray, a: np.ndarray) -> int:
@@ -117,3 +122,22 @@ def physical(name: str, theta: np.ndarray, param: float | None, ctx=None) -> dic
         out["offset"] = float(theta[0])
         out["plausible"] = True
     return out
+
+
+def noise_floor(v_raw: np.ndarray, target: np.ndarray, coefficients: dict,
+                lp: tuple, fs_hz: float, test: slice) -> dict:
+    """The part of L u that the force balance cannot explain because the velocity is
+    measured with noise: white velocity noise σ_v (from `at_rest`'s estimate) through
+    M L D and c L (D the difference of `measured_motion`), as an NRMSE of L u."""
+    sigma = velocity_noise(v_raw)
+    impulse = np.r_[1.0, np.zeros(4095)]
+    h_l = signal.lfilter(*lp, impulse)
+    h_ld = signal.lfilter(*lp, np.r_[-1.0, 1.0, np.zeros(4094)]) * fs_hz
+    mass, damping = coefficients["mass"], coefficients["damping"]
+    var = sigma ** 2 * (mass ** 2 * float(h_ld @ h_ld) + damping ** 2 * float(h_l @ h_l) / 2)
+    # the gap's NRMSE runs over every held-out row, the rows at rest being zero on both sides
+    live = float(np.mean(target[test] != 0))
+    spread = float(np.std(target[test]))
+    return {"floor": float(np.sqrt(var * live) / spread) if spread > 0 else None,
+            "method": "velocity noise through the force balance",
+            "velocity_noise": float(sigma)}

@@ -12,6 +12,8 @@ from fdi_daemon.diagnose import signals
 from fdi_daemon.diagnose.augment import AugmentedPlant
 from fdi_daemon.diagnose.effects import Context
 from fdi_daemon.diagnose.localize import localize
+from fdi_daemon.diagnose.floor import FLOOR_MARGIN, noise_floor
+from fdi_daemon.diagnose.inverse import noise_floor as inverse_floor
 from fdi_daemon.diagnose.select import Selection, select_effects
 from fdi_daemon.diagnose.simulate import prepare
 
@@ -42,19 +44,30 @@ def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = 
     (of ``order``, None: chosen from the data). form: see `simulate.prepare`."""
     ctx, _, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order, form)
     simulated = ctx.form == "simulation"
-    selection = select_effects(ctx, progress=progress, refit_linear=True)
+    test = ctx.split.test
+    y_meas = info["y_dom"]
+    gap_before = signals.nrmse(y_meas[test], ctx.y0[test])
+    floor = (noise_floor(y_meas, y_meas - ctx.y0, ctx.u, fs_hz, ctx.split.warmup, test)
+             if simulated else
+             inverse_floor(y, ctx.target + ctx.y0, info["inverse_baseline"], ctx.lowpass,
+                           fs_hz, test))
+    floor["at_floor"] = bool(floor["floor"] is not None
+                             and gap_before <= FLOOR_MARGIN * floor["floor"])
+    info["noise_floor"] = floor
+    if floor["at_floor"]:  # nothing to find: the nominal model is as good as the noise
+        selection = Selection([], [], np.zeros_like(ctx.target))
+    else:
+        selection = select_effects(ctx, progress=progress, refit_linear=True)
     plant = AugmentedPlant(fs_hz, info["plant_b"], info["plant_a"], output_kind,
                            info["highpass_hz"], selection.chosen if simulated else [],
                            domain=info["domain"])
     y_after = plant.run(ctx.u) if simulated else ctx.y0 + selection.prediction
-    y_meas = info["y_dom"]
-    test = ctx.split.test
     e_before = y_meas - ctx.y0
     e_after = y_meas - y_after
     return DiagnoseResult(
         ctx=ctx, info=info, selection=selection, plant=plant, y_measured=y_meas,
         y_before=ctx.y0, y_after=y_after,
-        gap_before=signals.nrmse(y_meas[test], ctx.y0[test]),
+        gap_before=gap_before,
         gap_after=signals.nrmse(y_meas[test], y_after[test]),
         where_before=localize(e_before, y_meas, ctx.u, ctx.v, ctx.x, fs_hz, test),
         where_after=localize(e_after, y_meas, ctx.u, ctx.v, ctx.x, fs_hz, test))

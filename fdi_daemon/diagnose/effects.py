@@ -41,7 +41,7 @@ from scipy.optimize import minimize_scalar
 
 EFFECT_NAMES = ("coulomb_friction", "viscous_friction", "stribeck_friction", "cubic_stiffness",
                 "dead_time", "input_saturation", "output_saturation", "dead_zone", "backlash",
-                "sensor_offset", "force_offset")
+                "sensor_offset", "force_offset", "gain_fault")
 
 
 # ----------------------------------------------------------------------------- regressor blocks
@@ -94,6 +94,17 @@ class DeadTimeRegressor(Regressor):
         delayed = (1 - self.frac) * delayed_d + self.frac * s[self.d]
         self.state = np.concatenate([[u], s[:-1]])
         return [float(delayed - u)]
+
+
+class DelayedOutputRegressor(DeadTimeRegressor):
+    """ŷ₀(t − τ) − ŷ₀(t): the nominal response shifted by a dead time τ (a dead time at the
+    input of a linear model shifts its whole response)."""
+
+    def run(self, u, v, x, y0):
+        return super().run(y0, v, x, y0)
+
+    def step(self, u, v, x, y0):
+        return super().step(y0, v, x, y0)
 
 
 class BacklashRegressor(Regressor):
@@ -187,8 +198,10 @@ SPECS: dict[str, EffectSpec] = {
     "cubic_stiffness": EffectSpec("cubic_stiffness", "state", True, None, "",
                                   lambda p, c: _Static(lambda u, v, x, y0: [x ** 3])),
     "dead_time": EffectSpec(
-        "dead_time", "input", True, "dead_time_s", "s",
-        lambda p, c: DeadTimeRegressor(p), _delays, integer_coarse=True),
+        "dead_time", "output", False, "dead_time_s", "s",
+        lambda p, c: DelayedOutputRegressor(p), _delays, integer_coarse=True),
+    "gain_fault": EffectSpec("gain_fault", "output", False, None, "",
+                             lambda p, c: _Static(lambda u, v, x, y0: [y0])),
     "input_saturation": EffectSpec(
         "input_saturation", "input", True, "level", "input units",
         lambda p, c: _Static(_saturate(p, c)),
@@ -511,6 +524,11 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
         if eff.name == "stribeck_friction":
             plausible = (out["coulomb_level_input_equivalent"]
                          * out["stribeck_excess_input_equivalent"]) > 0.0
+    elif eff.name == "gain_fault":  # y = (1 + g) ŷ₀
+        out["gain_ratio"] = 1.0 + float(eff.coefficients[0][0])
+    elif eff.name == "dead_time":  # y = ŷ₀ + c (ŷ₀(t − τ) − ŷ₀(t)); a pure shift has c = 1
+        out["shift_share"] = float(eff.coefficients[0][0])
+        plausible = 0.5 <= out["shift_share"] <= 1.5
     else:
         key = "offset" if eff.name == "sensor_offset" else "gain"
         out[key] = float(eff.coefficients[0][0])

@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from fdi_daemon.diagnose.effects import (SPECS, Context, FittedEffect, NotApplicable, columns,
-                                         fit_effect)
+from fdi_daemon.diagnose.effects import (BASE_TERMS, SPECS, Context, FittedEffect,
+                                         NotApplicable, columns, fit_effect)
 from fdi_daemon.diagnose.force import FORCE_EFFECTS, in_the_loop
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
@@ -166,6 +166,54 @@ class Selection:
     chosen: list[FittedEffect]
     rounds: list[list[Candidate]]
     prediction: np.ndarray  # Σ contributions of the chosen effects (whole record)
+    linear: dict = field(default_factory=dict)  # the refit check (`linear_round`)
+
+    @property
+    def named(self) -> list[FittedEffect]:
+        return [e for e in self.chosen if e.name not in BASE_TERMS]
+
+
+#: what a significant numerator refit may be: a pure gain change or a pure shift
+LINEAR_EXPLANATIONS = ("gain_fault", "dead_time")
+
+
+def linear_round(ctx: Context) -> tuple[list[FittedEffect], np.ndarray, dict]:
+    """The refit never swallows an effect silently.
+
+    The nominal numerator refit (``linear_refit``) is judged like a candidate. When it is
+    significant, a pure gain change (``gain_fault``, y = (1 + g) ŷ₀) and a pure shift
+    (``dead_time``, ŷ₀(t − τ)) are tried: the simplest one that the refit does not beat
+    (nested F-test at ALPHA) is named with its value and replaces the refit. A significant
+    refit that neither explains is kept and reported (``linear_check.unexplained``).
+    """
+    test = ctx.split.test
+    e0 = ctx.target[test]
+    sse0 = float(e0 @ e0)
+    n_eff = effective_samples(e0)
+    refit = evaluate("linear_refit", ctx, [], None, sse0, n_eff)
+    out = {"refit_significant": refit.accepted, "refit_p_value": refit.p_value,
+           "refit_sse_ratio": refit.sse_test / sse0 if sse0 > 0 else 1.0,
+           "explanations": []}
+    if not refit.accepted:
+        return [refit.effect], refit.prediction, out
+    simple = []
+    for name in LINEAR_EXPLANATIONS:
+        try:
+            c = evaluate(name, ctx, [], None, sse0, n_eff)
+        except NotApplicable:
+            continue
+        p_refit = nested_p_value(refit, c, n_eff)
+        out["explanations"].append({"effect": name, "sse_ratio": c.sse_test / sse0,
+                                    "p_value": c.p_value, "refit_beats_it_p": p_refit,
+                                    "params": dict(c.effect.physical)})
+        if c.accepted and p_refit >= ALPHA:
+            simple.append(c)
+    if simple:
+        best = min(simple, key=lambda c: c.sse_test)
+        out["named"] = best.name
+        return [best.effect], best.prediction, out
+    out["unexplained"] = True
+    return [refit.effect], refit.prediction, out
 
 
 def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
@@ -174,26 +222,34 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
 
     refit_linear: the nominal model's numerator is refitted jointly with every candidate
     (``linear_refit``, part of the base: an imperfect Ĝ, or one fitted on data that hold the
-    effect, otherwise makes linear stand-ins such as a dead time look significant). It is
-    kept only when an effect is named.
+    effect, otherwise makes linear stand-ins look significant), after `linear_round` has
+    checked that the refit is not a gain change or a dead time; in the inverse-dynamics
+    form the force balance's mass and damping (``force_balance``). A base term alone is
+    not a missing effect: it is dropped when nothing is named.
     """
     chosen: list[FittedEffect] = []
     base_cols = None
     prediction = np.zeros_like(ctx.target)
-    if refit_linear:
-        base_name = "force_balance" if ctx.form == "inverse_dynamics" else "linear_refit"
-        linear, _ = fit_effect(base_name, ctx)
-        chosen = [linear]
-        base_cols = columns(SPECS[base_name], None, ctx)
-        prediction = base_cols @ np.concatenate(linear.coefficients)
-    max_effects += len(chosen)
+    linear: dict = {}
+    if refit_linear and ctx.form == "inverse_dynamics":
+        balance, _ = fit_effect("force_balance", ctx)
+        chosen = [balance]
+    elif refit_linear:
+        chosen, prediction, linear = linear_round(ctx)
+    if chosen:
+        base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
+                                             ctx.regressors(SPECS[e.name], e.param))
+                                     for e in chosen])
+        prediction = base_cols @ np.concatenate([np.ravel(c) for c in chosen[0].coefficients])
     rounds: list[list[Candidate]] = []
     test = ctx.split.test
-    while len(chosen) < max_effects:
+    skip = set(LINEAR_EXPLANATIONS) if refit_linear else set()
+    while len([e for e in chosen if e.name not in BASE_TERMS]) < max_effects:
         e0 = ctx.target[test] - prediction[test]
         sse0 = float(e0 @ e0)
         n_eff = effective_samples(e0)
-        remaining = [c for c in ctx.candidates if c not in {e.name for e in chosen}]
+        remaining = [c for c in ctx.candidates
+                     if c not in {e.name for e in chosen} and c not in skip]
         results = []
         for name in remaining:
             try:
@@ -213,7 +269,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 for e in chosen]
         base_cols = np.column_stack(cols)
         prediction = best.prediction
-    if refit_linear and len(chosen) == 1:
+    if not any(e.name not in BASE_TERMS for e in chosen):
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
-    return Selection(chosen, rounds, prediction)
+    return Selection(chosen, rounds, prediction, linear)

@@ -199,7 +199,7 @@ def _shifts(w: np.ndarray, width: int) -> np.ndarray:
     return np.column_stack([np.concatenate([np.zeros(i), w[:len(w) - i]]) for i in range(width)])
 
 
-def in_the_loop(ctx, effects: list, passes: int = PASSES) -> tuple[list, np.ndarray]:
+def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
     """Refit ``effects`` with the force effects in the loop; returns the refitted effects
     (``loop_stiffness`` added when absent) and their contribution y − ŷ₀ over the record.
 
@@ -262,7 +262,7 @@ def in_the_loop(ctx, effects: list, passes: int = PASSES) -> tuple[list, np.ndar
     best_ff, best_nums = theta[:n_ff], np.outer(theta[n_ff:], b_path)
     y, best = run(best_ff, best_nums)
     # 3. free numerators, passes on the loop's own motion
-    for _ in range(passes if np.all(np.isfinite(y)) else 0):
+    for _ in range(PASSES if np.all(np.isfinite(y)) else 0):
         v, x = StateChain(ctx.chain[0], ctx.chain[3], ctx.highpass_hz).run(y)
         xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, _phi(k, p, v, x)), width)
                        for k, p in cols]

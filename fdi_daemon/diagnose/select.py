@@ -125,7 +125,7 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
 def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffect:
     """The searched parameter of a force effect (the last of ``effects``) again, with the
     motion in the loop: its feed-forward search saw the nominal motion only. Each grid
-    value gets a short loop fit (one pass); the lowest training error wins."""
+    value gets a full loop fit (a short one misleads); the lowest training error wins."""
     from dataclasses import replace
 
     new = effects[-1]
@@ -135,7 +135,7 @@ def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffe
     grid = np.append(spec.grid(ctx), new.param)
     for value in grid[np.isfinite(grid) & (grid > 0)]:
         trial = replace(new, param=float(value))
-        _, pred = in_the_loop(ctx, effects[:-1] + [trial], passes=1)
+        _, pred = in_the_loop(ctx, effects[:-1] + [trial])
         sse = float(np.sum((ctx.target - pred)[fit] ** 2))
         if sse < best[0]:
             best = (sse, trial)

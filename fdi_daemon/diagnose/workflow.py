@@ -12,7 +12,7 @@ from fdi_daemon.diagnose import signals
 from fdi_daemon.diagnose.augment import AugmentedPlant
 from fdi_daemon.diagnose.effects import Context
 from fdi_daemon.diagnose.localize import localize
-from fdi_daemon.diagnose.floor import FLOOR_MARGIN, noise_floor
+from fdi_daemon.diagnose.floor import FLOOR_MARGIN, delay_by_correlation, noise_floor
 from fdi_daemon.diagnose.inverse import noise_floor as inverse_floor
 from fdi_daemon.diagnose.select import Selection, select_effects
 from fdi_daemon.diagnose.simulate import prepare
@@ -54,6 +54,10 @@ def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = 
     floor["at_floor"] = bool(floor["floor"] is not None
                              and gap_before <= FLOOR_MARGIN * floor["floor"])
     info["noise_floor"] = floor
+    if simulated:
+        fit = ctx.split.fit
+        info["dead_time_by_correlation_s"] = delay_by_correlation(
+            y_meas[fit], ctx.y0[fit], fs_hz, ctx.max_delay_samples)
     if floor["at_floor"]:  # nothing to find: the nominal model is as good as the noise
         selection = Selection([], [], np.zeros_like(ctx.target))
     else:

@@ -87,8 +87,9 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         lines.append(f"noise floor (NRMSE): {floor['floor']:.4g} ({floor['method']})"
                      + ("  -- the nominal model is at the floor" if floor["at_floor"] else ""))
     if report["linear_check"].get("unexplained"):
-        lines.append("the nominal numerator is off (the refit is significant and is neither "
-                     "a gain change nor a dead time): kept as the base")
+        lines.append("the numerator refit alone is significant (a missing effect's linear "
+                     "part, or a numerator that is off) and is neither a gain change nor a "
+                     "dead time: it stays in the base")
     if report["effect"] is None:
         lines.append("no significant missing effect")
     else:

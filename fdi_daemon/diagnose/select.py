@@ -217,7 +217,7 @@ def linear_round(ctx: Context) -> tuple[list[FittedEffect], np.ndarray, dict]:
 
 
 def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
-                   refit_linear: bool = False) -> Selection:
+                   refit_linear: bool = False, floor_sse: float | None = None) -> Selection:
     """Rounds of candidate search; see the module docstring.
 
     refit_linear: the nominal model's numerator is refitted jointly with every candidate
@@ -225,7 +225,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     effect, otherwise makes linear stand-ins look significant), after `linear_round` has
     checked that the refit is not a gain change or a dead time; in the inverse-dynamics
     form the force balance's mass and damping (``force_balance``). A base term alone is
-    not a missing effect: it is dropped when nothing is named.
+    not a missing effect: it is dropped when nothing is named. floor_sse: the held-out SSE
+    at the noise floor (`floor`); once the remaining error is there, no further effect is
+    looked for.
     """
     chosen: list[FittedEffect] = []
     base_cols = None
@@ -247,6 +249,8 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     while len([e for e in chosen if e.name not in BASE_TERMS]) < max_effects:
         e0 = ctx.target[test] - prediction[test]
         sse0 = float(e0 @ e0)
+        if rounds and floor_sse is not None and sse0 <= floor_sse:
+            break  # what is left is noise
         n_eff = effective_samples(e0)
         remaining = [c for c in ctx.candidates
                      if c not in {e.name for e in chosen} and c not in skip]

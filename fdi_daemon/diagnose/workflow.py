@@ -61,7 +61,11 @@ def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = 
     if floor["at_floor"]:  # nothing to find: the nominal model is as good as the noise
         selection = Selection([], [], np.zeros_like(ctx.target))
     else:
-        selection = select_effects(ctx, progress=progress, refit_linear=True)
+        floor_sse = (None if floor["floor"] is None else
+                     (FLOOR_MARGIN * floor["floor"]) ** 2
+                     * float(np.sum((y_meas[test] - np.mean(y_meas[test])) ** 2)))
+        selection = select_effects(ctx, progress=progress, refit_linear=True,
+                                   floor_sse=floor_sse)
     plant = AugmentedPlant(fs_hz, info["plant_b"], info["plant_a"], output_kind,
                            info["highpass_hz"], selection.chosen if simulated else [],
                            domain=info["domain"])

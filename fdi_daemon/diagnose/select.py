@@ -177,14 +177,18 @@ class Selection:
 LINEAR_EXPLANATIONS = ("gain_fault", "dead_time")
 
 
-def linear_round(ctx: Context) -> tuple[list[FittedEffect], np.ndarray, dict]:
+def linear_round(ctx: Context, floor_sse: float | None = None
+                 ) -> tuple[list[FittedEffect], np.ndarray, dict]:
     """The refit never swallows an effect silently.
 
     The nominal numerator refit (``linear_refit``) is judged like a candidate. When it is
     significant, a pure gain change (``gain_fault``, y = (1 + g) ŷ₀) and a pure shift
-    (``dead_time``, ŷ₀(t − τ)) are tried: the simplest one that the refit does not beat
-    (nested F-test at ALPHA) is named with its value and replaces the refit. A significant
-    refit that neither explains is kept and reported (``linear_check.unexplained``).
+    (``dead_time``, ŷ₀(t − τ)) are tried: the best one that the refit does not beat
+    (nested F-test at ALPHA) and that leaves no more than the noise floor (floor_sse; a
+    dead zone or a saturation also looks like a lower gain, but leaves its nonlinear part)
+    is named with its value and replaces the refit. Otherwise the refit stays in the base
+    and is reported (``linear_check``: ``unexplained``, or the explanations tried, with
+    their values).
     """
     test = ctx.split.test
     e0 = ctx.target[test]
@@ -206,13 +210,15 @@ def linear_round(ctx: Context) -> tuple[list[FittedEffect], np.ndarray, dict]:
         out["explanations"].append({"effect": name, "sse_ratio": c.sse_test / sse0,
                                     "p_value": c.p_value, "refit_beats_it_p": p_refit,
                                     "params": dict(c.effect.physical)})
-        if c.accepted and p_refit >= ALPHA:
+        if (c.accepted and p_refit >= ALPHA
+                and (floor_sse is None or c.sse_test <= floor_sse)):
             simple.append(c)
     if simple:
         best = min(simple, key=lambda c: c.sse_test)
         out["named"] = best.name
         return [best.effect], best.prediction, out
-    out["unexplained"] = True
+    out["unexplained"] = not any(x["p_value"] < ALPHA and x["refit_beats_it_p"] >= ALPHA
+                                 for x in out["explanations"])
     return [refit.effect], refit.prediction, out
 
 
@@ -237,7 +243,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         balance, _ = fit_effect("force_balance", ctx)
         chosen = [balance]
     elif refit_linear:
-        chosen, prediction, linear = linear_round(ctx)
+        chosen, prediction, linear = linear_round(ctx, floor_sse)
     if chosen:
         base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
                                              ctx.regressors(SPECS[e.name], e.param))

@@ -1,4 +1,9 @@
-"""The diagnose workflow end to end: simulate, localise, name, add, show the gap shrink."""
+"""The diagnose workflow end to end, in the order of the package's stages:
+
+baseline and form of the test (`baseline`, `inverse`) -> noise floor and dead time
+(`floor`) and localisation (`localize`) -> candidate effects by place (`input_effects`,
+`force`, `output_effects`, fitted by `effects`) -> selection (`select`) -> report (`report`,
+`plots`, `augment`)."""
 
 from __future__ import annotations
 
@@ -15,7 +20,7 @@ from fdi_daemon.diagnose.localize import localize
 from fdi_daemon.diagnose.floor import FLOOR_MARGIN, delay_by_correlation, noise_floor
 from fdi_daemon.diagnose.inverse import noise_floor as inverse_floor
 from fdi_daemon.diagnose.select import Selection, select_effects
-from fdi_daemon.diagnose.simulate import prepare
+from fdi_daemon.diagnose.baseline import prepare
 
 
 @dataclass
@@ -41,7 +46,7 @@ def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = 
                  plant_b: np.ndarray | None = None, plant_a: np.ndarray | None = None,
                  order: int | None = None, progress=None, form: str = "auto") -> DiagnoseResult:
     """plant_b/plant_a: Ĝ (acceleration) from a model file; None: fit a linear baseline
-    (of ``order``, None: chosen from the data). form: see `simulate.prepare`."""
+    (of ``order``, None: chosen from the data). form: see `baseline.prepare`."""
     ctx, _, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order, form)
     simulated = ctx.form == "simulation"
     test = ctx.split.test

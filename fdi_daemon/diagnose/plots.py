@@ -23,7 +23,7 @@ def plot_diagnosis(result, report: dict, path: str | Path) -> Path:
     ctx = result.ctx
     inverse = ctx.form == "inverse_dynamics"
     unit = "input units" if inverse else UNITS[ctx.output_kind]
-    quantity = "low-passed input (force balance)" if inverse else ctx.output_kind
+    quantity = "L u" if inverse else ctx.output_kind
     fs = ctx.fs_hz
     t = np.arange(len(ctx.u)) / fs
     y = result.y_measured
@@ -44,7 +44,8 @@ def plot_diagnosis(result, report: dict, path: str | Path) -> Path:
             label=f"+ {named} (gap {result.gap_after:.3g})", zorder=2)
     ax.plot(t[w], result.y_before[w], "C3--", lw=1.0, alpha=0.8,
             label=f"nominal (gap {result.gap_before:.3g})", zorder=3)
-    ax.set_title(f"held-out data: {quantity}")
+    ax.set_title("held-out data: low-passed input against the force balance (0: at rest, "
+                 "left out)" if inverse else f"held-out data: {quantity}")
     ax.set_xlabel("t (s)")
     ax.set_ylabel(f"{quantity} ({unit})")
     ax.legend(**LEGEND)

@@ -154,3 +154,21 @@ def test_monitor_refuses_effects_fitted_on_velocity():
     model = FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": _plant("velocity").to_extra()})
     with pytest.raises(ConfigError, match="velocity"):
         nominal_plant(model)
+
+
+def test_a_model_file_without_force_loop_keeps_its_fed_forward_meaning():
+    # files written before issue 14 have no force_loop key: force effects fed forward
+    b, a = nominal_model()
+    plant = _plant()
+    extra = plant.to_extra()
+    del extra["force_loop"]
+    old = AugmentedPlant.from_model(model_from_dict(
+        FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": extra}).to_dict()))
+    assert not old.force_loop
+    u = 0.5 * np.random.default_rng(2).standard_normal(500)
+    fed = old.run_signals(u)
+    # fed forward: the output is ŷ₀ plus each effect's own part, nothing in a loop
+    assert "force_loop" not in fed["parts"]
+    np.testing.assert_allclose(fed["y"], fed["y0"] + sum(fed["parts"].values()), rtol=1e-12,
+                               atol=1e-12)
+    assert not np.allclose(fed["y"], plant.run(u))

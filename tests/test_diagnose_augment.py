@@ -172,3 +172,14 @@ def test_a_model_file_without_force_loop_keeps_its_fed_forward_meaning():
     np.testing.assert_allclose(fed["y"], fed["y0"] + sum(fed["parts"].values()), rtol=1e-12,
                                atol=1e-12)
     assert not np.allclose(fed["y"], plant.run(u))
+
+
+def test_an_old_dead_time_item_is_refused_not_misread():
+    # before issue 14 dead_time was u(t − τ) − u(t) through a numerator; now a pure shift
+    b, a = nominal_model()
+    items = [{"name": "dead_time", "param": {"name": "dead_time_s", "value": 0.01},
+              "coefficients": [[0.1, 0.2, 0.0, 0.0, 0.0]]}]
+    model = FdiModel(fs=FS, plant_b=b, plant_a=a,
+                     extra={"effects": {"output_kind": "acceleration", "items": items}})
+    with pytest.raises(ConfigError, match="older fdi diagnose"):
+        AugmentedPlant.from_model(model_from_dict(model.to_dict()))

@@ -226,6 +226,9 @@ def _parse_items(raw: Any, fs_hz: float, where: str) -> list[FittedEffect]:
             coefs = [np.asarray(c, dtype=float) for c in item["coefficients"]]
         except (KeyError, TypeError, ValueError):
             raise ConfigError(f"{where}[{k}].coefficients must be lists of numbers") from None
+        if name == "dead_time" and len(coefs) == 1 and coefs[0].size > 1:
+            raise ConfigError(f"{where}[{k}]: a dead_time written by an older fdi diagnose "
+                              f"(a filtered input term); run fdi diagnose again")
         centre = item.get("centre", 0.0)
         if isinstance(centre, bool) or not isinstance(centre, (int, float)):
             raise ConfigError(f"{where}[{k}].centre must be a number")

@@ -39,3 +39,38 @@ def recording(effect: str | None, seed: int = 2, duration_s: float = DURATION_S)
 def nominal_model() -> tuple[np.ndarray, np.ndarray]:
     """Ĝ of the §V model without any effect (exact ZOH discretisation)."""
     return nominal_tf(MsdParams())
+
+
+# ---------------------------------------------------------------- machines like the real ones
+
+#: the closed-loop stage (hil_sim.stage): 60 s at 500 Hz, six periods of a multisine
+STAGE_DURATION_S = 60.0
+
+
+@lru_cache(maxsize=None)
+def stage_recording(coulomb_n: float = 20.0, offset_n: float = 1.0, seed: int = 2):
+    """A PI velocity loop around a mass with Coulomb friction and a constant force; the
+    recording's columns are ``force`` and ``vel`` (not the recording contract's names)."""
+    from hil_sim.stage import StageParams, simulate_stage, velocity_reference
+
+    p = StageParams(coulomb_n=coulomb_n, offset_n=offset_n)
+    r = velocity_reference(STAGE_DURATION_S, p.fs_hz, seed=1, periods=6)
+    return simulate_stage(p, r, seed=seed)
+
+
+@lru_cache(maxsize=None)
+def duffing_recording(k3_n_per_m3: float = 3e5, seed: int = 2):
+    """A Duffing oscillator: the §V mass-spring-damper driven directly by the input (no
+    input filter) with a cubic spring (≈ 60 % of the linear force at the peaks); 40 s of a
+    0.3–12 Hz multisine at 1 V RMS; position out (0.5 mm uniform noise)."""
+    effects = {"cubic_stiffness": {"k3_n_per_m3": k3_n_per_m3}} if k3_n_per_m3 else {}
+    u = multisine(40.0, FS, 0.3, 12.0, 1.0, seed=1)
+    return simulate_recording(MsdParams(input_filter_hz=None, effects=effects, **NOISE), u,
+                              seed=seed)
+
+
+@lru_cache(maxsize=None)
+def gain_fault_recording(gain_ratio: float = 1.2, seed: int = 2):
+    """The §V model whose actuator gain is off by ``gain_ratio`` (the nominal model is not)."""
+    u = multisine(DURATION_S, FS, 0.3, 12.0, 0.5, seed=1)
+    return simulate_recording(MsdParams(gain_n_per_v=10.0 * gain_ratio, **NOISE), u, seed=seed)

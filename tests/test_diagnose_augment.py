@@ -11,6 +11,7 @@ from fdi_daemon.diagnose.effects import SPECS, FittedEffect
 from fdi_daemon.diagnose.workflow import run_diagnose
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.model_file import FdiModel, model_from_dict
+from hil_sim.msd import MsdParams, friction_tf
 from tests.diagnose_cases import FS, nominal_model, recording
 
 
@@ -18,13 +19,23 @@ def _plant(kind: str = "acceleration") -> AugmentedPlant:
     b, a = nominal_model()
     rng = np.random.default_rng(0)
     width = len(a)
+    # force on the mass -> output: the §V model's exact force path (no input filter on it)
+    b_force, a_force = friction_tf(MsdParams())
+    np.testing.assert_allclose(a_force, a)
+    path = AugmentedPlant(FS, b_force, a, kind, 0.2)
+    b_path = np.zeros(len(path.a_dom))
+    b_path[:len(path.b_dom)] = path.b_dom
+    #: forces in the loop: friction that opposes motion, a hardening spring (input units)
+    force = {"coulomb_friction": 0.05, "stribeck_friction": 0.05, "cubic_stiffness": 1e4}
     effects = []
     for name, param in [("coulomb_friction", None), ("stribeck_friction", 0.05),
                         ("cubic_stiffness", None), ("dead_time", 2.6), ("backlash", 0.1),
                         ("dead_zone", 0.05), ("output_saturation", 5.0), ("sensor_offset", None)]:
         spec = SPECS[name]
         n_reg = 2 if name == "stribeck_friction" else 1
-        if spec.dynamic:
+        if name in force:
+            coefs = [-force[name] * rng.uniform(0.5, 1.5) * b_path for _ in range(n_reg)]
+        elif spec.dynamic:
             coefs = [0.01 * rng.standard_normal(width) for _ in range(n_reg)]
         else:
             coefs = [0.1 * rng.standard_normal(1)]
@@ -55,6 +66,7 @@ def test_step_chunks_and_whole_array_agree(kind):
     chunked = _plant(kind)
     cuts = np.sort(rng.choice(np.arange(1, len(u)), 12, replace=False))
     y_chunks = np.concatenate([chunked.run(c) for c in np.split(u, cuts)])
+    assert np.all(np.isfinite(y_whole))  # the force loop of the test plant is stable
     scale = np.max(np.abs(y_whole))
     np.testing.assert_allclose(y_single, y_whole, rtol=1e-12, atol=1e-12 * scale)
     np.testing.assert_allclose(y_chunks, y_whole, rtol=1e-12, atol=1e-12 * scale)
@@ -142,3 +154,32 @@ def test_monitor_refuses_effects_fitted_on_velocity():
     model = FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": _plant("velocity").to_extra()})
     with pytest.raises(ConfigError, match="velocity"):
         nominal_plant(model)
+
+
+def test_a_model_file_without_force_loop_keeps_its_fed_forward_meaning():
+    # files written before issue 14 have no force_loop key: force effects fed forward
+    b, a = nominal_model()
+    plant = _plant()
+    extra = plant.to_extra()
+    del extra["force_loop"]
+    old = AugmentedPlant.from_model(model_from_dict(
+        FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": extra}).to_dict()))
+    assert not old.force_loop
+    u = 0.5 * np.random.default_rng(2).standard_normal(500)
+    fed = old.run_signals(u)
+    # fed forward: the output is ŷ₀ plus each effect's own part, nothing in a loop
+    assert "force_loop" not in fed["parts"]
+    np.testing.assert_allclose(fed["y"], fed["y0"] + sum(fed["parts"].values()), rtol=1e-12,
+                               atol=1e-12)
+    assert not np.allclose(fed["y"], plant.run(u))
+
+
+def test_an_old_dead_time_item_is_refused_not_misread():
+    # before issue 14 dead_time was u(t − τ) − u(t) through a numerator; now a pure shift
+    b, a = nominal_model()
+    items = [{"name": "dead_time", "param": {"name": "dead_time_s", "value": 0.01},
+              "coefficients": [[0.1, 0.2, 0.0, 0.0, 0.0]]}]
+    model = FdiModel(fs=FS, plant_b=b, plant_a=a,
+                     extra={"effects": {"output_kind": "acceleration", "items": items}})
+    with pytest.raises(ConfigError, match="older fdi diagnose"):
+        AugmentedPlant.from_model(model_from_dict(model.to_dict()))

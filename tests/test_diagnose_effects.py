@@ -1,5 +1,6 @@
 """Blind tests of the diagnose workflow: each effect hidden in the §V model is named and
-closing it at least halves the held-out gap; with nothing hidden, nothing is named."""
+closing it at least halves the held-out gap; with nothing hidden, nothing is named.
+(The closed-loop stage and the Duffing oscillator: `test_diagnose_machines.py`.)"""
 
 from __future__ import annotations
 
@@ -9,11 +10,15 @@ import pytest
 from hil_sim.msd import MsdParams, simulate_recording
 from fdi_daemon.diagnose.effects import EFFECT_NAMES
 from fdi_daemon.diagnose.workflow import run_diagnose
-from tests.diagnose_cases import FS, HIDDEN, nominal_model, recording
+from tests.diagnose_cases import FS, HIDDEN, gain_fault_recording, nominal_model, recording
+
+#: effects the §V simulator cannot hide, with the test that hides them
+ELSEWHERE = {"gain_fault": "test_a_gain_fault_is_named_with_its_ratio",
+             "force_offset": "test_diagnose_machines.py::test_closed_loop_stage"}
 
 
 def test_every_library_effect_has_a_case():
-    assert set(HIDDEN) == set(EFFECT_NAMES)
+    assert set(HIDDEN) | set(ELSEWHERE) == set(EFFECT_NAMES)
 
 
 @pytest.mark.parametrize("effect", sorted(HIDDEN))
@@ -32,6 +37,43 @@ def test_no_hidden_effect_names_none():
     result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
     assert result.named == []
     assert result.gap_after == result.gap_before
+    # the nominal model is exact: its gap is the noise, and the floor says so
+    floor = result.info["noise_floor"]
+    assert floor["at_floor"]
+    assert 0.8 < result.gap_before / floor["floor"] < 1.25
+
+
+def test_a_gain_fault_is_named_with_its_ratio():
+    rec = gain_fault_recording(1.2)
+    b, a = nominal_model()
+    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    assert result.named == ["gain_fault"]
+    assert result.selection.linear["named"] == "gain_fault"
+    assert abs(result.selection.named[0].physical["gain_ratio"] - 1.2) < 0.01
+    assert result.gap_after <= 0.5 * result.gap_before
+
+
+def test_a_dead_time_is_named_with_its_value_not_absorbed_by_the_refit():
+    rec = recording("dead_time")
+    b, a = nominal_model()
+    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    assert result.selection.linear["refit_significant"]
+    assert result.selection.linear["named"] == "dead_time"
+    true_s = HIDDEN["dead_time"]["delay_s"]
+    assert abs(result.selection.named[0].physical["dead_time_s"] - true_s) < 0.5 / FS
+    assert abs(result.info["dead_time_by_correlation_s"] - true_s) < 1.0 / FS
+
+
+@pytest.mark.parametrize("effect", ["coulomb_friction", "viscous_friction",
+                                    "stribeck_friction"])
+def test_named_friction_is_physically_possible(effect):
+    rec = recording(effect)
+    b, a = nominal_model()
+    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    params = result.selection.named[0].physical
+    assert params["plausible"]
+    powers = [v for k, v in params.items() if k.endswith("_power_ratio")]
+    assert powers and all(p < 0 for p in powers)  # it takes energy out of the motion
 
 
 @pytest.mark.parametrize("effect", [None, "input_saturation"])

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from fdi_daemon.io.columns import add_columns_option
+
 HELP = "find where a model and a recording disagree, name the missing effect, add it"
 
 OUTPUT_COLUMNS = {"acceleration": "accel", "velocity": "velocity", "position": "position"}
@@ -24,6 +26,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--output-kind", default="acceleration",
                         choices=("acceleration", "velocity", "position"),
                         help="what the output column measures (default acceleration)")
+    parser.add_argument("--form", default="auto",
+                        choices=("auto", "simulation", "inverse_dynamics"),
+                        help="how effects are tested: a free-run simulation, or the force "
+                             "balance on the measured motion (velocity/position outputs; for "
+                             "integrating or closed-loop plants); auto: inverse_dynamics when "
+                             "the free run drifts (default auto)")
+    add_columns_option(parser)
     parser.add_argument("--json", metavar="REPORT.json", help="write the report as JSON")
     parser.add_argument("--plot", metavar="FILE.png", help="measured vs simulated, error maps")
     parser.add_argument("-o", "--out", metavar="AUGMENTED_MODEL.yaml",
@@ -59,9 +68,10 @@ def run(args: argparse.Namespace) -> int:
         if target and not Path(target).resolve().parent.is_dir():
             raise UserError(f"{target}: cannot write there: directory "
                             f"{Path(target).parent} does not exist")
-    rec = read_recording(args.recording)
-    fs = rec.fs
     out_col = args.output or OUTPUT_COLUMNS[args.output_kind]
+    # only the time and the two columns used are required (real data name them freely)
+    rec = read_recording(args.recording, required=("t",), columns=args.columns)
+    fs = rec.fs
     u = _column(rec, args.input, args.recording)
     y = _column(rec, out_col, args.recording)
     min_samples = max(256, 40 * ((args.order or 8) + 2))
@@ -92,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
                   console=Console(stderr=True), transient=True) as progress:
         task = progress.add_task("fitting candidate effects", total=None)
         result = run_diagnose(
-            u, y, fs, args.output_kind, plant_b, plant_a, order=args.order,
+            u, y, fs, args.output_kind, plant_b, plant_a, order=args.order, form=args.form,
             progress=lambda name: progress.update(task, description=f"tried {name}"))
     report = build_report(result, source=str(args.recording))
     for line in summary_lines(report):
@@ -103,6 +113,10 @@ def run(args: argparse.Namespace) -> int:
         from fdi_daemon.diagnose.plots import plot_diagnosis
 
         plot_diagnosis(result, report, args.plot)
+    if args.out and result.ctx.form == "inverse_dynamics":
+        raise UserError(f"-o {args.out}: effects tested in the inverse-dynamics form (a force "
+                        f"balance on the measured motion) cannot be simulated; use --form "
+                        f"simulation to write an augmented model")
     if args.out:
         provenance = dict(model.provenance) if model is not None else {}
         provenance["diagnose"] = {"recording": str(args.recording),

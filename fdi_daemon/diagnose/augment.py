@@ -29,6 +29,7 @@ import numpy as np
 from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.diagnose import signals
 from fdi_daemon.diagnose.effects import SPECS, FittedEffect, regressor_param, stored_param
+from fdi_daemon.diagnose.force import LOOPED, ForceLoop, kinds
 from fdi_daemon.errors import ConfigError
 
 
@@ -37,9 +38,11 @@ class AugmentedPlant:
 
     def __init__(self, fs_hz: float, plant_b, plant_a, output_kind: str = "acceleration",
                  highpass_hz: float = 1.0, effects: list[FittedEffect] | None = None,
-                 domain: tuple | None = None) -> None:
+                 domain: tuple | None = None, force_loop: bool = True) -> None:
         """plant_b/plant_a: Ĝ (acceleration); domain: (b, a) of the model in the measured
-        quantity's domain when it was fitted there (default Lⁿ Ĝ)."""
+        quantity's domain when it was fitted there (default Lⁿ Ĝ). force_loop: force effects
+        in feedback with the augmented motion (`force`); False: fed forward from the nominal
+        motion (model files written before the loop existed)."""
         if output_kind not in signals.OUTPUT_KINDS:
             raise ValueError(f"output_kind must be one of {', '.join(signals.OUTPUT_KINDS)}")
         self.fs_hz = float(fs_hz)
@@ -55,7 +58,15 @@ class AugmentedPlant:
         self.b_dom, self.a_dom = np.asarray(b_dom, float), np.asarray(a_dom, float)
         self._plant = IIRFilter(self.b_dom, self.a_dom)
         self._chain = signals.StateChain(n, fs_hz, highpass_hz)
-        self._blocks = [self._block(eff) for eff in self.effects]
+        self.force_loop = bool(force_loop)
+        looped = [e for e in self.effects if force_loop and e.name in LOOPED]
+        self._fed = [e for e in self.effects if e not in looped]
+        self._blocks = [self._block(eff) for eff in self._fed]
+        self._loop = None
+        if looped:
+            cols = [c for e in looped for c in kinds(e.name, e.param)]
+            nums = [b for e in looped for b in e.coefficients]
+            self._loop = ForceLoop(self.a_dom, cols, nums, self._chain.coefficients)
 
     def _block(self, eff: FittedEffect):
         spec = SPECS[eff.name]
@@ -80,7 +91,7 @@ class AugmentedPlant:
             else:
                 for gain, phi in zip(outs, phis):
                     y += gain * phi
-        return y
+        return y if self._loop is None else self._loop.step(y)
 
     def run(self, v_in: np.ndarray) -> np.ndarray:
         """A whole array, continuing from the current state."""
@@ -93,24 +104,30 @@ class AugmentedPlant:
         v, x = self._chain.run(y0)
         y = y0.copy()
         parts: dict[str, np.ndarray] = {}
-        for eff, (reg, dynamic, outs) in zip(self.effects, self._blocks):
+        for eff, (reg, dynamic, outs) in zip(self._fed, self._blocks):
             phis = reg.run(u, v, x, y0)
             part = np.zeros_like(y0)
             for j, out in enumerate(outs):
                 part += out.run(phis[:, j]) if dynamic else out * phis[:, j]
             parts[eff.name] = part
             y += part
+        if self._loop is not None:
+            y_ff = y
+            y = self._loop.run(y_ff)
+            parts["force_loop"] = y - y_ff
         return {"y0": y0, "v": v, "x": x, "y": y, "parts": parts}
 
     def reset(self) -> None:
         """Zero every state (filters and regressor memories), as after construction."""
         self._plant.reset()
         self._chain.reset()
-        for eff, block in zip(self.effects, self._blocks):
+        for eff, block in zip(self._fed, self._blocks):
             block[0] = eff.regressor()
             if block[1]:
                 for f in block[2]:
                     f.reset()
+        if self._loop is not None:
+            self._loop.reset()
 
     @property
     def state(self) -> list[Any]:
@@ -120,13 +137,16 @@ class AugmentedPlant:
             out.append(getattr(reg, "state", None))
             if dynamic:
                 out.extend(f.state for f in outs)
+        if self._loop is not None:
+            out.extend(self._loop.state)
         return out
 
     # -- model file --------------------------------------------------------------------------
 
     def to_extra(self) -> dict[str, Any]:
         """The ``effects`` mapping of the model file."""
-        out = {"output_kind": self.output_kind, "highpass_hz": self.highpass_hz}
+        out = {"output_kind": self.output_kind, "highpass_hz": self.highpass_hz,
+               "force_loop": self.force_loop}
         if self._n:
             out["domain_plant"] = {"b": [float(c) for c in self.b_dom],
                                    "a": [float(c) for c in self.a_dom]}
@@ -160,7 +180,10 @@ class AugmentedPlant:
             except (KeyError, TypeError, ValueError):
                 raise ConfigError(f"{where}.domain_plant must hold lists b and a") from None
         effects = _parse_items(section.get("items", []), model.fs, f"{where}.items")
-        return cls(model.fs, model.plant_b, model.plant_a, kind, hp, effects, domain)
+        loop = section.get("force_loop", False)
+        if not isinstance(loop, bool):
+            raise ConfigError(f"{where}.force_loop must be true or false")
+        return cls(model.fs, model.plant_b, model.plant_a, kind, hp, effects, domain, loop)
 
 
 def _items(effects: list[FittedEffect], fs_hz: float) -> list[dict[str, Any]]:
@@ -203,6 +226,9 @@ def _parse_items(raw: Any, fs_hz: float, where: str) -> list[FittedEffect]:
             coefs = [np.asarray(c, dtype=float) for c in item["coefficients"]]
         except (KeyError, TypeError, ValueError):
             raise ConfigError(f"{where}[{k}].coefficients must be lists of numbers") from None
+        if name == "dead_time" and len(coefs) == 1 and coefs[0].size > 1:
+            raise ConfigError(f"{where}[{k}]: a dead_time written by an older fdi diagnose "
+                              f"(a filtered input term); run fdi diagnose again")
         centre = item.get("centre", 0.0)
         if isinstance(centre, bool) or not isinstance(centre, (int, float)):
             raise ConfigError(f"{where}[{k}].centre must be a number")

@@ -1,37 +1,38 @@
-"""The library of physical effects that a nominal linear model may be missing.
+"""The library of physical effects that a nominal linear model may be missing, and their fit.
 
-Each effect is a regressor φ(u, v, x, ŷ₀; p) — built from the input u, the simulated
-velocity v and position x, or the nominal simulated output ŷ₀ — with nonlinear parameters p
-(a saturation level, a dead time ...) found by search, and linear coefficients found by least
-squares. It enters the model in one of two ways:
+Each effect is a regressor φ(u, v, x, ŷ₀; p) with at most one nonlinear parameter p (found
+by search) and linear coefficients (least squares). Where it enters (``source``):
 
-- dynamic (``source`` input or state): through a filter G_e = B_e(q)/Â(q) with Â the
-  nominal model's denominator and a free numerator of the same order. As G_e does for
-  friction in eq. (8)–(14): a force (friction, a spring) acts through the mechanics, whose
-  poles are those of Ĝ (eq. 6); an input nonlinearity acts through Ĝ itself
-  (Ĝ N(u) − Ĝ u = Ĝ [N(u) − u]), also B/Â. G_e φ = Σᵢ bᵢ q⁻ⁱ (Â⁻¹ φ), linear in bᵢ.
-- static (``source`` output): added to the output with a gain (sensor offset, clipping).
+- input (`input_effects`): through B_e(q)/Â(q), Â the nominal denominator, B_e free
+  (Ĝ N(u) − Ĝ u = Ĝ [N(u) − u]); G_e φ = Σᵢ bᵢ q⁻ⁱ (Â⁻¹ φ), linear in bᵢ;
+- state (force on the moving mass, `force`): the same filter as a start, with the nominal
+  motion; then in the loop with the augmented motion (`force.in_the_loop`);
+- output (`output_effects`): a static map of ŷ₀ with a gain.
 
-| effect             | φ                                    | nonlinear parameter           |
-|--------------------|--------------------------------------|-------------------------------|
-| coulomb_friction   | sign(v)                              | —                             |
-| viscous_friction   | v                                    | —                             |
-| stribeck_friction  | sign(v), sign(v)·exp(−(v/v_s)²)       | Stribeck velocity v_s         |
-| cubic_stiffness    | x³                                   | —                             |
-| dead_time          | u(t − τ) − u(t) (linear interp.)     | dead time τ                   |
-| input_saturation   | sat_L(u) − u                         | level L                       |
-| dead_zone          | dz_w(u) − u                          | half-width w                  |
-| backlash           | play_g(u) − u                        | gap g                         |
-| output_saturation  | sat_L(ŷ₀) − ŷ₀  (static)             | level L                       |
-| sensor_offset      | 1 (static)                           | —                             |
+| effect             | source | φ                                    | nonlinear parameter   |
+|--------------------|--------|--------------------------------------|-----------------------|
+| coulomb_friction   | state  | sign(v)                              | —                     |
+| viscous_friction   | state  | v                                    | —                     |
+| stribeck_friction  | state  | sign(v), sign(v)·exp(−(v/v_s)²)       | Stribeck velocity v_s |
+| cubic_stiffness    | state  | x³                                   | —                     |
+| force_offset       | state  | 1                                    | —                     |
+| input_saturation   | input  | sat_L(u − u_c) − (u − u_c)           | level L               |
+| dead_zone          | input  | dz_w(u − u_c) − (u − u_c)            | half-width w          |
+| backlash           | input  | play_g(u) − u                        | gap g                 |
+| dead_time          | output | ŷ₀(t − τ) − ŷ₀(t) (linear interp.)   | dead time τ           |
+| gain_fault         | output | ŷ₀                                   | —                     |
+| output_saturation  | output | sat_L(ŷ₀) − ŷ₀                       | level L               |
+| sensor_offset      | output | 1                                    | —                     |
 
-Every regressor is a streaming block (`step` per sample, `run` per array, explicit state),
-so the augmented model (`augment.AugmentedPlant`) computes exactly what was fitted.
+Base terms, never named: ``linear_refit`` (B_e/Â on u), ``loop_stiffness`` (x in the force
+loop), ``force_balance`` (mass and damping of the inverse-dynamics form). In the
+inverse-dynamics form every φ is taken from the measured motion and low-passed
+(`columns`). Every regressor is a streaming block, so the augmented model
+(`augment.AugmentedPlant`) computes exactly what was fitted.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -39,112 +40,21 @@ import numpy as np
 from scipy import signal
 from scipy.optimize import minimize_scalar
 
+from fdi_daemon.diagnose.input_effects import BacklashRegressor, dead_zone, saturate
+from fdi_daemon.diagnose.output_effects import DelayedOutputRegressor, out_saturate
+from fdi_daemon.diagnose.regressors import Regressor, Static
+
 EFFECT_NAMES = ("coulomb_friction", "viscous_friction", "stribeck_friction", "cubic_stiffness",
                 "dead_time", "input_saturation", "output_saturation", "dead_zone", "backlash",
-                "sensor_offset")
+                "sensor_offset", "force_offset", "gain_fault")
 
 
-# ----------------------------------------------------------------------------- regressor blocks
-
-
-class Regressor:
-    """Base: stateless φ; subclasses with memory override `run`/`step` and keep ``state``."""
-
-    n_out = 1
-
-    def run(self, u, v, x, y0) -> np.ndarray:  # (n, n_out)
-        raise NotImplementedError
-
-    def step(self, u: float, v: float, x: float, y0: float) -> list[float]:
-        return [float(c) for c in self.run(np.array([u]), np.array([v]), np.array([x]),
-                                           np.array([y0]))[0]]
-
-
-class _Static(Regressor):
-    def __init__(self, fn: Callable[..., list[np.ndarray]], n_out: int = 1) -> None:
-        self.fn = fn
-        self.n_out = n_out
-
-    def run(self, u, v, x, y0):
-        return np.column_stack(self.fn(np.asarray(u, float), np.asarray(v, float),
-                                       np.asarray(x, float), np.asarray(y0, float)))
-
-
-class DeadTimeRegressor(Regressor):
-    """u(t − τ) − u(t) with τ = d + f samples, linear interpolation; history starts at 0."""
-
-    def __init__(self, delay_samples: float) -> None:
-        self.d = int(math.floor(delay_samples))
-        self.frac = float(delay_samples - self.d)
-        self.state = np.zeros(self.d + 1)  # u[k-1] .. u[k-d-1]
-
-    def run(self, u, v, x, y0):
-        u = np.asarray(u, float)
-        ext = np.concatenate([self.state[::-1], u])  # ext[j + d + 1] = u[j]
-        h = self.d + 1
-        n = len(u)
-        delayed = ((1 - self.frac) * ext[h - self.d: h - self.d + n]
-                   + self.frac * ext[h - self.d - 1: h - self.d - 1 + n])
-        self.state = ext[::-1][: self.d + 1].copy()
-        return (delayed - u)[:, None]
-
-    def step(self, u, v, x, y0):
-        s = self.state
-        delayed_d = s[self.d - 1] if self.d > 0 else u
-        delayed = (1 - self.frac) * delayed_d + self.frac * s[self.d]
-        self.state = np.concatenate([[u], s[:-1]])
-        return [float(delayed - u)]
-
-
-class BacklashRegressor(Regressor):
-    """play_g(u) − u: the output follows the input with a gap g (starts centred on u[0])."""
-
-    def __init__(self, gap: float) -> None:
-        self.half = 0.5 * float(gap)
-        self.state: float | None = None
-
-    def step(self, u, v, x, y0):
-        y = u if self.state is None else self.state
-        if u - y > self.half:
-            y = u - self.half
-        elif y - u > self.half:
-            y = u + self.half
-        self.state = y
-        return [float(y - u)]
-
-    def run(self, u, v, x, y0):
-        u = np.asarray(u, float)
-        if u.size == 0:
-            return np.zeros((0, 1))
-        half = self.half
-        y = u[0] if self.state is None else self.state
-        out = []
-        append = out.append
-        for ui in u.tolist():  # the same arithmetic as step(), without the call per sample
-            if ui - y > half:
-                y = ui - half
-            elif y - ui > half:
-                y = ui + half
-            append(y)
-        self.state = y
-        return (np.array(out) - u).reshape(-1, 1)
+# regressor blocks: `regressors` (base), `input_effects`, `output_effects`; force effects'
+# regressors are the memoryless maps below (their loop is in `force`)
 
 
 def _stribeck(vs):
     return lambda u, v, x, y0: [np.sign(v), np.sign(v) * np.exp(-(v / vs) ** 2)]
-
-
-def _saturate(level, c):
-    return lambda u, v, x, y0: [np.clip(u - c, -level, level) - (u - c)]
-
-
-def _dead_zone(width, c):
-    return lambda u, v, x, y0: [np.sign(u - c) * np.maximum(np.abs(u - c) - width, 0.0)
-                                - (u - c)]
-
-
-def _out_saturate(level, c):
-    return lambda u, v, x, y0: [np.clip(y0 - c, -level, level) - (y0 - c)]
 
 
 # ----------------------------------------------------------------------------- effect specs
@@ -177,30 +87,32 @@ def _delays(c: "Context") -> np.ndarray:
 
 SPECS: dict[str, EffectSpec] = {
     "coulomb_friction": EffectSpec("coulomb_friction", "state", True, None, "",
-                                   lambda p, c: _Static(lambda u, v, x, y0: [np.sign(v)])),
+                                   lambda p, c: Static(lambda u, v, x, y0: [np.sign(v)])),
     "viscous_friction": EffectSpec("viscous_friction", "state", True, None, "",
-                                   lambda p, c: _Static(lambda u, v, x, y0: [v])),
+                                   lambda p, c: Static(lambda u, v, x, y0: [v])),
     "stribeck_friction": EffectSpec(
         "stribeck_friction", "state", True, "stribeck_velocity", "velocity units",
-        lambda p, c: _Static(_stribeck(p), 2),
+        lambda p, c: Static(_stribeck(p), 2),
         lambda c: _q(c.v[c.split.fit], [0.02, 0.05, 0.1, 0.2, 0.3, 0.5])),
     "cubic_stiffness": EffectSpec("cubic_stiffness", "state", True, None, "",
-                                  lambda p, c: _Static(lambda u, v, x, y0: [x ** 3])),
+                                  lambda p, c: Static(lambda u, v, x, y0: [x ** 3])),
     "dead_time": EffectSpec(
-        "dead_time", "input", True, "dead_time_s", "s",
-        lambda p, c: DeadTimeRegressor(p), _delays, integer_coarse=True),
+        "dead_time", "output", False, "dead_time_s", "s",
+        lambda p, c: DelayedOutputRegressor(p), _delays, integer_coarse=True),
+    "gain_fault": EffectSpec("gain_fault", "output", False, None, "",
+                             lambda p, c: Static(lambda u, v, x, y0: [y0])),
     "input_saturation": EffectSpec(
         "input_saturation", "input", True, "level", "input units",
-        lambda p, c: _Static(_saturate(p, c)),
+        lambda p, c: Static(saturate(p, c)),
         lambda c: _q(c.u[c.split.fit], [0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.94, 0.97, 0.99,
                                         0.995], c.u_centre)),
     "output_saturation": EffectSpec(
         "output_saturation", "output", False, "level", "output units",
-        lambda p, c: _Static(_out_saturate(p, c)),
+        lambda p, c: Static(out_saturate(p, c)),
         lambda c: _q(c.y0[c.split.fit], [0.8, 0.9, 0.95, 0.97, 0.98, 0.99, 0.995, 0.999])),
     "dead_zone": EffectSpec(
         "dead_zone", "input", True, "half_width", "input units",
-        lambda p, c: _Static(_dead_zone(p, c)),
+        lambda p, c: Static(dead_zone(p, c)),
         lambda c: _q(c.u[c.split.fit], [0.01, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5],
                      c.u_centre)),
     "backlash": EffectSpec(
@@ -208,14 +120,25 @@ SPECS: dict[str, EffectSpec] = {
         lambda p, c: BacklashRegressor(p),
         lambda c: np.ptp(c.u[c.split.fit]) * np.array([0.005, 0.01, 0.02, 0.04, 0.07, 0.1,
                                                        0.15, 0.2, 0.3])),
+    "force_offset": EffectSpec("force_offset", "state", True, None, "",
+                               lambda p, c: Static(lambda u, v, x, y0: [np.ones_like(u)])),
     "sensor_offset": EffectSpec("sensor_offset", "output", False, None, "",
-                                lambda p, c: _Static(lambda u, v, x, y0: [np.ones_like(u)])),
+                                lambda p, c: Static(lambda u, v, x, y0: [np.ones_like(u)])),
+    # not a candidate: corrections of the inverse-dynamics form's mass, damping [, stiffness]
+    # refitted with every candidate (columns from `Context.base_columns`)
+    "force_balance": EffectSpec("force_balance", "state", False, None, "", lambda p, c: None),
+    # not a candidate: in the force loop with any force effect (`force.in_the_loop`)
+    "loop_stiffness": EffectSpec("loop_stiffness", "state", True, None, "",
+                                 lambda p, c: Static(lambda u, v, x, y0: [x])),
     # not a candidate: with a fitted linear baseline, the baseline's numerator is refitted
     # together with every candidate (the baseline absorbed part of the missing effect)
     "linear_refit": EffectSpec("linear_refit", "input", True, None, "",
-                               lambda p, c: _Static(lambda u, v, x, y0: [u])),
+                               lambda p, c: Static(lambda u, v, x, y0: [u])),
 }
 
+
+#: terms of the base, never named: the nominal numerator refit and the force loop's spring
+BASE_TERMS = ("linear_refit", "loop_stiffness", "force_balance")
 
 #: static input maps that act around the input's operating point (its training median)
 CENTRED = ("input_saturation", "dead_zone")
@@ -223,7 +146,7 @@ CENTRED = ("input_saturation", "dead_zone")
 
 @dataclass
 class Context:
-    """Everything the fits need, computed once per recording (see `simulate.prepare`)."""
+    """Everything the fits need, computed once per recording (see `baseline.prepare`)."""
 
     u: np.ndarray
     v: np.ndarray
@@ -239,6 +162,12 @@ class Context:
     max_delay_samples: int
     u_centre: float = 0.0  # operating point of the input maps (median training input)
     candidates: tuple[str, ...] = EFFECT_NAMES
+    chain: tuple = ()  # (n, b, a, fs) of the state chain (`signals.StateChain.coefficients`)
+    form: str = "simulation"  # or "inverse_dynamics" (`inverse`): φ of the measured motion
+    lowpass: tuple = ()  # (b, a) of L in the inverse-dynamics form
+    base_columns: Any = None  # L a, L v [, L x] (inverse dynamics: the force balance)
+    inverse_base: dict = field(default_factory=dict)  # its fitted mass, damping [, stiffness]
+    highpass_hz: float = 1.0
     cache: dict = field(default_factory=dict, repr=False)
 
     def centre(self, spec: "EffectSpec") -> float:
@@ -247,6 +176,8 @@ class Context:
 
     def regressors(self, spec: "EffectSpec", param: float | None) -> np.ndarray:
         """φ of one effect over the record (the last few are cached: some are slow loops)."""
+        if spec.name == "force_balance":
+            return self.base_columns
         key = (spec.name, param)
         if key not in self.cache:
             if len(self.cache) >= 8:
@@ -280,6 +211,7 @@ class FittedEffect:
     n_linear: int = 0
     physical: dict[str, Any] = field(default_factory=dict)
     centre: float = 0.0  # operating point of a centred static map
+    n_free: int | None = None  # fitted numbers when fewer than the coefficients (force loop)
 
     def regressor(self) -> Regressor:
         """A fresh streaming regressor block with this effect's parameters."""
@@ -287,7 +219,8 @@ class FittedEffect:
 
     @property
     def n_params(self) -> int:
-        return self.n_linear + (0 if self.param is None else 1)
+        free = self.n_linear if self.n_free is None else self.n_free
+        return free + (0 if self.param is None else 1)
 
 
 def stored_param(spec: EffectSpec, param: float | None, fs_hz: float) -> float | None:
@@ -307,8 +240,12 @@ def regressor_param(spec: EffectSpec, value: float | None, fs_hz: float) -> floa
 def columns(spec: EffectSpec, param: float | None, ctx: Context,
             phi: np.ndarray | None = None) -> np.ndarray:
     """Design-matrix columns of one effect over the whole record (φ computed if not given)."""
+    if spec.name == "force_balance":
+        return ctx.base_columns
     if phi is None:
         phi = spec.build(param, ctx.centre(spec)).run(ctx.u, ctx.v, ctx.x, ctx.y0)
+    if ctx.form == "inverse_dynamics":  # L φ at the moving samples: one force per regressor
+        return signal.lfilter(*ctx.lowpass, phi, axis=0) * (ctx.base_columns[:, :1] != 0)
     if not spec.dynamic:
         return phi
     order = len(ctx.a_dom) - 1
@@ -461,6 +398,10 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
     The sign of a single friction term cannot be judged without knowing how force enters.
     """
     spec = SPECS[eff.name]
+    if ctx.form == "inverse_dynamics":
+        from fdi_daemon.diagnose.inverse import physical
+
+        return physical(eff.name, np.concatenate(eff.coefficients), eff.param, ctx)
     out: dict[str, Any] = {}
     if spec.param is not None:
         out[spec.param] = stored_param(spec, eff.param, ctx.fs_hz)
@@ -482,6 +423,11 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
         if eff.name == "stribeck_friction":
             plausible = (out["coulomb_level_input_equivalent"]
                          * out["stribeck_excess_input_equivalent"]) > 0.0
+    elif eff.name == "gain_fault":  # y = (1 + g) ŷ₀
+        out["gain_ratio"] = 1.0 + float(eff.coefficients[0][0])
+    elif eff.name == "dead_time":  # y = ŷ₀ + c (ŷ₀(t − τ) − ŷ₀(t)); a pure shift has c = 1
+        out["shift_share"] = float(eff.coefficients[0][0])
+        plausible = 0.5 <= out["shift_share"] <= 1.5
     else:
         key = "offset" if eff.name == "sensor_offset" else "gain"
         out[key] = float(eff.coefficients[0][0])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from fdi_daemon.diagnose.effects import BASE_TERMS
+
 from typing import Any
 
 from fdi_daemon.diagnose.select import ALPHA
@@ -14,7 +16,7 @@ def build_report(result, source: str = "") -> dict[str, Any]:
     ctx = result.ctx
     test = ctx.split.test
     y = result.y_measured
-    named = [e for e in result.selection.chosen if e.name != "linear_refit"]
+    named = [e for e in result.selection.chosen if e.name not in BASE_TERMS]
     rounds = []
     for candidates in result.selection.rounds:
         rows = []
@@ -52,8 +54,26 @@ def build_report(result, source: str = "") -> dict[str, Any]:
                   "output_kind": ctx.output_kind,
                   "highpass_hz": result.info["highpass_hz"], "fs": ctx.fs_hz},
         "source": source,
+        # how the effects were tested (issue 14): the form, the noise floor, the dead time
+        "form": result.info["form"],
+        "form_reason": result.info["form_reason"],
+        "noise_floor": result.info["noise_floor"],
+        "gap_before_to_floor": _ratio(result.gap_before, result.info["noise_floor"]),
+        "gap_after_to_floor": _ratio(result.gap_after, result.info["noise_floor"]),
+        "dead_time": {
+            "by_correlation_s": result.info.get("dead_time_by_correlation_s"),
+            "named_s": next((e.physical.get("dead_time_s") for e in named
+                             if e.name == "dead_time"), None)},
+        "linear_check": result.selection.linear,
     }
+    if "inverse_baseline" in result.info:  # mass, damping [, stiffness]: refitted if named
+        refit = [e.physical for e in result.selection.chosen if e.name == "force_balance"]
+        report["force_balance"] = refit[0] if refit else dict(result.info["inverse_baseline"])
     return json_data(report)
+
+
+def _ratio(gap: float, floor: dict):
+    return gap / floor["floor"] if floor.get("floor") else None
 
 
 def summary_lines(report: dict[str, Any]) -> list[str]:
@@ -61,6 +81,15 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     lines = [f"baseline: {report['model']['baseline']}  "
              f"(output {report['model']['output_kind']}, held out from "
              f"t = {report['test']['held_out_from_s']:.3g} s)"]
+    lines.append(f"form: {report['form']} ({report['form_reason']})")
+    floor = report["noise_floor"]
+    if floor.get("floor") is not None:
+        lines.append(f"noise floor (NRMSE): {floor['floor']:.4g} ({floor['method']})"
+                     + ("  -- the nominal model is at the floor" if floor["at_floor"] else ""))
+    if report["linear_check"].get("unexplained"):
+        lines.append("the numerator refit alone is significant (a missing effect's linear "
+                     "part, or a numerator that is off) and is neither a gain change nor a "
+                     "dead time: it stays in the base")
     if report["effect"] is None:
         lines.append("no significant missing effect")
     else:
@@ -72,7 +101,10 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
                 if isinstance(v, (int, float)) and not isinstance(v, bool))
             lines.append(f"missing effect: {e['effect']}  ({params})")
     lines.append(f"gap (NRMSE, held out): {report['gap_before']:.4g} -> "
-                 f"{report['gap_after']:.4g}")
+                 f"{report['gap_after']:.4g}"
+                 + (f"  ({report['gap_before_to_floor']:.3g} -> "
+                    f"{report['gap_after_to_floor']:.3g} x the floor)"
+                    if report["gap_before_to_floor"] is not None else ""))
     lines.append("ranking:")
     for row in report["ranking"][:5]:
         mark = "*" if row["accepted"] else " "

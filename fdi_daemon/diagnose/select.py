@@ -28,8 +28,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from fdi_daemon.diagnose.effects import (SPECS, Context, FittedEffect, NotApplicable, columns,
-                                         fit_effect)
+from fdi_daemon.diagnose.effects import (BASE_TERMS, SPECS, Context, FittedEffect,
+                                         NotApplicable, columns, fit_effect)
+from fdi_daemon.diagnose.force import FORCE_EFFECTS, in_the_loop
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
 #: effect in pure noise near 2 %
@@ -83,19 +84,31 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
     """Fit ``name`` on top of ``base`` and judge it on the held-out part (n_eff: effective
     samples of the residual it has to explain, the same for every candidate of a round)."""
     eff, refitted = fit_effect(name, ctx, base, base_cols)
-    x_new = columns(SPECS[name], eff.param, ctx, ctx.regressors(SPECS[name], eff.param))
-    xx = x_new if base_cols is None else np.column_stack([base_cols, x_new])
-    theta = np.concatenate([np.concatenate([np.ravel(c) for c in e.coefficients])
-                            for e in refitted + [eff]])
-    prediction = xx @ theta
+    effects = refitted + [eff]
+    if ctx.form == "simulation" and any(e.name in FORCE_EFFECTS for e in effects):
+        if SPECS[name].param is not None and name in FORCE_EFFECTS:
+            eff = _search_in_the_loop(ctx, effects)
+            effects = refitted + [eff]
+        effects, prediction = in_the_loop(ctx, effects)
+        refitted, eff = effects[:-1], effects[-1]
+    else:
+        x_new = columns(SPECS[name], eff.param, ctx, ctx.regressors(SPECS[name], eff.param))
+        xx = x_new if base_cols is None else np.column_stack([base_cols, x_new])
+        theta = np.concatenate([np.concatenate([np.ravel(c) for c in e.coefficients])
+                                for e in effects])
+        prediction = xx @ theta
     test = ctx.split.test
     e1 = ctx.target[test] - prediction[test]
     sse1 = float(e1 @ e1)
-    k = eff.n_params
-    k_total = k + sum(b.n_params for b in refitted)
+    if not math.isfinite(sse1):  # a force loop that diverges on the held-out part
+        sse1 = math.inf
+    k = eff.n_params + sum(e.n_params for e in refitted if e.name not in {b.name for b in base})
+    k_total = eff.n_params + sum(b.n_params for b in refitted)
     dof = n_eff - k_total
     if sse1 <= 0.0:
         score, p = -math.inf, 0.0
+    elif math.isinf(sse1):
+        score, p = math.inf, 1.0
     else:
         score = n_eff * math.log(sse1 / sse_reference) + k * math.log(max(n_eff, 2.0))
         if dof > 1 and sse1 < sse_reference:
@@ -107,6 +120,26 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
     return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, float(score), p,
                      bool(p < ALPHA and score < 0.0 and plausible
                           and sse1 <= (1.0 - MIN_REDUCTION) * sse_reference), prediction)
+
+
+def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffect:
+    """The searched parameter of a force effect (the last of ``effects``) again, with the
+    motion in the loop: its feed-forward search saw the nominal motion only. Each grid
+    value gets a full loop fit (a short one misleads); the lowest training error wins."""
+    from dataclasses import replace
+
+    new = effects[-1]
+    spec = SPECS[new.name]
+    fit = ctx.split.fit
+    best = (math.inf, new)
+    grid = np.append(spec.grid(ctx), new.param)
+    for value in grid[np.isfinite(grid) & (grid > 0)]:
+        trial = replace(new, param=float(value))
+        _, pred = in_the_loop(ctx, effects[:-1] + [trial])
+        sse = float(np.sum((ctx.target - pred)[fit] ** 2))
+        if sse < best[0]:
+            best = (sse, trial)
+    return best[1]
 
 
 def nested_p_value(larger: Candidate, smaller: Candidate, n_eff: float) -> float:
@@ -133,33 +166,100 @@ class Selection:
     chosen: list[FittedEffect]
     rounds: list[list[Candidate]]
     prediction: np.ndarray  # Σ contributions of the chosen effects (whole record)
+    linear: dict = field(default_factory=dict)  # the refit check (`linear_round`)
+
+    @property
+    def named(self) -> list[FittedEffect]:
+        return [e for e in self.chosen if e.name not in BASE_TERMS]
+
+
+#: what a significant numerator refit may be: a pure gain change or a pure shift
+LINEAR_EXPLANATIONS = ("gain_fault", "dead_time")
+
+
+def linear_round(ctx: Context, floor_sse: float | None = None
+                 ) -> tuple[list[FittedEffect], np.ndarray, dict]:
+    """The refit never swallows an effect silently.
+
+    The nominal numerator refit (``linear_refit``) is judged like a candidate. When it is
+    significant, a pure gain change (``gain_fault``, y = (1 + g) ŷ₀) and a pure shift
+    (``dead_time``, ŷ₀(t − τ)) are tried: the best one that the refit does not beat
+    (nested F-test at ALPHA) and that leaves no more than the noise floor (floor_sse; a
+    dead zone or a saturation also looks like a lower gain, but leaves its nonlinear part)
+    is named with its value and replaces the refit. Otherwise the refit stays in the base
+    and is reported (``linear_check``: ``unexplained``, or the explanations tried, with
+    their values).
+    """
+    test = ctx.split.test
+    e0 = ctx.target[test]
+    sse0 = float(e0 @ e0)
+    n_eff = effective_samples(e0)
+    refit = evaluate("linear_refit", ctx, [], None, sse0, n_eff)
+    out = {"refit_significant": refit.accepted, "refit_p_value": refit.p_value,
+           "refit_sse_ratio": refit.sse_test / sse0 if sse0 > 0 else 1.0,
+           "explanations": []}
+    if not refit.accepted:
+        return [refit.effect], refit.prediction, out
+    simple = []
+    for name in LINEAR_EXPLANATIONS:
+        try:
+            c = evaluate(name, ctx, [], None, sse0, n_eff)
+        except NotApplicable:
+            continue
+        p_refit = nested_p_value(refit, c, n_eff)
+        out["explanations"].append({"effect": name, "sse_ratio": c.sse_test / sse0,
+                                    "p_value": c.p_value, "refit_beats_it_p": p_refit,
+                                    "params": dict(c.effect.physical)})
+        if (c.accepted and p_refit >= ALPHA
+                and (floor_sse is None or c.sse_test <= floor_sse)):
+            simple.append(c)
+    if simple:
+        best = min(simple, key=lambda c: c.sse_test)
+        out["named"] = best.name
+        return [best.effect], best.prediction, out
+    out["unexplained"] = not any(x["p_value"] < ALPHA and x["refit_beats_it_p"] >= ALPHA
+                                 for x in out["explanations"])
+    return [refit.effect], refit.prediction, out
 
 
 def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
-                   refit_linear: bool = False) -> Selection:
+                   refit_linear: bool = False, floor_sse: float | None = None) -> Selection:
     """Rounds of candidate search; see the module docstring.
 
     refit_linear: the nominal model's numerator is refitted jointly with every candidate
     (``linear_refit``, part of the base: an imperfect Ĝ, or one fitted on data that hold the
-    effect, otherwise makes linear stand-ins such as a dead time look significant). It is
-    kept only when an effect is named.
+    effect, otherwise makes linear stand-ins look significant), after `linear_round` has
+    checked that the refit is not a gain change or a dead time; in the inverse-dynamics
+    form the force balance's mass and damping (``force_balance``). A base term alone is
+    not a missing effect: it is dropped when nothing is named. floor_sse: the held-out SSE
+    at the noise floor (`floor`); once the remaining error is there, no further effect is
+    looked for.
     """
     chosen: list[FittedEffect] = []
     base_cols = None
     prediction = np.zeros_like(ctx.target)
-    if refit_linear:
-        linear, _ = fit_effect("linear_refit", ctx)
-        chosen = [linear]
-        base_cols = columns(SPECS["linear_refit"], None, ctx)
-        prediction = base_cols @ np.concatenate(linear.coefficients)
-    max_effects += len(chosen)
+    linear: dict = {}
+    if refit_linear and ctx.form == "inverse_dynamics":
+        balance, _ = fit_effect("force_balance", ctx)
+        chosen = [balance]
+    elif refit_linear:
+        chosen, prediction, linear = linear_round(ctx, floor_sse)
+    if chosen:
+        base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
+                                             ctx.regressors(SPECS[e.name], e.param))
+                                     for e in chosen])
+        prediction = base_cols @ np.concatenate([np.ravel(c) for c in chosen[0].coefficients])
     rounds: list[list[Candidate]] = []
     test = ctx.split.test
-    while len(chosen) < max_effects:
+    skip = set(LINEAR_EXPLANATIONS) if refit_linear else set()
+    while len([e for e in chosen if e.name not in BASE_TERMS]) < max_effects:
         e0 = ctx.target[test] - prediction[test]
         sse0 = float(e0 @ e0)
+        if rounds and floor_sse is not None and sse0 <= floor_sse:
+            break  # what is left is noise
         n_eff = effective_samples(e0)
-        remaining = [c for c in ctx.candidates if c not in {e.name for e in chosen}]
+        remaining = [c for c in ctx.candidates
+                     if c not in {e.name for e in chosen} and c not in skip]
         results = []
         for name in remaining:
             try:
@@ -179,7 +279,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 for e in chosen]
         base_cols = np.column_stack(cols)
         prediction = best.prediction
-    if refit_linear and len(chosen) == 1:
+    if not any(e.name not in BASE_TERMS for e in chosen):
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
-    return Selection(chosen, rounds, prediction)
+    return Selection(chosen, rounds, prediction, linear)

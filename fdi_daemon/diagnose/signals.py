@@ -143,6 +143,11 @@ class StateChain:
     def state(self) -> list:
         return [self._first.state, self._second.state, self._prev]
 
+    @property
+    def coefficients(self) -> tuple[int, np.ndarray, np.ndarray, float]:
+        """(n, b, a, fs) of the chain, for the force loop's kernel (`force.ForceLoop`)."""
+        return self.n, self._first.b, self._first.a, self.fs_hz
+
 
 def settle_samples(a: np.ndarray, limit: int) -> int:
     """Samples for the slowest pole of 1/A to decay to 1 %, at most ``limit``."""

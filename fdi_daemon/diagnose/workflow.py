@@ -1,6 +1,13 @@
-"""The diagnose workflow end to end: simulate, localise, name, add, show the gap shrink."""
+"""The diagnose workflow end to end, in the order of the package's stages:
+
+baseline and form of the test (`baseline`, `inverse`) -> noise floor and dead time
+(`floor`) and localisation (`localize`) -> candidate effects by place (`input_effects`,
+`force`, `output_effects`, fitted by `effects`) -> selection (`select`) -> report (`report`,
+`plots`, `augment`)."""
 
 from __future__ import annotations
+
+from fdi_daemon.diagnose.effects import BASE_TERMS
 
 from dataclasses import dataclass
 
@@ -10,8 +17,10 @@ from fdi_daemon.diagnose import signals
 from fdi_daemon.diagnose.augment import AugmentedPlant
 from fdi_daemon.diagnose.effects import Context
 from fdi_daemon.diagnose.localize import localize
+from fdi_daemon.diagnose.floor import FLOOR_MARGIN, delay_by_correlation, noise_floor
+from fdi_daemon.diagnose.inverse import noise_floor as inverse_floor
 from fdi_daemon.diagnose.select import Selection, select_effects
-from fdi_daemon.diagnose.simulate import prepare
+from fdi_daemon.diagnose.baseline import prepare
 
 
 @dataclass
@@ -30,27 +39,48 @@ class DiagnoseResult:
 
     @property
     def named(self) -> list[str]:
-        return [e.name for e in self.selection.chosen if e.name != "linear_refit"]
+        return [e.name for e in self.selection.chosen if e.name not in BASE_TERMS]
 
 
 def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = "acceleration",
                  plant_b: np.ndarray | None = None, plant_a: np.ndarray | None = None,
-                 order: int | None = None, progress=None) -> DiagnoseResult:
+                 order: int | None = None, progress=None, form: str = "auto") -> DiagnoseResult:
     """plant_b/plant_a: Ĝ (acceleration) from a model file; None: fit a linear baseline
-    (of ``order``, None: chosen from the data)."""
-    ctx, _, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order)
-    selection = select_effects(ctx, progress=progress, refit_linear=True)
-    plant = AugmentedPlant(fs_hz, info["plant_b"], info["plant_a"], output_kind,
-                           info["highpass_hz"], selection.chosen, domain=info["domain"])
-    y_after = plant.run(ctx.u)
-    y_meas = info["y_dom"]
+    (of ``order``, None: chosen from the data). form: see `baseline.prepare`."""
+    ctx, _, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order, form)
+    simulated = ctx.form == "simulation"
     test = ctx.split.test
+    y_meas = info["y_dom"]
+    gap_before = signals.nrmse(y_meas[test], ctx.y0[test])
+    floor = (noise_floor(y_meas, y_meas - ctx.y0, ctx.u, fs_hz, ctx.split.warmup, test)
+             if simulated else
+             inverse_floor(y, ctx.target + ctx.y0, info["inverse_baseline"], ctx.lowpass,
+                           fs_hz, test))
+    floor["at_floor"] = bool(floor["floor"] is not None
+                             and gap_before <= FLOOR_MARGIN * floor["floor"])
+    info["noise_floor"] = floor
+    if simulated:
+        fit = ctx.split.fit
+        info["dead_time_by_correlation_s"] = delay_by_correlation(
+            y_meas[fit], ctx.y0[fit], fs_hz, ctx.max_delay_samples)
+    if floor["at_floor"]:  # nothing to find: the nominal model is as good as the noise
+        selection = Selection([], [], np.zeros_like(ctx.target))
+    else:
+        floor_sse = (None if floor["floor"] is None else
+                     (FLOOR_MARGIN * floor["floor"]) ** 2
+                     * float(np.sum((y_meas[test] - np.mean(y_meas[test])) ** 2)))
+        selection = select_effects(ctx, progress=progress, refit_linear=True,
+                                   floor_sse=floor_sse)
+    plant = AugmentedPlant(fs_hz, info["plant_b"], info["plant_a"], output_kind,
+                           info["highpass_hz"], selection.chosen if simulated else [],
+                           domain=info["domain"])
+    y_after = plant.run(ctx.u) if simulated else ctx.y0 + selection.prediction
     e_before = y_meas - ctx.y0
     e_after = y_meas - y_after
     return DiagnoseResult(
         ctx=ctx, info=info, selection=selection, plant=plant, y_measured=y_meas,
         y_before=ctx.y0, y_after=y_after,
-        gap_before=signals.nrmse(y_meas[test], ctx.y0[test]),
+        gap_before=gap_before,
         gap_after=signals.nrmse(y_meas[test], y_after[test]),
         where_before=localize(e_before, y_meas, ctx.u, ctx.v, ctx.x, fs_hz, test),
         where_after=localize(e_after, y_meas, ctx.u, ctx.v, ctx.x, fs_hz, test))

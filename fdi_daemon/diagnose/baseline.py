@@ -75,11 +75,42 @@ def band_centre_hz(u: np.ndarray, fs_hz: float) -> float:
     return float(f[1:][np.searchsorted(cum, 0.5)])
 
 
+#: share of the free-run error's energy below the input band's low edge above which the
+#: free run is "dominated by drift"
+DRIFT_SHARE = 0.5
+
+
+def drift(e: np.ndarray, u: np.ndarray, fs_hz: float) -> dict:
+    """How much of a free-run error e sits below the input's band (where 5 % of the input
+    power lies below): an integrator's drift, or a closed loop answering the output noise."""
+    nper = min(len(e), 4096)
+    f, pe = signal.welch(e - np.mean(e), fs=fs_hz, nperseg=nper)
+    _, pu = signal.welch(np.asarray(u, float) - np.mean(u), fs=fs_hz, nperseg=nper)
+    cum = np.cumsum(pu) / np.sum(pu) if np.sum(pu) > 0 else np.linspace(0, 1, f.size)
+    f_low = float(f[max(np.searchsorted(cum, 0.05), 1)])
+    share = float(np.sum(pe[f <= f_low]) / np.sum(pe)) if np.sum(pe) > 0 else 0.0
+    return {"band_low_hz": f_low, "error_share_below": share}
+
+
+#: a model mode this many times slower than the DC block is marginally stable for the test
+MARGINAL = 1.5
+
+
+def slowest_time_constant(a: np.ndarray, fs_hz: float) -> float:
+    """Time constant (s) of the slowest pole of 1/A (inf for a pole on the unit circle)."""
+    radius = float(np.max(np.abs(np.roots(a)))) if len(a) > 1 else 0.0
+    if radius <= 0.0:
+        return 0.0
+    return math.inf if radius >= 1.0 else -1.0 / (fs_hz * math.log(radius))
+
+
 def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
             plant_b: np.ndarray | None, plant_a: np.ndarray | None,
-            order: int | None = None) -> tuple[Context, AugmentedPlant, dict]:
+            order: int | None = None, form: str = "auto") -> tuple[Context, AugmentedPlant, dict]:
     """Context for the effect fits and the nominal plant; plant None -> fit a linear baseline
-    of ``order`` (None: `choose_order`)."""
+    of ``order`` (None: `choose_order`). form: "simulation", "inverse_dynamics" or "auto"
+    (inverse dynamics when the free run of a velocity or position model is dominated by
+    drift, `drift`)."""
     n_kind = signals.OUTPUT_KINDS[output_kind]
     u = np.asarray(u, float)
     y = np.asarray(y, float)
@@ -118,9 +149,52 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
                   a_dom=nominal.a_dom, b_dom=nominal.b_dom, split=split, fs_hz=fs_hz,
                   output_kind=output_kind, ref_hz=ref_hz,
                   max_delay_samples=max_delay,
-                  u_centre=float(np.median(u[split.fit])), candidates=candidates)
+                  u_centre=float(np.median(u[split.fit])), candidates=candidates,
+                  chain=signals.StateChain(n_kind, fs_hz, hp).coefficients, highpass_hz=hp)
     info["y_dom"] = y_dom
     info["plant_b"] = np.asarray(plant_b, float)
     info["plant_a"] = np.asarray(plant_a, float)
     info["domain"] = domain
+    info["drift"] = drift((y_dom - sig["y0"])[split.test], u[split.test], fs_hz)
+    info["drift"]["slowest_time_constant_s"] = slowest_time_constant(nominal.a_dom, fs_hz)
+    info["drift"]["dc_block_time_constant_s"] = 1.0 / (2.0 * math.pi * hp)
+    if form == "auto":
+        d = info["drift"]
+        drifting = d["error_share_below"] > DRIFT_SHARE
+        marginal = d["slowest_time_constant_s"] > MARGINAL * d["dc_block_time_constant_s"]
+        form = "inverse_dynamics" if n_kind and (drifting or marginal) else "simulation"
+        info["form_reason"] = (
+            f"{100 * d['error_share_below']:.0f} % of the free-run error lies below the "
+            f"input band ({d['band_low_hz']:.3g} Hz); slowest model time constant "
+            f"{d['slowest_time_constant_s']:.3g} s against the DC block's "
+            f"{d['dc_block_time_constant_s']:.3g} s: "
+            + ("a free run drifts (" + ("drift" if drifting else "marginally stable model")
+               + "), so the force balance is tested" if form == "inverse_dynamics"
+               else "the free run does not drift, so the model is simulated"))
+    else:
+        info["form_reason"] = "chosen by the user"
+    info["form"] = form
+    if form == "inverse_dynamics":
+        if not n_kind:
+            raise UserError("the inverse-dynamics form needs a velocity or position output")
+        ctx = inverse_context(u, y, fs_hz, output_kind, split, info)
     return ctx, nominal, info
+
+
+def inverse_context(u, y, fs_hz, output_kind, split, info) -> Context:
+    """The fitting context of the inverse-dynamics form (`inverse`)."""
+    from fdi_daemon.diagnose.inverse import INVERSE_CANDIDATES, baseline
+
+    base = baseline(u, y, output_kind, fs_hz, split)
+    info["y_dom"] = base["target"]
+    info["inverse_baseline"] = base["coefficients"]
+    info["baseline"] += "; inverse dynamics: L u = M L a + c L v" + (
+        " + k L x" if output_kind == "position" else "")
+    candidates = tuple(c for c in INVERSE_CANDIDATES
+                       if output_kind == "position" or c != "cubic_stiffness")
+    return Context(u=np.asarray(u, float), v=base["v"], x=base["x"], y0=base["y0"],
+                   target=base["target"] - base["y0"], a_dom=np.array([1.0]),
+                   b_dom=np.array([1.0]), split=split, fs_hz=fs_hz, output_kind=output_kind,
+                   ref_hz=0.0, max_delay_samples=1, candidates=candidates,
+                   form="inverse_dynamics", lowpass=base["lp"], base_columns=base["columns"],
+                   inverse_base=base["coefficients"])

@@ -1,0 +1,367 @@
+"""Force effects on the moving mass, in feedback with the motion: y = G_u u + G_F F(x, v).
+
+Friction (Coulomb, viscous, Stribeck), a cubic spring and a constant force act on the mass.
+The force they produce moves the mass, and the motion sets the force: the velocity v and
+position x that enter F are those of the *augmented* model's own output, not of the nominal
+simulation. Per sample k (all filters share Â, the nominal model's denominator):
+
+    z_pre[k] = Σ_{i≥1} (−a_i z[k−i] + Σ_j b_ji φ_j[k−i])      (G_F F without this sample's force)
+    y[k]      = y_ff[k] + z_pre[k] + Σ_j b_j0 φ_j(v[k], x[k])   (sign v, v, x³, 1, ...)
+    (v, x)[k] = states(y[k])                                    (`signals` state chain)
+
+This sample's force moves this sample's output (b_j0 ≠ 0: an acceleration follows a force at
+once), and the states depend on that output: the pair is solved by a few fixed-point passes
+(the chain's direct term is T/2 per integration, so the passes converge fast).
+
+y_ff is everything fed forward from the input (Ĝ u, the linear refit, input and output
+effects). The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
+m ẍ + c ẋ + k x = F − F_f moves with the plant's poles), and its numerator B_F (one per
+regressor, same order as Â) is identified: first by linear least squares with the nominal
+motion (the feed-forward first approximation, `effects.fit_effect`), then refined by
+output-error least squares with the motion in the loop (`refine`). A valve or an input
+filter between the input and the force (poles of Ĝ that are not the mechanics') is
+cancelled by B_F's zeros; a force input makes B_F ∝ B̂.
+
+The loop is a streaming block (`ForceLoop`: `run` and `step` run the same compiled kernel).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from scipy import signal
+from scipy.optimize import least_squares as least_squares_nl
+
+#: effects that are forces on the moving mass
+FORCE_EFFECTS = ("coulomb_friction", "viscous_friction", "stribeck_friction",
+                 "cubic_stiffness", "force_offset")
+#: everything in the loop: the force effects and the loop's linear spring correction
+LOOPED = FORCE_EFFECTS + ("loop_stiffness",)
+
+# regressor kinds of the kernel
+_SIGN, _VEL, _STRIBECK, _CUBE, _ONE, _X = 0, 1, 2, 3, 4, 5
+
+
+def kinds(name: str, param: float | None) -> list[tuple[int, float]]:
+    """(kind, parameter) of each regressor column of a force effect."""
+    if name == "coulomb_friction":
+        return [(_SIGN, 0.0)]
+    if name == "viscous_friction":
+        return [(_VEL, 0.0)]
+    if name == "stribeck_friction":
+        return [(_SIGN, 0.0), (_STRIBECK, float(param))]
+    if name == "cubic_stiffness":
+        return [(_CUBE, 0.0)]
+    if name == "force_offset":
+        return [(_ONE, 0.0)]
+    if name == "loop_stiffness":
+        return [(_X, 0.0)]
+    raise ValueError(f"{name} is not a force effect")
+
+
+@njit(cache=True)
+def _df2t(b, a, s, x):
+    out = b[0] * x + s[0]
+    n = s.size
+    for i in range(n - 1):
+        s[i] = s[i + 1] + b[i + 1] * x - a[i + 1] * out
+    s[n - 1] = b[n] * x - a[n] * out
+    return out
+
+
+@njit(cache=True)
+def _states(chain_n, vb0, s1, s2, prev, fs, y):
+    """(v, x) the state chain would give for output y this sample (no state change)."""
+    if chain_n == 0:
+        v = vb0 * y + s1[0]
+        return v, vb0 * v + s2[0]
+    if chain_n == 1:
+        return y, vb0 * y + s1[0]
+    return (y - prev[0]) * fs, y
+
+
+@njit(cache=True)
+def _phi_k(kind, par, v, x):
+    if kind == 0:
+        return 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
+    if kind == 1:
+        return v
+    if kind == 2:
+        sg = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
+        return sg * math.exp(-(v / par) ** 2)
+    if kind == 3:
+        return x * x * x
+    if kind == 4:
+        return 1.0
+    return x
+
+
+#: fixed-point passes for this sample's force, which moves this sample's output (b_j0 ≠ 0)
+_PASSES = 4
+
+
+@njit(cache=True)
+def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs):
+    n = a.size - 1
+    m = bmat.shape[1] - 1
+    ncol = bmat.shape[0]
+    y = np.empty(y_ff.size)
+    phi = np.zeros(ncol)
+    for k in range(y_ff.size):
+        acc = 0.0
+        for i in range(n):
+            acc -= a[i + 1] * zhist[i]
+        for i in range(m):
+            for j in range(ncol):
+                acc += bmat[j, i + 1] * phist[j, i]
+        base = y_ff[k] + acc
+        yk = base
+        for _ in range(_PASSES):
+            v, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
+            yk = base
+            for j in range(ncol):
+                phi[j] = _phi_k(kind[j], par[j], v, x)
+                yk += bmat[j, 0] * phi[j]
+        # commit the chain with the sample's output
+        if chain_n == 0:
+            v = _df2t(vb, va, s1, yk)
+            _df2t(vb, va, s2, v)
+        elif chain_n == 1:
+            _df2t(vb, va, s1, yk)
+        else:
+            prev[0] = yk
+        for i in range(n - 1, 0, -1):
+            zhist[i] = zhist[i - 1]
+        if n > 0:
+            zhist[0] = yk - y_ff[k]
+        for i in range(m - 1, 0, -1):
+            for j in range(ncol):
+                phist[j, i] = phist[j, i - 1]
+        if m > 0:
+            for j in range(ncol):
+                phist[j, 0] = phi[j]
+        y[k] = yk
+    return y
+
+
+class ForceLoop:
+    """The force effects' loop around a fed-forward output y_ff (frozen parameters).
+
+    a_dom: Â; columns: [(kind, parameter)]; numerators: B_F per column (len(Â) each);
+    chain: (n, b, a, fs) of the state chain (`signals.StateChain.coefficients`).
+    """
+
+    def __init__(self, a_dom, columns, numerators, chain) -> None:
+        self.a = np.asarray(a_dom, float)
+        self.kind = np.array([c[0] for c in columns], dtype=np.int64)
+        self.par = np.array([c[1] if c[1] else 1.0 for c in columns], dtype=float)
+        self.bmat = np.array(numerators, dtype=float).reshape(len(columns), -1)
+        self.chain_n, vb, va, self.fs = chain
+        self.vb, self.va = np.asarray(vb, float), np.asarray(va, float)
+        self.reset()
+
+    def reset(self) -> None:
+        order = max(self.va.size - 1, 1)
+        self.s1, self.s2 = np.zeros(order), np.zeros(order)
+        self.prev = np.zeros(1)
+        self.zhist = np.zeros(max(self.a.size - 1, 1))
+        self.phist = np.zeros((self.kind.size, max(self.bmat.shape[1] - 1, 1)))
+
+    def run(self, y_ff: np.ndarray) -> np.ndarray:
+        """y = y_ff + G_F F(v, x) over an array, continuing from the current state."""
+        return _kernel(np.ascontiguousarray(y_ff, dtype=float), self.a, self.bmat, self.kind,
+                       self.par, self.chain_n, self.vb, self.va, self.s1, self.s2, self.prev,
+                       self.zhist, self.phist, float(self.fs))
+
+    def step(self, y_ff: float) -> float:
+        return float(self.run(np.array([y_ff]))[0])
+
+    @property
+    def state(self) -> list[np.ndarray]:
+        return [self.s1.copy(), self.s2.copy(), self.prev.copy(), self.zhist.copy(),
+                self.phist.copy()]
+
+
+#: at most this many passes of the loop refinement (each: states from the last loop run,
+#: numerators by least squares)
+PASSES = 8
+
+
+def _padded(b: np.ndarray, width: int) -> np.ndarray:
+    out = np.zeros(width)
+    out[: min(width, len(b))] = np.asarray(b, float)[:width]
+    return out
+
+
+def _shifts(w: np.ndarray, width: int) -> np.ndarray:
+    return np.column_stack([np.concatenate([np.zeros(i), w[:len(w) - i]]) for i in range(width)])
+
+
+def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
+    """Refit ``effects`` with the force effects in the loop; returns the refitted effects
+    (``loop_stiffness`` added when absent) and their contribution y − ŷ₀ over the record.
+
+    The force path G_F = B_F/Â is identified on the training part in three steps:
+    1. feed-forward start: B_F = θ B̂ (a force enters where the input does), θ and the
+       fed-forward coefficients by least squares with the nominal motion;
+    2. the amplitudes θ (and fed-forward coefficients) by output-error least squares with
+       the motion in the loop;
+    3. the free numerators B_F (same order as Â: a valve or input filter in Ĝ is not on the
+       force path, B_F's zeros cancel its poles) by passes of least squares on the states of
+       the last loop run, each pass kept only if the loop's training error falls
+       (backtracking: a full step may destabilise the loop).
+    ``loop_stiffness`` (x through its own B_F) lets the loop move the nominal poles, as a
+    spring that the nominal model mis-sized would; it is part of the base, never named.
+    """
+    from fdi_daemon.diagnose.effects import SPECS, FittedEffect, columns, least_squares, \
+        physical_report
+    from fdi_daemon.diagnose.signals import StateChain
+
+    width = len(ctx.a_dom)
+    if not any(e.name == "loop_stiffness" for e in effects):
+        effects = [FittedEffect("loop_stiffness", None, [np.zeros(width)], n_linear=width,
+                                n_free=width)] + list(effects)
+    ff = [e for e in effects if e.name not in LOOPED]
+    fb = [e for e in effects if e.name in LOOPED]
+    fit = ctx.split.fit
+    y_meas = ctx.target + ctx.y0
+    x_ff = (np.column_stack([columns(SPECS[e.name], e.param, ctx,
+                                     ctx.regressors(SPECS[e.name], e.param)) for e in ff])
+            if ff else np.zeros((len(ctx.u), 0)))
+    n_ff = x_ff.shape[1]
+    cols = [c for e in fb for c in kinds(e.name, e.param)]
+    b_path = _padded(ctx.b_dom, width)
+
+    def run(theta_ff, nums):
+        with np.errstate(all="ignore"):
+            y = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).run(ctx.y0 + x_ff @ theta_ff)
+            sse = float(np.sum((y_meas - y)[fit] ** 2))
+        return y, (sse if np.isfinite(sse) else np.inf)
+
+    # 1. feed-forward start, 2. amplitudes on B̂ in the loop
+    x_fb = np.column_stack([signal.lfilter(ctx.b_dom, ctx.a_dom, _phi(k, p, ctx.v, ctx.x))
+                            for k, p in cols])
+    theta = least_squares(np.column_stack([x_ff, x_fb])[fit], ctx.target[fit])
+    scale = 1e3 * (float(np.std(y_meas[fit])) or 1.0)
+
+    def residual(th):
+        with np.errstate(all="ignore"):
+            e = (y_meas - ForceLoop(ctx.a_dom, cols, np.outer(th[n_ff:], b_path),
+                                    ctx.chain).run(ctx.y0 + x_ff @ th[:n_ff]))[fit]
+        # an unstable trial diverges: a large, finite residual keeps the solver going
+        return np.clip(np.nan_to_num(e, nan=scale), -scale, scale)
+
+    r0 = residual(theta)
+    with np.errstate(all="ignore"):
+        sol = least_squares_nl(residual, theta, method="trf", x_scale="jac",
+                               max_nfev=30 * theta.size)
+    if float(sol.fun @ sol.fun) < float(r0 @ r0):
+        theta = sol.x
+    best_ff, best_nums = theta[:n_ff], np.outer(theta[n_ff:], b_path)
+    y, best = run(best_ff, best_nums)
+    # 3. free numerators, passes on the loop's own motion
+    for _ in range(PASSES if np.all(np.isfinite(y)) else 0):
+        v, x = StateChain(ctx.chain[0], ctx.chain[3], ctx.highpass_hz).run(y)
+        xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, _phi(k, p, v, x)), width)
+                       for k, p in cols]
+        target = least_squares(np.column_stack(xs)[fit], ctx.target[fit])
+        start = np.concatenate([best_ff, best_nums.ravel()])
+        before = best
+        for frac in (1.0, 0.5, 0.25, 0.125):
+            trial = start + frac * (target - start)
+            y_try, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
+            if sse < best:
+                y, best = y_try, sse
+                best_ff, best_nums = trial[:n_ff], trial[n_ff:].reshape(len(cols), width)
+                break
+        if best > 0.999 * before:
+            break
+    out, pos, row = [], 0, 0
+    for e in effects:
+        if e.name in LOOPED:
+            k = len(kinds(e.name, e.param))
+            new = FittedEffect(e.name, e.param, list(best_nums[row:row + k]),
+                               n_linear=k * width, centre=e.centre, n_free=k * width)
+            new.physical = force_report(new, ctx, y)
+            row += k
+        else:
+            k = e.n_linear
+            flat = best_ff[pos:pos + k]
+            coefs = ([flat[j:j + width] for j in range(0, k, width)] if SPECS[e.name].dynamic
+                     else [flat])
+            new = FittedEffect(e.name, e.param, coefs, n_linear=k, centre=e.centre)
+            new.physical = physical_report(new, ctx)
+            pos += k
+        out.append(new)
+    return out, y - ctx.y0
+
+
+_FORCE_LABELS = {"coulomb_friction": ["coulomb_level"],
+                 "viscous_friction": ["viscous_coefficient"],
+                 "stribeck_friction": ["coulomb_level", "stribeck_excess"],
+                 "cubic_stiffness": ["cubic_coefficient"], "force_offset": ["offset"],
+                 "loop_stiffness": ["stiffness"]}
+_FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
+
+
+def force_report(eff, ctx, y: np.ndarray) -> dict:
+    """Size and physical check of a force effect, from the augmented motion.
+
+    ``<label>_input_equivalent``: the input per unit of φ that the force takes away,
+    c = −⟨Ĝφ, G_Fφ⟩/⟨Ĝφ, Ĝφ⟩ on the training part (v, x the augmented motion): the friction
+    level, the cubic spring coefficient, the constant force — newtons when the input is a
+    force; on a plant whose input acts through a valve only an order of magnitude.
+    Friction must take energy out of the motion: the velocity w_j that regressor j causes
+    (its output contribution G_Fj φ_j, turned into velocity) must oppose the motion,
+    P_j = ⟨w_j, v⟩/⟨v, v⟩ < 0 (``*_power_ratio``); a Stribeck excess must too (friction
+    higher near v = 0). Otherwise the fit is not ``plausible`` and is never named. The
+    power test needs no knowledge of how force enters, unlike the sign of c.
+    """
+    from fdi_daemon.diagnose.signals import StateChain
+
+    if not np.all(np.isfinite(y)):
+        return {"diverged": True, "plausible": False}
+    n, vb, va, fs = ctx.chain
+    v, x = StateChain(n, fs, ctx.highpass_hz).run(y)
+    fit = ctx.split.fit
+    out: dict = {}
+    if eff.param is not None:
+        out["stribeck_velocity"] = float(eff.param)
+        out["stribeck_velocity_unit"] = "velocity units"
+    plausible = True
+    vv = float(v[fit] @ v[fit]) or 1.0
+    for label, (kind, par), b in zip(_FORCE_LABELS[eff.name], kinds(eff.name, eff.param),
+                                     eff.coefficients):
+        phi = _phi(kind, par, v, x)
+        c = signal.lfilter(b, ctx.a_dom, phi)
+        g = signal.lfilter(ctx.b_dom, ctx.a_dom, phi)[fit]
+        gg = float(g @ g)
+        out[f"{label}_input_equivalent"] = -float(g @ c[fit]) / gg if gg > 0 else 0.0
+        if eff.name in _FRICTION:
+            if n == 0:
+                w = signal.lfilter(vb, va, c)
+            elif n == 1:
+                w = c
+            else:
+                w = np.diff(c, prepend=0.0) * fs
+            power = float(w[fit] @ v[fit]) / vv
+            out[f"{label}_power_ratio"] = power
+            plausible = plausible and power < 0.0
+    out["plausible"] = plausible
+    return out
+
+
+def _phi(kind: int, par: float, v: np.ndarray, x: np.ndarray) -> np.ndarray:
+    if kind == _SIGN:
+        return np.sign(v)
+    if kind == _VEL:
+        return v
+    if kind == _STRIBECK:
+        return np.sign(v) * np.exp(-(v / par) ** 2)
+    if kind == _CUBE:
+        return x ** 3
+    if kind == _X:
+        return x.copy()
+    return np.ones_like(v)

@@ -1,0 +1,143 @@
+"""The inverse-dynamics form of the test, for integrating and closed-loop plants.
+
+A free-run simulation of a linear model of an integrating plant (force in, velocity out) or
+of closed-loop data drifts: a small error in an integrator's input piles up, and under
+feedback the input itself answers the output's noise. Then the effects are tested on the
+force balance of the moving mass instead, with the *measured* motion:
+
+    L u = M L a + c L v [+ k L x]  +  Σ_e θ_e L φ_e(v, x)        (per sample, least squares)
+
+u the input (a force, or proportional to one), v and x the measured velocity and position,
+a = D v the backward-difference acceleration, L a second-order Butterworth low-pass applied
+to both sides (the equation holds for any L applied to every term; L keeps the noise that D
+amplifies out of the fit). The baseline is M, c (and k for a position output), fitted on the
+training part; the effects' θ are forces in input units: Coulomb level F_c (sign v),
+Stribeck excess, cubic spring k₃ (x³, position output only), a constant force F_0 (1).
+The gap is the held-out NRMSE of L u: how much of the force the model does not explain.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+from fdi_daemon.diagnose import signals
+
+#: effects that can be tested in this form (forces on the mass from the measured motion)
+INVERSE_CANDIDATES = ("coulomb_friction", "stribeck_friction", "cubic_stiffness",
+                      "force_offset")
+
+
+def lowpass(u: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """L: 2nd-order Butterworth at twice the frequency below which 98 % of the input power
+    lies (at most fs/8)."""
+    x = np.asarray(u, float) - np.mean(u)
+    f, pxx = signal.welch(x, fs=fs_hz, nperseg=min(len(x), 2048))
+    cum = np.cumsum(pxx) / np.sum(pxx) if np.sum(pxx) > 0 else np.linspace(0, 1, f.size)
+    f_hi = float(f[min(np.searchsorted(cum, 0.98), f.size - 1)])
+    cut = min(max(2.0 * f_hi, 4.0 * fs_hz / len(x)), fs_hz / 8.0)
+    return signal.butter(2, cut, fs=fs_hz)
+
+
+def measured_motion(y: np.ndarray, output_kind: str, fs_hz: float) -> dict[str, np.ndarray]:
+    """a, v (and x) over each sample interval [k, k+1], where the held input u[k] acts:
+    velocity output: a = (v[k+1] − v[k])/T, v = (v[k+1] + v[k])/2; position output:
+    v = (x[k+1] − x[k])/T, a = (x[k+1] − 2x[k] + x[k−1])/T², x = (x[k+1] + x[k])/2.
+    The last sample repeats its neighbour."""
+    y = np.asarray(y, float)
+    ahead = np.append(y[1:], y[-1])
+    if output_kind == "velocity":
+        return {"a": (ahead - y) * fs_hz, "v": 0.5 * (ahead + y), "x": None}
+    if output_kind == "position":
+        behind = np.insert(y[:-1], 0, y[0])
+        x = 0.5 * (ahead + y)
+        return {"a": (ahead - 2.0 * y + behind) * fs_hz ** 2, "v": (ahead - y) * fs_hz,
+                "x": x - np.mean(x)}
+    raise ValueError("the inverse-dynamics form needs a velocity or position output")
+
+
+def velocity_noise(v: np.ndarray) -> float:
+    """σ of white noise on v, from the median absolute second difference (σ√6 for white
+    noise; a smooth motion hardly contributes)."""
+    d2 = np.diff(np.asarray(v, float), 2)
+    return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0)
+
+
+def at_rest(v: np.ndarray) -> np.ndarray:
+    """Samples where the velocity is within 3σ of its noise (`velocity_noise`): at rest,
+    friction is whatever holds the mass."""
+    return np.abs(v) <= 3.0 * velocity_noise(v)
+
+
+def settle_samples(b: np.ndarray, a: np.ndarray) -> int:
+    """Samples holding 99 % of L's impulse-response energy."""
+    h = signal.lfilter(b, a, np.r_[1.0, np.zeros(4095)])
+    return int(np.searchsorted(np.cumsum(h * h) / np.sum(h * h), 0.99)) + 1
+
+
+def baseline(u, y, output_kind: str, fs_hz: float, split: signals.Split) -> dict:
+    """The linear force balance fitted on the training part, and what the effect fits
+    need: ``target`` (L u), ``y0`` (its linear prediction), ``columns`` (L a, L v [, L x]),
+    the filter and the motion.
+
+    Samples at rest (`at_rest`) and those L is still settling from them take no part in
+    any fit or gap: their rows are zeroed in the target and every column (``moving``)."""
+    b, a = lowpass(u, fs_hz)
+    motion = measured_motion(y, output_kind, fs_hz)
+    names = ["mass", "damping"] + (["stiffness"] if motion["x"] is not None else [])
+    raw = [motion["a"], motion["v"]] + ([motion["x"]] if motion["x"] is not None else [])
+    rest = at_rest(motion["v"]).astype(float)
+    moving = np.convolve(rest, np.ones(settle_samples(b, a)))[: rest.size] == 0
+    cols = np.column_stack([signal.lfilter(b, a, c) for c in raw]) * moving[:, None]
+    target = signal.lfilter(b, a, np.asarray(u, float)) * moving
+    fit = split.fit
+    coef, *_ = np.linalg.lstsq(cols[fit], target[fit], rcond=None)
+    return {"lp": (b, a), "target": target, "y0": cols @ coef, "columns": cols,
+            "moving": moving, "names": names,
+            "coefficients": dict(zip(names, (float(c) for c in coef))),
+            "v": motion["v"], "x": motion["x"] if motion["x"] is not None
+            else np.zeros_like(motion["v"])}
+
+
+def physical(name: str, theta: np.ndarray, param: float | None, ctx=None) -> dict:
+    """Forces in input units; friction (Coulomb level, Stribeck excess) must be positive;
+    the force balance's mass positive and its damping not negative."""
+    out: dict = {}
+    if name == "force_balance":
+        values = [ctx.inverse_base[k] + float(t) for k, t in zip(ctx.inverse_base, theta)]
+        out.update(zip(ctx.inverse_base, values))
+        out["plausible"] = bool(values[0] > 0 and values[1] >= 0)
+    elif name == "stribeck_friction":
+        out["stribeck_velocity"] = float(param)
+        out["stribeck_velocity_unit"] = "velocity units"
+        out["coulomb_level"], out["stribeck_excess"] = float(theta[0]), float(theta[1])
+        out["plausible"] = bool(theta[0] > 0 and theta[1] > 0)
+    elif name == "coulomb_friction":
+        out["coulomb_level"] = float(theta[0])
+        out["plausible"] = bool(theta[0] > 0)
+    elif name == "cubic_stiffness":
+        out["cubic_coefficient"] = float(theta[0])
+        out["plausible"] = True
+    else:
+        out["offset"] = float(theta[0])
+        out["plausible"] = True
+    return out
+
+
+def noise_floor(v_raw: np.ndarray, target: np.ndarray, coefficients: dict,
+                lp: tuple, fs_hz: float, test: slice) -> dict:
+    """The part of L u that the force balance cannot explain because the velocity is
+    measured with noise: white velocity noise σ_v (from `at_rest`'s estimate) through
+    M L D and c L (D the difference of `measured_motion`), as an NRMSE of L u."""
+    sigma = velocity_noise(v_raw)
+    impulse = np.r_[1.0, np.zeros(4095)]
+    h_l = signal.lfilter(*lp, impulse)
+    h_ld = signal.lfilter(*lp, np.r_[-1.0, 1.0, np.zeros(4094)]) * fs_hz
+    mass, damping = coefficients["mass"], coefficients["damping"]
+    var = sigma ** 2 * (mass ** 2 * float(h_ld @ h_ld) + damping ** 2 * float(h_l @ h_l) / 2)
+    # the gap's NRMSE runs over every held-out row, the rows at rest being zero on both sides
+    live = float(np.mean(target[test] != 0))
+    spread = float(np.std(target[test]))
+    return {"floor": float(np.sqrt(var * live) / spread) if spread > 0 else None,
+            "method": "velocity noise through the force balance",
+            "velocity_noise": float(sigma)}

@@ -1,0 +1,109 @@
+"""The force loop (`diagnose.force`), the noise floor and dead time (`diagnose.floor`), and
+the inverse-dynamics force balance (`diagnose.inverse`) against independent references."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from fdi_daemon.diagnose.floor import delay_by_correlation, input_period, noise_floor
+from fdi_daemon.diagnose.force import ForceLoop
+from fdi_daemon.diagnose.inverse import baseline, velocity_noise
+from fdi_daemon.diagnose.signals import StateChain, make_split
+
+FS = 256.0
+A = np.array([1.0, -1.6, 0.8])  # a stable resonance
+
+
+def _loop(n_kind=0):
+    chain = StateChain(n_kind, FS, 0.2).coefficients
+    cols = [(0, 0.0), (2, 0.05), (3, 0.0), (5, 0.0)]  # sign v, Stribeck, x³, x
+    nums = np.array([[0.01, -0.02, 0.01], [0.02, 0.01, -0.01], [5.0, 1.0, 0.0],
+                     [0.1, 0.05, 0.0]])
+    return ForceLoop(A, cols, nums, chain)
+
+
+@pytest.mark.parametrize("n_kind", [0, 1, 2])
+def test_force_loop_step_chunks_and_whole_array_agree(n_kind):
+    rng = np.random.default_rng(3)
+    y_ff = 0.05 * rng.standard_normal(600)
+    whole = _loop(n_kind)
+    y_whole = whole.run(y_ff)
+    single = _loop(n_kind)
+    y_single = np.array([single.step(float(v)) for v in y_ff])
+    chunked = _loop(n_kind)
+    cuts = np.sort(rng.choice(np.arange(1, len(y_ff)), 9, replace=False))
+    y_chunks = np.concatenate([chunked.run(c) for c in np.split(y_ff, cuts)])
+    np.testing.assert_allclose(y_single, y_whole, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(y_chunks, y_whole, rtol=1e-12, atol=1e-15)
+    for s1, s2 in zip(single.state, whole.state):
+        np.testing.assert_allclose(s1, s2, rtol=1e-12, atol=1e-15)
+
+
+def test_a_linear_force_in_the_loop_is_the_closed_loop_filter():
+    # position output (x = y), force θ·x through B/A with b0 = 0: y = A/(A − θB) y_ff
+    theta, b = -0.3, np.array([0.0, 0.5, 0.2])
+    loop = ForceLoop(A, [(5, 0.0)], [theta * b], StateChain(2, FS, 0.2).coefficients)
+    y_ff = np.random.default_rng(4).standard_normal(800)
+    expected = signal.lfilter(A, A - theta * b, y_ff)
+    np.testing.assert_allclose(loop.run(y_ff), expected, rtol=1e-10, atol=1e-12)
+
+
+def _periodic(n_periods=6, sigma=0.05, seed=5):
+    rng = np.random.default_rng(seed)
+    period = 512
+    u1 = rng.standard_normal(period)
+    u = np.tile(u1, n_periods)
+    y_clean = signal.lfilter([0.2, 0.1], [1.0, -0.7], u)
+    return u, y_clean, y_clean + sigma * rng.standard_normal(u.size)
+
+
+def test_periodic_floor_is_the_period_to_period_noise():
+    u, y_clean, y = _periodic()
+    assert input_period(u, 50) == 512
+    test = slice(2 * len(u) // 3, None)
+    floor = noise_floor(y, y - y_clean, u, FS, warmup=512, test=test)
+    assert floor["method"] == "periodic"
+    assert floor["floor"] == pytest.approx(0.05 / np.std(y[test]), rel=0.1)
+
+
+def test_spectrum_floor_is_the_white_noise_above_the_input_band():
+    rng = np.random.default_rng(6)
+    n = 8192
+    u = signal.lfilter(*signal.butter(4, 10.0, fs=FS), rng.standard_normal(n))
+    y_clean = signal.lfilter([0.2, 0.1], [1.0, -0.7], u)
+    y = y_clean + 0.01 * rng.standard_normal(n)
+    test = slice(2 * n // 3, None)
+    floor = noise_floor(y, y - y_clean, u, FS, warmup=0, test=test)
+    assert floor["method"] == "spectrum"
+    assert floor["floor"] == pytest.approx(0.01 / np.std(y[test]), rel=0.15)
+
+
+def test_dead_time_by_correlation():
+    rng = np.random.default_rng(7)
+    n = 4096
+    y0 = signal.lfilter(*signal.butter(4, 20.0, fs=FS), rng.standard_normal(n))
+    # a 3.4-sample delay, applied exactly in the frequency domain
+    f = np.fft.rfftfreq(n)
+    y = np.fft.irfft(np.fft.rfft(y0) * np.exp(-2j * np.pi * f * 3.4), n)
+    assert delay_by_correlation(y, y0, FS, 20) * FS == pytest.approx(3.4, abs=0.15)
+
+
+def test_force_balance_recovers_mass_and_damping():
+    # M v̇ = u − c v, exact for a held force: v[k+1] = d v[k] + (1 − d)/c u[k]
+    mass, damping, fs = 8.0, 40.0, 500.0
+    d = np.exp(-damping / mass / fs)
+    rng = np.random.default_rng(8)
+    u = signal.lfilter(*signal.butter(2, 5.0, fs=fs), 50 * rng.standard_normal(20000)) + 30.0
+    v = signal.lfilter([0.0, (1 - d) / damping], [1.0, -d], u)
+    base = baseline(u, v, "velocity", fs, make_split(len(u), 200))
+    assert base["coefficients"]["mass"] == pytest.approx(mass, rel=0.01)
+    assert base["coefficients"]["damping"] == pytest.approx(damping, rel=0.01)
+
+
+def test_velocity_noise_ignores_a_smooth_motion():
+    rng = np.random.default_rng(9)
+    t = np.arange(20000) / 500.0
+    v = 0.2 * np.sin(2 * np.pi * 1.3 * t) + 3e-4 * rng.standard_normal(t.size)
+    assert velocity_noise(v) == pytest.approx(3e-4, rel=0.05)

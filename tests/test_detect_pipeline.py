@@ -51,8 +51,30 @@ def test_friction_fault_gives_the_signature(system):
     np.testing.assert_allclose(np.median(sol.theta2[after]), model.fault_filter.gamma_f, rtol=0.1)
 
 
-def test_step_run_and_chunks_agree(system):
+def _observer_model(model):
+    import copy
+
+    observed = copy.deepcopy(model)
+    observed.velocity = {"method": "model_observer"}
+    return observed
+
+
+def test_the_model_observer_runs_on_the_plant_models_prediction(system):
+    """velocity.method model_observer: v̂ = L·x̂̈ + V·r with x̂̈ the pipeline's own Ĝ v_in."""
+    from fdi_daemon.core.velocity_observer import ModelVelocityObserver
+
     model, rec = system
+    out = Pipeline(_observer_model(model), N).run(rec.v_in, rec.accel)
+    xhat = lfilter(model.plant_b, model.plant_a, rec.v_in)
+    v = ModelVelocityObserver(model.fs).run(rec.accel, xhat)
+    np.testing.assert_allclose(out.velocity, v, rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("observer", [False, True], ids=["highpass", "model_observer"])
+def test_step_run_and_chunks_agree(system, observer):
+    model, rec = system
+    if observer:
+        model = _observer_model(model)
     v_in, accel = rec.v_in, rec.accel
     whole = Pipeline(model, N)
     ref = whole.run(v_in, accel)

@@ -4,7 +4,8 @@ Per tick::
 
     x̂̈  = Ĝ(q) v_in                          eq. (1), plant IIR
     r   = ẍ - x̂̈                              eq. (3), acceleration residual
-    v̂  = V(q) ẍ                               high-pass + integrator (core.velocity)
+    v̂  = V(q) ẍ                               high-pass + integrator (core.velocity), or
+    v̂  = L(q) x̂̈ + V(q) r                      the model-based observer (core.velocity_observer)
     g1  = G_e(q)[sign v̂],  g2 = G_e(q)[v̂]     eq. (15), G_e = q^-nk B/F, two IIR states
     θ   = argmin Σ_N (r - θ1 g1 - θ2 g2)²      eqs. (16)–(17), core.window_ls
 
@@ -23,7 +24,7 @@ import numpy as np
 
 from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.core.sliding_sums import SlidingSums
-from fdi_daemon.core.velocity import VelocityEstimator
+from fdi_daemon.core.velocity_observer import velocity_from_settings
 from fdi_daemon.core.window_ls import MIN_RCOND, WindowLS, solve_sums
 from fdi_daemon.detect.settings import velocity_settings
 from fdi_daemon.errors import ConfigError
@@ -49,7 +50,8 @@ class PipelineBatch:
 class Pipeline:
     """Ĝ, residual, velocity, G_e regressors and the window least squares of one rig."""
 
-    __slots__ = ("plant", "velocity", "ge_sign", "ge_velocity", "wls", "speed", "min_v2_sum",
+    __slots__ = ("plant", "velocity", "model_velocity", "ge_sign", "ge_velocity", "wls", "speed",
+                 "min_v2_sum",
                  "xhat", "residual", "v", "g1", "g2", "moving", "theta1", "theta2")
 
     def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = MIN_RCOND,
@@ -59,10 +61,10 @@ class Pipeline:
             raise ConfigError("the model has no fault_filter (G_e, γ_f): run `fdi signature` "
                               "on a recording with a friction fault first")
         try:
-            self.velocity = VelocityEstimator.from_settings(velocity_settings(model.velocity),
-                                                            model.fs)
+            self.velocity = velocity_from_settings(velocity_settings(model.velocity), model.fs)
         except ValueError as exc:
             raise ConfigError(f"model velocity settings: {exc}") from None
+        self.model_velocity = self.velocity.needs_model
         if model.extra.get("effects"):  # Ĝ plus the effects `fdi diagnose` added (same API)
             from fdi_daemon.diagnose.augment import nominal_plant
 
@@ -99,7 +101,7 @@ class Pipeline:
         if accel is None:
             accel = xhat
         r = accel - xhat
-        v = self.velocity.step(accel)
+        v = self.velocity.step(accel, xhat) if self.model_velocity else self.velocity.step(accel)
         s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
         g1 = self.ge_sign.step(s)
         g2 = self.ge_velocity.step(v)
@@ -119,7 +121,7 @@ class Pipeline:
         if bad_accel is not None and bad_accel.any():
             accel = np.where(bad_accel, xhat, accel)
         r = accel - xhat
-        v = self.velocity.run(accel)
+        v = self.velocity.run(accel, xhat) if self.model_velocity else self.velocity.run(accel)
         g1 = self.ge_sign.run(np.sign(v))
         g2 = self.ge_velocity.run(v)
         sums, counts = self.wls.run_sums(g1, g2, r)

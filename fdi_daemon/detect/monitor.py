@@ -75,7 +75,12 @@ class Monitor:
         self.model = model
         self.settings = DetectorSettings.from_mapping(detector_map)
         self.fs_hz = float(model.fs)
-        self.gamma_f = float(model.fault_filter.gamma_f)
+        gamma_f = model.fault_filter.gamma_f
+        if gamma_f is None and self.settings.method == "band":
+            raise ConfigError("detector.method band tracks the signature (1, gamma_f), but the "
+                              "model's gamma_f is not identified (null): use method sequential "
+                              "or calibrate the signature again (docs/identification.md)")
+        self.gamma_f = float("nan") if gamma_f is None else float(gamma_f)
         self.detector = Detector(self.settings, self.fs_hz, self.gamma_f)
         self.pipeline = Pipeline(model, self.detector.window_samples,
                                  min_velocity_rms_mps=self.settings.min_velocity_rms_mps)
@@ -299,7 +304,7 @@ class Monitor:
             "theta2": _finite(det.theta2),
             "friction_level": _finite(det.theta1),
             "band": det.band,
-            "signature": [1.0, self.gamma_f],
+            "signature": [1.0, _finite(self.gamma_f)],
             "residual_rms": _finite(math.sqrt(syy / count)) if count and syy >= 0 else None,
             "statistic": _finite(det.statistic),
             "threshold": float(det.threshold),

@@ -18,6 +18,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--summary", metavar="SUMMARY.json", help="write the replay summary")
     parser.add_argument("--plot", metavar="FILE.png",
                         help="acceleration, θ1/θ2 with band and signature, residual, statistic")
+    parser.add_argument("--trace", metavar="FILE",
+                        help="write t, theta1, theta2, friction_level, statistic, state per "
+                             "sample (CSV with a header; .npz with the same names)")
+    parser.add_argument("--trace-every", type=int, default=1, metavar="N",
+                        help="with --trace: every N-th sample (default %(default)s)")
     parser.add_argument("--realtime", action="store_true",
                         help="pace the samples at fs through the per-tick path (as the daemon)")
     parser.add_argument("--dashboard", action="store_true",
@@ -36,6 +41,8 @@ def run(args: argparse.Namespace) -> int:
     if args.dashboard and not args.realtime:
         raise UserError("--dashboard needs --realtime (a batch replay is over before a "
                         "screen could show it)")
+    if args.trace_every < 1:
+        raise UserError("--trace-every must be a whole number >= 1")
     model = load_model(args.model)
     rec = read_recording(args.recording, strict=False)
     if not same_rate(rec.fs, model.fs):
@@ -52,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
         events, trace = _paced(monitor, rec)
     else:
         trace_every = max(1, -(-n // TRACE_POINTS)) if args.plot else max(1, n)
+        if args.trace:  # the file and the plot show the same samples
+            trace_every = args.trace_every
         events, trace = _batch(monitor, rec, trace_every)
     snap = monitor.snapshot()
     summary = replay_summary(events, n, model.fs, monitor.settings.method,
@@ -62,6 +71,11 @@ def run(args: argparse.Namespace) -> int:
         write_events(args.events, events)
     if args.summary:
         write_summary(args.summary, summary)
+    if args.trace:
+        from fdi_daemon.detect.trace_file import write_trace
+
+        # the batch path traced every --trace-every sample already; the paced one every one
+        write_trace(args.trace, trace, 1 if trace.every == args.trace_every else args.trace_every)
     if args.plot:
         from fdi_daemon.detect.plots import plot_replay
 

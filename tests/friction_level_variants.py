@@ -3,8 +3,8 @@ and its variants (docs/detector.md §4a). Run: ``python tests/friction_level_var
 [default|v0|v1|velsrc ...]`` (about a minute per rig).
 
 Per rig: `fdi identify` on its chirps; `fdi signature` as shipped (high-pass velocity,
-signature_calibration.yaml) and with ``--velocity-method model_observer`` on the paired
-calibration run; both models replay test cases 1 and 2 and the steady fault under changing
+signature_calibration.yaml) and with ``--velocity-method model_observer`` and
+``position_observer`` on the paired calibration run; both models replay test cases 1 and 2 and the steady fault under changing
 operation. Truths from the simulator: a fault's size is the mean air-bearing contact force
 after the fault over the calibration fault's (Coulomb force μ·N relative to the signature's).
 """
@@ -72,10 +72,14 @@ def measure(name: str, rig: dict, root: Path) -> list[str]:
          root / "plant.yaml", "--fault-window", "22:42", "--reference-window", "1:21",
          "--lowpass-hz", "10", "--velocity-method", "model_observer",
          "-o", root / "observer.yaml")
+    _fdi("signature", root / "signature_calibration_paired.npz", "--model",
+         root / "plant.yaml", "--fault-window", "22:42", "--reference-window", "1:21",
+         "--lowpass-hz", "10", "--velocity-method", "position_observer",
+         "-o", root / "position.yaml")
     cal = recs["signature_calibration_paired"]
     calibrated = np.mean(cal.columns["contact_force"][cal.t >= 22.0])
     lines = []
-    for velocity in ("highpass", "observer"):
+    for velocity in ("highpass", "observer", "position"):
         model = load_model(root / f"{velocity}.yaml")
         sig = model.provenance["signature"]
         lines.append(f"{name} {velocity}: gamma_f {model.fault_filter.gamma_f} "

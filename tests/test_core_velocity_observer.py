@@ -116,7 +116,10 @@ def test_settings_round_trip_and_method_selection():
     ({"method": "kalman"}, "method must be one of"),
     ({"method": "model_observer", "leak_hz": 0.6}, "leak_hz must lie in"),
     ({"method": "model_observer", "leak_hz": -1}, "leak_hz must lie in"),
-    ({"leak_hz": 0.02}, "leak_hz belongs to method model_observer"),
+    ({"leak_hz": 0.02}, "leak_hz does not belong to method highpass"),
+    ({"crossover_hz": 5.0}, "crossover_hz does not belong to method highpass"),
+    ({"method": "position_observer", "crossover_hz": 100.0}, "crossover_hz must lie in"),
+    ({"method": "position_observer", "leak_hz": 0.1}, "unknown velocity setting"),
     ({"method": "model_observer", "fs_hz": 100.0}, "disagrees"),
 ])
 def test_bad_settings_are_refused(settings, message):

@@ -124,3 +124,50 @@ def test_model_without_signature_is_refused(system):
     broken.velocity = {"highpass_hz": -1}
     with pytest.raises(ConfigError, match="velocity"):
         Pipeline(broken, N)
+
+
+def test_the_position_observer_runs_on_the_position_column_step_and_batch():
+    """velocity.method position_observer: v̂ from the recording's position and ẍ; per tick
+    (Sample.position) and batch agree, and a missing position holds the last one."""
+    import copy
+    import math
+
+    from conftest_detect import scenario_recording, sim_rig_model
+
+    from fdi_daemon.core.velocity_position import PositionVelocityObserver
+
+    model = copy.deepcopy(sim_rig_model())
+    model.velocity = {"method": "position_observer", "crossover_hz": 15.0}
+    rec = scenario_recording("test_case_2")
+    position = np.asarray(rec["position"], dtype=float).copy()
+    position[700:705] = np.nan
+    whole = Pipeline(model, N)
+    out = whole.run(rec.v_in, rec.accel, position=position)
+    ref = PositionVelocityObserver(model.fs, crossover_hz=15.0).run(rec.accel, position)
+    np.testing.assert_allclose(out.velocity, ref, rtol=1e-12, atol=1e-15)
+    one = Pipeline(model, N)
+    got = []
+    for v, a, x in zip(rec.v_in.tolist(), rec.accel.tolist(), position.tolist()):
+        one.step(v, a, x)
+        got.append(one.v)
+    np.testing.assert_allclose(got, out.velocity, rtol=1e-12, atol=1e-15)
+    assert math.isfinite(one.theta1) and one.theta1 == pytest.approx(whole.theta1, rel=1e-9)
+
+
+def test_a_position_model_needs_a_position_column(tmp_path, capsys):
+    import copy
+
+    from conftest_detect import scenario_recording, sim_rig_model
+
+    from fdi_daemon.cli import main
+    from fdi_daemon.io.model_file import save_model
+    from fdi_daemon.io.recordings import Recording, write_recording
+
+    model = copy.deepcopy(sim_rig_model())
+    model.velocity = {"method": "position_observer"}
+    path = save_model(tmp_path / "m.yaml", model)
+    rec = scenario_recording("test_case_2")
+    cols = {k: rec[k] for k in ("t", "v_in", "accel", "seq")}
+    no_position = write_recording(tmp_path / "r.csv", Recording(cols, dict(rec.meta)))
+    assert main(["replay", str(no_position), "--model", str(path)]) == 2
+    assert "has no position column" in capsys.readouterr().err

@@ -129,6 +129,7 @@ def _paced(monitor, rec, on_tick=None):
     t = np.asarray(cols["t"], dtype=float)
     v_in = np.asarray(cols["v_in"], dtype=float)
     accel = np.asarray(cols["accel"], dtype=float)
+    position = monitor.position_column(rec)
     seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
            else monitor.sample_numbers(t))
     period = 1.0 / monitor.fs_hz
@@ -142,7 +143,8 @@ def _paced(monitor, rec, on_tick=None):
             delay = start + k * period - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            new = monitor.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]), float(accel[k])))
+            new = monitor.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]), float(accel[k]),
+                                      float(position[k])))
             events.extend(new)
             pl, det = monitor.pipeline, monitor.detector
             values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,

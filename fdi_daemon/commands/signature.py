@@ -25,11 +25,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="velocity estimator high-pass cut-off (default: the model's "
                              "velocity settings, else 1 Hz; with model_observer, 0.5 Hz on "
                              "the residual path)")
-    parser.add_argument("--velocity-method", choices=("highpass", "model_observer"),
+    parser.add_argument("--velocity-method",
+                        choices=("highpass", "model_observer", "position_observer"),
                         help="velocity estimate: the accelerometer through a high-pass and an "
-                             "integrator, or the model-based observer (right in phase at "
-                             "1-3 Hz; docs/detector.md). Default: the model's velocity "
-                             "settings, else highpass. The monitor uses the same")
+                             "integrator, the model-based observer (right in phase at 1-3 Hz), "
+                             "or position and acceleration fused (needs a position column; "
+                             "docs/detector.md). Default: the model's velocity settings, else "
+                             "highpass. The monitor uses the same")
     parser.add_argument("--flat-fraction", type=float, default=0.2,
                         help="flag the profile flat when the 99 %% interval of γ covers more "
                              "than this fraction of the grid (default %(default)s)")
@@ -130,8 +132,15 @@ def run(args: argparse.Namespace) -> int:
     # residual (eq. 3) and velocity from the recording start, so that filter start-up
     # transients have settled before the window; the fit uses the window only
     residual = sig.plant_residual(nominal_plant(model), v_in, accel)
-    velocity = estimator.run(accel, accel - residual) if estimator.needs_model \
-        else estimator.run(accel)
+    if estimator.needs_model:
+        velocity = estimator.run(accel, accel - residual)
+    elif estimator.needs_position:
+        if "position" not in rec.columns:
+            raise UserError(f"{args.recording}: velocity method position_observer needs a "
+                            "position column")
+        velocity = estimator.run(accel, np.asarray(rec.columns["position"], dtype=float))
+    else:
+        velocity = estimator.run(accel)
     first, end = int(np.flatnonzero(inside)[0]), int(np.flatnonzero(inside)[-1]) + 1
     start = 0
     if args.reference_window is not None:
@@ -258,6 +267,14 @@ def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf) ->
     gamma = (f"not identified (edge): least cost at γ = {result.gamma_f:.4g}, the end of the "
              "grid; stored as null" if result.at_edge else f"{result.gamma_f:.4g}")
     velocity = estimator.settings()
+    if velocity.get("method") == "position_observer":
+        described = (f"position_observer, crossover {velocity['crossover_hz']:g} Hz, damping "
+                     f"{velocity['damping']:g}")
+    else:
+        described = (f"{velocity.get('method', 'highpass')}, high-pass "
+                     f"{velocity['highpass_hz']:g} Hz order {velocity['highpass_order']}"
+                     + (f", leak {velocity['leak_hz']:g} Hz" if "leak_hz" in velocity else "")
+                     + f", {velocity['integrator']} integrator")
     lines = [
         f"gamma_f           : {gamma} (grid {result.grid[0]:g}..{result.grid[-1]:g}"
         f" step {result.grid[1] - result.grid[0]:g}, refined)",
@@ -271,10 +288,7 @@ def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf) ->
         f"G_e (model file)  : b = {[round(float(v), 6) for v in fault_fit.b]}, "
         f"f = {[round(float(v), 6) for v in fault_fit.f]}; explains {full_band_vaf:.1f} % of "
         f"the unfiltered fault residual's variance ({full_band_pct:.2f} % 1 - NRMSE)",
-        f"velocity          : {velocity.get('method', 'highpass')}, high-pass "
-        f"{velocity['highpass_hz']:g} Hz order {velocity['highpass_order']}"
-        + (f", leak {velocity['leak_hz']:g} Hz" if "leak_hz" in velocity else "")
-        + f", {velocity['integrator']} integrator",
+        f"velocity          : {described}",
         f"model written     : {args.output}",
     ]
     print("\n".join(lines))

@@ -38,12 +38,13 @@ from scipy.signal import freqz
 
 from fdi_daemon.core.velocity import DEFAULT_SETTINGS as HIGHPASS_SETTINGS
 from fdi_daemon.core.velocity import VelocityEstimator
+from fdi_daemon.core.velocity_position import POSITION_DEFAULTS, PositionVelocityObserver
 
-__all__ = ["ModelVelocityObserver", "OBSERVER_DEFAULTS", "METHODS", "velocity_from_settings",
-           "velocity_setting_names"]
+__all__ = ["ModelVelocityObserver", "OBSERVER_DEFAULTS", "METHODS", "VelocityBlock",
+           "velocity_from_settings", "velocity_setting_names"]
 
 #: ``velocity.method`` values; a mapping without ``method`` is ``highpass`` (today's models)
-METHODS = ("highpass", "model_observer")
+METHODS = ("highpass", "model_observer", "position_observer")
 
 OBSERVER_DEFAULTS: dict[str, Any] = {
     "leak_hz": 0.02,
@@ -60,6 +61,7 @@ class ModelVelocityObserver:
     __slots__ = ("fs_hz", "leak_hz", "model_path", "residual_path")
 
     needs_model = True  # step/run take the plant model's x̂̈ as well
+    needs_position = False
 
     def __init__(self, fs_hz: float, leak_hz: float = 0.02, highpass_hz: float = 0.5,
                  highpass_order: int = 2, integrator: str = "trapezoid",
@@ -123,16 +125,20 @@ class ModelVelocityObserver:
 
 def velocity_setting_names() -> tuple[str, ...]:
     """Every key the ``velocity`` mapping may hold (either method)."""
-    return tuple(dict.fromkeys(("method", "fs_hz", *HIGHPASS_SETTINGS, *OBSERVER_DEFAULTS)))
+    return tuple(dict.fromkeys(("method", "fs_hz", *HIGHPASS_SETTINGS, *OBSERVER_DEFAULTS,
+                                *POSITION_DEFAULTS)))
 
 
-def velocity_from_settings(settings: Mapping[str, Any] | None, fs_hz: float
-                           ) -> VelocityEstimator | ModelVelocityObserver:
+VelocityBlock = VelocityEstimator | ModelVelocityObserver | PositionVelocityObserver
+
+
+def velocity_from_settings(settings: Mapping[str, Any] | None, fs_hz: float) -> VelocityBlock:
     """The velocity block a model file's ``velocity`` mapping describes.
 
     No ``method`` (every model made before the observer existed) or ``method: highpass``:
     the accelerometer-only `VelocityEstimator`, exactly as before. ``model_observer``: the
-    complementary observer above. ValueError on a bad setting."""
+    complementary observer above; ``position_observer``: position and acceleration
+    (`core.velocity_position`). ValueError on a bad setting."""
     settings = dict(settings or {})
     method = settings.get("method", "highpass")
     if method not in METHODS:
@@ -142,7 +148,10 @@ def velocity_from_settings(settings: Mapping[str, Any] | None, fs_hz: float
         raise ValueError(f"velocity.fs_hz = {fs_in_map} disagrees with fs = {fs_hz}")
     if method == "model_observer":
         return ModelVelocityObserver.from_settings(settings, fs_hz)
+    if method == "position_observer":
+        return PositionVelocityObserver.from_settings(settings, fs_hz)
     settings.pop("method", None)
-    if "leak_hz" in settings:
-        raise ValueError("leak_hz belongs to method model_observer")
+    for key in ("leak_hz", *POSITION_DEFAULTS):
+        if key in settings:
+            raise ValueError(f"{key} does not belong to method highpass")
     return VelocityEstimator.from_settings(settings, fs_hz)

@@ -30,7 +30,7 @@ from fdi_daemon.detect.detector import STATES, Detector
 from fdi_daemon.detect.events import make_event
 from fdi_daemon.detect.pipeline import Pipeline
 from fdi_daemon.detect.settings import DetectorSettings
-from fdi_daemon.errors import ConfigError
+from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.io.model_file import FdiModel
 from fdi_daemon.io.recordings import Recording
 from fdi_daemon.io.sample import Sample
@@ -127,7 +127,7 @@ class Monitor:
         self._v_in = v_in
         self._last_t = t
         pl = self.pipeline
-        pl.step(v_in, accel)
+        pl.step(v_in, accel, sample.position)
         events.extend(self.detector.step(t, v_in, pl.xhat, pl.residual, pl.g1, pl.g2,
                                          pl.theta1, pl.theta2))
         if self._samples % self._history_every == 0:
@@ -173,6 +173,7 @@ class Monitor:
         t = np.asarray(cols["t"], dtype=float)
         v_in = np.asarray(cols["v_in"], dtype=float)
         accel = np.asarray(cols["accel"], dtype=float)
+        position = self.position_column(rec)
         seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
                else self.sample_numbers(t))
         events: list[dict[str, Any]] = []
@@ -182,7 +183,8 @@ class Monitor:
         while start < n:
             stop = min(n, start + _CHUNK)
             events.extend(self._run_chunk(t[start:stop], v_in[start:stop], accel[start:stop],
-                                          seq[start:stop], parts, trace_every))
+                                          position[start:stop], seq[start:stop], parts,
+                                          trace_every))
             start = stop
             if progress is not None:
                 progress(stop, n)
@@ -190,6 +192,17 @@ class Monitor:
         trace = MonitorTrace(every=trace_every, **{
             k: (np.concatenate(v) if v else np.empty(0)) for k, v in parts.items()})
         return events, trace
+
+    def position_column(self, rec: Recording) -> np.ndarray:
+        """The recording's ``position`` (m) when the velocity fuses it, else NaN; a model
+        whose velocity needs position and a recording without it: UserError."""
+        n = len(rec.columns["t"])
+        if not self.pipeline.needs_position:
+            return np.full(n, np.nan)
+        if "position" not in rec.columns:
+            raise UserError("the model's velocity fuses position (velocity.method "
+                            "position_observer) but the recording has no position column")
+        return np.asarray(rec.columns["position"], dtype=float)
 
     def sample_numbers(self, t: np.ndarray) -> np.ndarray:
         """Sample numbers from the time column (recordings without ``seq``)."""
@@ -201,7 +214,8 @@ class Monitor:
         base = 0 if self._last_seq is None else self._last_seq + 1
         return base + np.concatenate([[0], np.cumsum(steps)])
 
-    def _run_chunk(self, t, v_in, accel, seq, parts, trace_every) -> list[dict[str, Any]]:
+    def _run_chunk(self, t, v_in, accel, position, seq, parts, trace_every
+                   ) -> list[dict[str, Any]]:
         events: list[dict[str, Any]] = []
         # split where seq does not advance by exactly one: gaps and dropped samples
         prev = np.concatenate([[self._last_seq if self._last_seq is not None else seq[0] - 1],
@@ -217,18 +231,19 @@ class Monitor:
                     # duplicates / going backwards: drop them one at a time (rare)
                     for k in range(a, b):
                         events.extend(self.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]),
-                                                       float(accel[k]))))
+                                                       float(accel[k]), float(position[k]))))
                     continue
                 events.extend(self._flush_bad())
                 events.append(self._gap(float(t[a]), int(seq[a] - self._last_seq - 1)))
             if step[a] != 1:
                 self._last_seq = int(seq[a]) - 1
-            events.extend(self._run_contiguous(t[a:b], v_in[a:b], accel[a:b], parts,
-                                               trace_every))
+            events.extend(self._run_contiguous(t[a:b], v_in[a:b], accel[a:b], position[a:b],
+                                               parts, trace_every))
             self._last_seq = int(seq[b - 1])
         return events
 
-    def _run_contiguous(self, t, v_in, accel, parts, trace_every) -> list[dict[str, Any]]:
+    def _run_contiguous(self, t, v_in, accel, position, parts, trace_every
+                        ) -> list[dict[str, Any]]:
         """Samples with consecutive seq: good runs batched, bad samples through ``step``."""
         events: list[dict[str, Any]] = []
         bad = ~np.isfinite(v_in) | ~np.isfinite(accel) | ~np.isfinite(t)
@@ -244,17 +259,18 @@ class Monitor:
                 for k in range(a, last):
                     seq = self._last_seq + 1 if self._last_seq is not None else 0
                     events.extend(self.step(Sample(seq, float(t[k]), float(v_in[k]),
-                                                   float(accel[k]))))
+                                                   float(accel[k]), float(position[k]))))
                     self._trace_one(parts, trace_every)
                 a = last
             if a < b:
-                events.extend(self._run_good(t[a:b], v_in[a:b], accel[a:b], parts,
-                                             trace_every))
+                events.extend(self._run_good(t[a:b], v_in[a:b], accel[a:b], position[a:b],
+                                             parts, trace_every))
         return events
 
-    def _run_good(self, t, v_in, accel, parts, trace_every) -> list[dict[str, Any]]:
+    def _run_good(self, t, v_in, accel, position, parts, trace_every
+                  ) -> list[dict[str, Any]]:
         pl = self.pipeline
-        batch = pl.run(v_in, accel)
+        batch = pl.run(v_in, accel, position=position)
         sol_t1, sol_t2 = pl.thetas(batch)
         events, det_trace = self.detector.run(t, v_in, batch.xhat, batch.residual, batch.g1,
                                               batch.g2, sol_t1, sol_t2)

@@ -6,6 +6,7 @@ Per tick::
     r   = ẍ - x̂̈                              eq. (3), acceleration residual
     v̂  = V(q) ẍ                               high-pass + integrator (core.velocity), or
     v̂  = L(q) x̂̈ + V(q) r                      the model-based observer (core.velocity_observer)
+    v̂  = P(q) x + A(q) ẍ                       position fusion (core.velocity_position)
     g1  = G_e(q)[sign v̂],  g2 = G_e(q)[v̂]     eq. (15), G_e = q^-nk B/F, two IIR states
     θ   = argmin Σ_N (r - θ1 g1 - θ2 g2)²      eqs. (16)–(17), core.window_ls
 
@@ -18,6 +19,7 @@ Both leave the blocks in the same state, so a replay can switch between them.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,7 +52,7 @@ class PipelineBatch:
 class Pipeline:
     """Ĝ, residual, velocity, G_e regressors and the window least squares of one rig."""
 
-    __slots__ = ("plant", "velocity", "model_velocity", "ge_sign", "ge_velocity", "wls", "speed",
+    __slots__ = ("plant", "velocity", "model_velocity", "needs_position", "ge_sign", "ge_velocity", "wls", "speed",
                  "min_v2_sum",
                  "xhat", "residual", "v", "g1", "g2", "moving", "theta1", "theta2")
 
@@ -65,6 +67,7 @@ class Pipeline:
         except ValueError as exc:
             raise ConfigError(f"model velocity settings: {exc}") from None
         self.model_velocity = self.velocity.needs_model
+        self.needs_position = self.velocity.needs_position
         if model.extra.get("effects"):  # Ĝ plus the effects `fdi diagnose` added (same API)
             from fdi_daemon.diagnose.augment import nominal_plant
 
@@ -91,17 +94,23 @@ class Pipeline:
             block.reset()
         self._clear()
 
-    def step(self, v_in: float, accel: float | None) -> None:
+    def step(self, v_in: float, accel: float | None, position: float = math.nan) -> None:
         """Advance one tick; results in the attributes and in ``wls`` (θ, sums, ok).
 
         ``accel`` None (a bad sample) is replaced by the model's x̂̈: residual 0, and the
         velocity estimator integrates the model's acceleration instead of a bad value.
+        ``position`` (m) is read only by the position observer (NaN: hold the last one).
         """
         xhat = self.plant.step(v_in)
         if accel is None:
             accel = xhat
         r = accel - xhat
-        v = self.velocity.step(accel, xhat) if self.model_velocity else self.velocity.step(accel)
+        if self.model_velocity:
+            v = self.velocity.step(accel, xhat)
+        elif self.needs_position:
+            v = self.velocity.step(accel, position)
+        else:
+            v = self.velocity.step(accel)
         s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
         g1 = self.ge_sign.step(s)
         g2 = self.ge_velocity.step(v)
@@ -110,18 +119,25 @@ class Pipeline:
         self.theta1, self.theta2 = (t1, t2) if moving else (float("nan"), float("nan"))
         self.xhat, self.residual, self.v, self.g1, self.g2 = xhat, r, v, g1, g2
 
-    def run(self, v_in: np.ndarray, accel: np.ndarray,
-            bad_accel: np.ndarray | None = None) -> PipelineBatch:
+    def run(self, v_in: np.ndarray, accel: np.ndarray, bad_accel: np.ndarray | None = None,
+            position: np.ndarray | None = None) -> PipelineBatch:
         """Batch ``step`` over arrays (continuing from, and updating, the same state).
 
-        ``bad_accel``: a mask of samples to replace by x̂̈ (``step(v, None)``)."""
+        ``bad_accel``: a mask of samples to replace by x̂̈ (``step(v, None)``); ``position``:
+        the position column (None: not carried, all NaN)."""
         v_in = np.asarray(v_in, dtype=float)
         accel = np.asarray(accel, dtype=float)
         xhat = self.plant.run(v_in)
         if bad_accel is not None and bad_accel.any():
             accel = np.where(bad_accel, xhat, accel)
         r = accel - xhat
-        v = self.velocity.run(accel, xhat) if self.model_velocity else self.velocity.run(accel)
+        if self.model_velocity:
+            v = self.velocity.run(accel, xhat)
+        elif self.needs_position:
+            v = self.velocity.run(accel, np.full(accel.shape, np.nan) if position is None
+                                  else np.asarray(position, dtype=float))
+        else:
+            v = self.velocity.run(accel)
         g1 = self.ge_sign.run(np.sign(v))
         g2 = self.ge_velocity.run(v)
         sums, counts = self.wls.run_sums(g1, g2, r)

@@ -1,8 +1,8 @@
 """The friction level as a physical quantity (issue 12), against the simulator's truth.
 
-The model: the shipped plant (configs/model_sim_rig.yaml) with a signature identified by
-`fdi signature --velocity-method model_observer` on the paired 6 Hz calibration run
-(bearing supply 45 %). Truths come from the simulator, never from the code under test:
+The models: the shipped plant (configs/model_sim_rig.yaml) with a signature identified by
+`fdi signature --velocity-method model_observer` (or ``position_observer``: the LVDT fused
+with the accelerometer) on the paired 6 Hz calibration run (bearing supply 45 %). Truths come from the simulator, never from the code under test:
 - γ_f: bearing_viscous_per_n / bearing_mu_kinetic of hil_sim.rig.params (the contact
   friction is μ·N·sign v + c·N·v, so viscous/Coulomb = c/μ whatever the contact force N);
 - a fault's size: its Coulomb force μ·N over the calibration fault's, i.e. the mean
@@ -24,15 +24,24 @@ from hil_sim.rig.params import RigParams
 CALIBRATION = "signature_calibration_paired"
 
 
-@pytest.fixture(scope="module")
-def observer_model(tmp_path_factory):
-    root = tmp_path_factory.mktemp("observer_model")
+def _signature(tmp_path_factory, method):
+    root = tmp_path_factory.mktemp(method)
     rec = write_recording(root / "paired.npz", scenario_recording(CALIBRATION))
     out = root / "model.yaml"
     assert main(["signature", str(rec), "--model", str(MODEL), "--fault-window", "22:42",
                  "--reference-window", "1:21", "--lowpass-hz", "10",
-                 "--velocity-method", "model_observer", "-o", str(out)]) == 0
+                 "--velocity-method", method, "-o", str(out)]) == 0
     return load_model(out)
+
+
+@pytest.fixture(scope="module")
+def observer_model(tmp_path_factory):
+    return _signature(tmp_path_factory, "model_observer")
+
+
+@pytest.fixture(scope="module")
+def position_model(tmp_path_factory):
+    return _signature(tmp_path_factory, "position_observer")
 
 
 def _fault_size(rec, fault_t):
@@ -103,3 +112,33 @@ def test_a_steady_faults_level_stays_within_20_percent_of_its_median(observer_mo
     lo, hi = np.percentile(theta1, [5, 95])
     assert lo >= 0.8 * median and hi <= 1.2 * median
     assert abs(median / _fault_size(rec, 20.0) - 1) <= 0.10
+
+
+def test_with_position_a_large_fault_is_reported_at_its_size(position_model):
+    """The LVDT fused with the accelerometer: test case 2 (2.3x the calibrated fault) is
+    isolated as friction and reported within ±10 % (measured +8 %)."""
+    rec = scenario_recording("test_case_2")
+    truth = _fault_size(rec, 2.9)
+    assert 2.0 < truth < 2.6
+    events, theta1 = _level(position_model, rec, 2.9 + 1.5)
+    assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "friction_isolated"]
+    assert abs(np.median(theta1) / truth - 1) <= 0.10
+    params = RigParams()
+    gamma_truth = params.bearing_viscous_per_n / params.bearing_mu_kinetic
+    assert abs(position_model.fault_filter.gamma_f / gamma_truth - 1) <= 0.2
+
+
+def test_with_position_a_steady_faults_median_level_is_its_size(position_model):
+    """Under changing operation the median level from 10 s after the fault is within 10 %
+    of the truth (measured −1 %)."""
+    rec = _steady()
+    _, theta1 = _level(position_model, rec, 30.0)
+    assert abs(np.median(theta1) / _fault_size(rec, 20.0) - 1) <= 0.10
+
+
+@pytest.mark.xfail(strict=True, reason="measured: cleared and raised again 3 times: at "
+                   "1.8 Hz the load sticks 11 % of the time, θ slides to (0.05, -34) along "
+                   "the g1/g2 valley and the moving reference loses the friction")
+def test_with_position_a_steady_fault_is_one_episode(position_model):
+    events, _ = Monitor(position_model).run(_steady())
+    assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "friction_isolated"]

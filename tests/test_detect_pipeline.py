@@ -171,3 +171,33 @@ def test_a_position_model_needs_a_position_column(tmp_path, capsys):
     no_position = write_recording(tmp_path / "r.csv", Recording(cols, dict(rec.meta)))
     assert main(["replay", str(no_position), "--model", str(path)]) == 2
     assert "has no position column" in capsys.readouterr().err
+
+
+def test_a_missing_position_is_a_bad_sample_in_step_and_batch():
+    """A position model on a link that drops the position: one bad_sample event per run
+    (reason named), the same events per tick and in batch."""
+    import copy
+
+    from conftest_detect import scenario_recording, sim_rig_model
+
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.io.recordings import Recording
+    from fdi_daemon.io.sample import Sample
+
+    model = copy.deepcopy(sim_rig_model())
+    model.velocity = {"method": "position_observer"}
+    rec = scenario_recording("test_case_2")
+    cols = dict(rec.columns)
+    cols["position"] = np.asarray(cols["position"], dtype=float).copy()
+    cols["position"][600:610] = np.nan
+    events, _ = Monitor(model).run(Recording(cols, dict(rec.meta)))
+    bad = [e for e in events if e["kind"] == "bad_sample"]
+    assert len(bad) == 1 and bad[0]["count"] == 10 and bad[0]["reason"] == "position not finite"
+    one = Monitor(model)
+    stepped = []
+    for k in range(len(rec)):
+        stepped.extend(one.step(Sample(int(cols["seq"][k]), float(cols["t"][k]),
+                                       float(cols["v_in"][k]), float(cols["accel"][k]),
+                                       float(cols["position"][k]))))
+    stepped.extend(one.finish())
+    assert [(e["kind"], e["t"]) for e in stepped] == [(e["kind"], e["t"]) for e in events]

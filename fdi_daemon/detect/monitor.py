@@ -119,6 +119,8 @@ class Monitor:
         elif self.accel_limit_mps2 is not None and abs(accel) >= self.accel_limit_mps2:
             accel = None
             reason = reason or "accel saturated"
+        if self.pipeline.needs_position and not math.isfinite(sample.position):
+            reason = reason or "position not finite"  # the velocity holds the last position
         t = sample.t if math.isfinite(sample.t) else self._last_t + 1.0 / self.fs_hz
         if reason:
             self._bad(t, reason, events)
@@ -247,6 +249,8 @@ class Monitor:
         """Samples with consecutive seq: good runs batched, bad samples through ``step``."""
         events: list[dict[str, Any]] = []
         bad = ~np.isfinite(v_in) | ~np.isfinite(accel) | ~np.isfinite(t)
+        if self.pipeline.needs_position:
+            bad |= ~np.isfinite(position)
         if self.accel_limit_mps2 is not None:
             with np.errstate(invalid="ignore"):
                 bad |= np.abs(accel) >= self.accel_limit_mps2

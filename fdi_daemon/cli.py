@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "diagnose": "diagnose",
     "replay": "replay",
     "bench": "bench",
+    "baseline": "baseline",
 }
 
 

@@ -86,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
         plot_replay(args.plot, trace, events, monitor.gamma_f, monitor.detector.band,
                     monitor.detector.threshold, onset, title=str(args.recording))
     _report(events, summary)
+    if monitor.baseline_note:
+        print(f"note: {monitor.baseline_note}")
     return 0
 
 

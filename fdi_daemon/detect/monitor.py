@@ -19,6 +19,7 @@ and the calibrated band are kept).
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -26,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from fdi_daemon.detect.baseline import Baseline
 from fdi_daemon.detect.detector import STATES, Detector
 from fdi_daemon.detect.events import make_event
 from fdi_daemon.detect.pipeline import Pipeline
@@ -40,6 +42,9 @@ __all__ = ["Monitor", "MonitorTrace"]
 HISTORY_S = 30.0
 HISTORY_POINTS = 300
 _CHUNK = 16384
+
+
+log = logging.getLogger("fdi.monitor")
 
 
 @dataclass
@@ -84,6 +89,18 @@ class Monitor:
         self.detector = Detector(self.settings, self.fs_hz, self.gamma_f)
         self.pipeline = Pipeline(model, self.detector.window_samples,
                                  min_velocity_rms_mps=self.settings.min_velocity_rms_mps)
+        self.baseline = None
+        self.baseline_note = ("the model has no commissioning baseline: friction present "
+                              "when monitoring starts is not reported (run `fdi baseline`)")
+        if model.extra.get("baseline") is not None:
+            if not isinstance(model.extra["baseline"], dict):
+                raise ConfigError("model: baseline must be a mapping (from `fdi baseline`)")
+            self.baseline = Baseline.from_mapping(model.extra["baseline"])
+            self.baseline_note = ""
+            self._margin = np.maximum(0.5 * self.settings.friction_min_level,
+                                      self.settings.band_k * self.baseline.sigma)
+        else:
+            log.info(self.baseline_note)
         self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))
         self._history: deque = deque(maxlen=HISTORY_POINTS)
         self._samples = 0
@@ -130,8 +147,10 @@ class Monitor:
         self._last_t = t
         pl = self.pipeline
         pl.step(v_in, accel, sample.position)
+        over = (float(self.over_baseline(pl.theta1, pl.v_rms)) if self.baseline is not None
+                else math.nan)
         events.extend(self.detector.step(t, v_in, pl.xhat, pl.residual, pl.g1, pl.g2,
-                                         pl.theta1, pl.theta2))
+                                         pl.theta1, pl.theta2, over))
         if self._samples % self._history_every == 0:
             self._history.append((t, self.detector.theta1, self.detector.theta2))
         self._samples += 1
@@ -194,6 +213,12 @@ class Monitor:
         trace = MonitorTrace(every=trace_every, **{
             k: (np.concatenate(v) if v else np.empty(0)) for k, v in parts.items()})
         return events, trace
+
+    def over_baseline(self, theta1, v_rms):
+        """(θ1 − baseline median)/margin of the bin of the window's velocity RMS; margin =
+        max(friction_min_level, band_k·σ). Above 1: friction beyond the fault-free level."""
+        idx = self.baseline.bin_index(v_rms)
+        return (theta1 - self.baseline.median[idx]) / self._margin[idx]
 
     def position_column(self, rec: Recording) -> np.ndarray:
         """The recording's ``position`` (m) when the velocity fuses it, else NaN; a model
@@ -276,8 +301,10 @@ class Monitor:
         pl = self.pipeline
         batch = pl.run(v_in, accel, position=position)
         sol_t1, sol_t2 = pl.thetas(batch)
+        over = (self.over_baseline(sol_t1, batch.v_rms) if self.baseline is not None
+                else None)
         events, det_trace = self.detector.run(t, v_in, batch.xhat, batch.residual, batch.g1,
-                                              batch.g2, sol_t1, sol_t2)
+                                              batch.g2, sol_t1, sol_t2, over)
         theta1, theta2 = det_trace.theta1, det_trace.theta2
         n = len(t)
         ticks = self._samples + np.arange(n)

@@ -47,14 +47,15 @@ class PipelineBatch:
     sums: np.ndarray
     counts: np.ndarray
     moving: np.ndarray  # bool: the window's velocity RMS is above the rest floor
+    v_rms: np.ndarray  # the window's velocity RMS (m/s): the operating condition
 
 
 class Pipeline:
     """Ĝ, residual, velocity, G_e regressors and the window least squares of one rig."""
 
     __slots__ = ("plant", "velocity", "model_velocity", "needs_position", "ge_sign", "ge_velocity", "wls", "speed",
-                 "min_v2_sum",
-                 "xhat", "residual", "v", "g1", "g2", "moving", "theta1", "theta2")
+                 "min_v2_sum", "window_samples",
+                 "xhat", "residual", "v", "g1", "g2", "moving", "v_rms", "theta1", "theta2")
 
     def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = MIN_RCOND,
                  min_velocity_rms_mps: float = 0.0) -> None:
@@ -80,10 +81,11 @@ class Pipeline:
         self.wls = WindowLS(window_samples, min_rcond=min_rcond)
         self.speed = SlidingSums(window_samples, 1)  # Σ v̂² over the window
         self.min_v2_sum = float(min_velocity_rms_mps) ** 2 * window_samples
+        self.window_samples = window_samples
         self._clear()
 
     def _clear(self) -> None:
-        self.xhat = self.residual = self.v = self.g1 = self.g2 = 0.0
+        self.xhat = self.residual = self.v = self.g1 = self.g2 = self.v_rms = 0.0
         self.moving = False
         self.theta1 = self.theta2 = float("nan")
 
@@ -115,7 +117,9 @@ class Pipeline:
         g1 = self.ge_sign.step(s)
         g2 = self.ge_velocity.step(v)
         t1, t2 = self.wls.step(g1, g2, r)
-        self.moving = moving = self.speed.push((v * v,))[0] >= self.min_v2_sum
+        v2_sum = self.speed.push((v * v,))[0]
+        self.moving = moving = v2_sum >= self.min_v2_sum
+        self.v_rms = math.sqrt(max(v2_sum, 0.0) / self.window_samples)
         self.theta1, self.theta2 = (t1, t2) if moving else (float("nan"), float("nan"))
         self.xhat, self.residual, self.v, self.g1, self.g2 = xhat, r, v, g1, g2
 
@@ -141,16 +145,19 @@ class Pipeline:
         g1 = self.ge_sign.run(np.sign(v))
         g2 = self.ge_velocity.run(v)
         sums, counts = self.wls.run_sums(g1, g2, r)
-        moving = self.speed.run((v * v)[:, None])[0][:, 0] >= self.min_v2_sum
+        v2_sum = self.speed.run((v * v)[:, None])[0][:, 0]
+        moving = v2_sum >= self.min_v2_sum
+        v_rms = np.sqrt(np.maximum(v2_sum, 0.0) / self.window_samples)
         if v.size:
             self.xhat, self.residual, self.v = float(xhat[-1]), float(r[-1]), float(v[-1])
             self.g1, self.g2 = float(g1[-1]), float(g2[-1])
             self.moving = bool(moving[-1])
+            self.v_rms = float(v_rms[-1])
             wls = self.wls
             self.theta1, self.theta2 = ((wls.theta1, wls.theta2) if self.moving
                                         else (float("nan"), float("nan")))
         return PipelineBatch(xhat=xhat, residual=r, velocity=v, g1=g1, g2=g2, sums=sums,
-                             counts=counts, moving=moving)
+                             counts=counts, moving=moving, v_rms=v_rms)
 
     def thetas(self, batch: PipelineBatch) -> tuple[np.ndarray, np.ndarray]:
         """θ1, θ2 of a batch as ``step`` reports them (NaN: invalid window or at rest)."""

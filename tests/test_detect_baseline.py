@@ -143,3 +143,27 @@ def test_a_broken_baseline_is_one_clear_error(tmp_path, capsys):
     rec = write_recording(tmp_path / "r.npz", _friction_from_start(SINE, 1.0))
     assert main(["replay", str(rec), "--model", str(path)]) == 2
     assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_friction_present_at_start_and_removed_is_cleared(baseline_model):
+    """Raised against the baseline, cleared on the level: bearing supply 45 % from 0 s,
+    restored at 10 s: one episode, cleared after the window has left the friction."""
+    rec = simulate(scenario_from_dict({
+        "name": "friction_at_start_removed", "duration_s": 20.0, "seed": 0,
+        "centring_gain_v_per_m": 30.0, "excitation": SINE,
+        "events": [{"t_s": 0.0, "bearing_supply": 0.45}, {"t_s": 10.0, "bearing_supply": 1.0}]}))
+    events, _ = Monitor(baseline_model).run(rec)
+    kinds = [e["kind"] for e in events]
+    assert kinds.count("fault_detected") == 1 and "friction_isolated" in kinds
+    cleared = first_event(events, "cleared")
+    assert cleared is not None and 10.0 < cleared["t"] < 13.0
+    assert kinds[-1] in ("cleared", "calibrated")  # calibrates once the rig is fault-free
+
+
+def test_too_little_fault_free_data_is_one_clear_error(tmp_path, capsys):
+    rec = write_recording(tmp_path / "short.npz", _friction_from_start(SINE, 1.0))
+    assert main(["baseline", str(rec), "--model", str(MODEL), "-o",
+                 str(tmp_path / "m.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "at least 20 s" in err
+    assert not (tmp_path / "m.yaml").exists()

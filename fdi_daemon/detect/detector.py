@@ -569,8 +569,9 @@ class _Episode:
                            **extra)]
 
     def _clear(self, det, t, theta1, theta2):
-        # an episode raised against the baseline before the calibration ended: calibrate now
-        det.state = "monitoring" if det.band is not None else "calibrating"
+        # an episode raised against the baseline: the calibration (if any) saw the friction
+        # as normal, so calibrate again on the fault-free rig
+        det.state = "calibrating" if self.baseline or det.band is None else "monitoring"
         det._calibration = []
         det._episode = None
         det._above = 0

@@ -4,7 +4,8 @@ and its variants (docs/detector.md §4a). Run: ``python tests/friction_level_var
 
 Per rig: `fdi identify` on its chirps; `fdi signature` as shipped (high-pass velocity,
 signature_calibration.yaml) and with ``--velocity-method model_observer`` and
-``position_observer`` on the paired calibration run; both models replay test cases 1 and 2 and the steady fault under changing
+``position_observer`` on the paired calibration run; the models replay test cases 1
+and 2 and the steady fault under changing
 operation. Truths from the simulator: a fault's size is the mean air-bearing contact force
 after the fault over the calibration fault's (Coulomb force μ·N relative to the signature's).
 """

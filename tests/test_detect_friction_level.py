@@ -2,7 +2,8 @@
 
 The models: the shipped plant (configs/model_sim_rig.yaml) with a signature identified by
 `fdi signature --velocity-method model_observer` (or ``position_observer``: the LVDT fused
-with the accelerometer) on the paired 6 Hz calibration run (bearing supply 45 %). Truths come from the simulator, never from the code under test:
+with the accelerometer) on the paired 6 Hz calibration run (bearing supply 45 %).
+Truths come from the simulator, never from the code under test:
 - γ_f: bearing_viscous_per_n / bearing_mu_kinetic of hil_sim.rig.params (the contact
   friction is μ·N·sign v + c·N·v, so viscous/Coulomb = c/μ whatever the contact force N);
 - a fault's size: its Coulomb force μ·N over the calibration fault's, i.e. the mean

@@ -12,7 +12,8 @@ held by friction reads exactly zero velocity), above it the accelerometer (the p
 derivative noise passes with gain at most 2ζω_c: 2 µm of LVDT noise give 0.27 mm/s at
 15 Hz). The default crossover, 15 Hz, lets the position carry the motion through the
 operating band (1–10 Hz): on the simulated rig a 5 Hz crossover left the 8 Hz motion to the
-accelerometer and a supply-cut fault was not isolated (docs/detector.md §4a). Both paths are discretised by the bilinear transform, which maps a sum to a sum, so
+accelerometer and a supply-cut fault was not isolated (docs/detector.md §4a). Both paths
+are discretised by the bilinear transform, which maps a sum to a sum, so
 the discrete weights still add up to one. A non-finite position (a link that dropped it)
 holds the last good one.
 

@@ -53,7 +53,8 @@ class PipelineBatch:
 class Pipeline:
     """Ĝ, residual, velocity, G_e regressors and the window least squares of one rig."""
 
-    __slots__ = ("plant", "velocity", "model_velocity", "needs_position", "ge_sign", "ge_velocity", "wls", "speed",
+    __slots__ = ("plant", "velocity", "model_velocity", "needs_position", "ge_sign",
+                 "ge_velocity", "wls", "speed",
                  "min_v2_sum", "window_samples",
                  "xhat", "residual", "v", "g1", "g2", "moving", "v_rms", "theta1", "theta2")
 

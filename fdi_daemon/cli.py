@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "replay": "replay",
     "bench": "bench",
     "trend": "trend",
+    "baseline": "baseline",
 }
 
 

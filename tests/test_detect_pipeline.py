@@ -51,8 +51,30 @@ def test_friction_fault_gives_the_signature(system):
     np.testing.assert_allclose(np.median(sol.theta2[after]), model.fault_filter.gamma_f, rtol=0.1)
 
 
-def test_step_run_and_chunks_agree(system):
+def _observer_model(model):
+    import copy
+
+    observed = copy.deepcopy(model)
+    observed.velocity = {"method": "model_observer"}
+    return observed
+
+
+def test_the_model_observer_runs_on_the_plant_models_prediction(system):
+    """velocity.method model_observer: v̂ = L·x̂̈ + V·r with x̂̈ the pipeline's own Ĝ v_in."""
+    from fdi_daemon.core.velocity_observer import ModelVelocityObserver
+
     model, rec = system
+    out = Pipeline(_observer_model(model), N).run(rec.v_in, rec.accel)
+    xhat = lfilter(model.plant_b, model.plant_a, rec.v_in)
+    v = ModelVelocityObserver(model.fs).run(rec.accel, xhat)
+    np.testing.assert_allclose(out.velocity, v, rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("observer", [False, True], ids=["highpass", "model_observer"])
+def test_step_run_and_chunks_agree(system, observer):
+    model, rec = system
+    if observer:
+        model = _observer_model(model)
     v_in, accel = rec.v_in, rec.accel
     whole = Pipeline(model, N)
     ref = whole.run(v_in, accel)
@@ -102,3 +124,80 @@ def test_model_without_signature_is_refused(system):
     broken.velocity = {"highpass_hz": -1}
     with pytest.raises(ConfigError, match="velocity"):
         Pipeline(broken, N)
+
+
+def test_the_position_observer_runs_on_the_position_column_step_and_batch():
+    """velocity.method position_observer: v̂ from the recording's position and ẍ; per tick
+    (Sample.position) and batch agree, and a missing position holds the last one."""
+    import copy
+    import math
+
+    from conftest_detect import scenario_recording, sim_rig_model
+
+    from fdi_daemon.core.velocity_position import PositionVelocityObserver
+
+    model = copy.deepcopy(sim_rig_model())
+    model.velocity = {"method": "position_observer", "crossover_hz": 15.0}
+    rec = scenario_recording("test_case_2")
+    position = np.asarray(rec["position"], dtype=float).copy()
+    position[700:705] = np.nan
+    whole = Pipeline(model, N)
+    out = whole.run(rec.v_in, rec.accel, position=position)
+    ref = PositionVelocityObserver(model.fs, crossover_hz=15.0).run(rec.accel, position)
+    np.testing.assert_allclose(out.velocity, ref, rtol=1e-12, atol=1e-15)
+    one = Pipeline(model, N)
+    got = []
+    for v, a, x in zip(rec.v_in.tolist(), rec.accel.tolist(), position.tolist()):
+        one.step(v, a, x)
+        got.append(one.v)
+    np.testing.assert_allclose(got, out.velocity, rtol=1e-12, atol=1e-15)
+    assert math.isfinite(one.theta1) and one.theta1 == pytest.approx(whole.theta1, rel=1e-9)
+
+
+def test_a_position_model_needs_a_position_column(tmp_path, capsys):
+    import copy
+
+    from conftest_detect import scenario_recording, sim_rig_model
+
+    from fdi_daemon.cli import main
+    from fdi_daemon.io.model_file import save_model
+    from fdi_daemon.io.recordings import Recording, write_recording
+
+    model = copy.deepcopy(sim_rig_model())
+    model.velocity = {"method": "position_observer"}
+    path = save_model(tmp_path / "m.yaml", model)
+    rec = scenario_recording("test_case_2")
+    cols = {k: rec[k] for k in ("t", "v_in", "accel", "seq")}
+    no_position = write_recording(tmp_path / "r.csv", Recording(cols, dict(rec.meta)))
+    assert main(["replay", str(no_position), "--model", str(path)]) == 2
+    assert "has no position column" in capsys.readouterr().err
+
+
+def test_a_missing_position_is_a_bad_sample_in_step_and_batch():
+    """A position model on a link that drops the position: one bad_sample event per run
+    (reason named), the same events per tick and in batch."""
+    import copy
+
+    from conftest_detect import scenario_recording, sim_rig_model
+
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.io.recordings import Recording
+    from fdi_daemon.io.sample import Sample
+
+    model = copy.deepcopy(sim_rig_model())
+    model.velocity = {"method": "position_observer"}
+    rec = scenario_recording("test_case_2")
+    cols = dict(rec.columns)
+    cols["position"] = np.asarray(cols["position"], dtype=float).copy()
+    cols["position"][600:610] = np.nan
+    events, _ = Monitor(model).run(Recording(cols, dict(rec.meta)))
+    bad = [e for e in events if e["kind"] == "bad_sample"]
+    assert len(bad) == 1 and bad[0]["count"] == 10 and bad[0]["reason"] == "position not finite"
+    one = Monitor(model)
+    stepped = []
+    for k in range(len(rec)):
+        stepped.extend(one.step(Sample(int(cols["seq"][k]), float(cols["t"][k]),
+                                       float(cols["v_in"][k]), float(cols["accel"][k]),
+                                       float(cols["position"][k]))))
+    stepped.extend(one.finish())
+    assert [(e["kind"], e["t"]) for e in stepped] == [(e["kind"], e["t"]) for e in events]

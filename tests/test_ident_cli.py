@@ -107,6 +107,93 @@ def test_signature_flags_a_single_sine(identified, tmp_path, capsys):
     assert load_model(out).provenance["signature"]["cost_profile"]["flat"] is True
 
 
+@pytest.fixture(scope="module")
+def exact_model(tmp_path_factory):
+    """A model file holding the known plant of conftest_ident exactly."""
+    from conftest_ident import FS, plant
+
+    from fdi_daemon.io.model_file import FdiModel, save_model
+
+    b, a = plant()
+    return save_model(tmp_path_factory.mktemp("exact") / "exact.yaml",
+                      FdiModel(fs=FS, plant_b=np.asarray(b), plant_a=np.asarray(a)))
+
+
+def _stepped_fault_recording(model, path, gamma, noise_ratio):
+    """Known plant, an amplitude-stepped 3 + 5 Hz input and a friction effect through the
+    known G_e of x_f = sign(v) + γ v from 2 s, plus white noise of noise_ratio·std(effect)."""
+    from conftest_ident import FS, OE_B, OE_F
+    from scipy import signal
+
+    from fdi_daemon.core.velocity import VelocityEstimator
+
+    t = np.arange(int(10 * FS)) / FS
+    amplitude = np.repeat([0.6, 1.0, 1.4, 1.8, 0.6, 1.0, 1.4, 1.8, 1.0, 1.0], int(FS))
+    v_in = amplitude * (np.sin(2 * np.pi * 3 * t) + 0.5 * np.sin(2 * np.pi * 5 * t))
+    accel = signal.lfilter(model.plant_b, model.plant_a, v_in)
+    velocity = VelocityEstimator(FS).run(accel)
+    friction = np.where(t > 2.0, np.sign(velocity) + gamma * velocity, 0.0)
+    effect = signal.lfilter(OE_B, OE_F, friction)
+    effect *= 0.1 * np.std(accel) / np.std(effect)  # small: it hardly moves the velocity
+    rng = np.random.default_rng(5)
+    accel = accel + effect + noise_ratio * np.std(effect) * rng.standard_normal(len(t))
+    write_recording(path, Recording({"t": t, "v_in": v_in, "accel": accel}, {"fs": "256"}))
+    return path
+
+
+def test_signature_at_the_grid_edge_is_not_stored_as_a_value(exact_model, tmp_path, capsys):
+    """True γ beyond the grid's end: 'not identified (edge)', gamma_f null in the model."""
+    model_path = exact_model
+    rec = _stepped_fault_recording(load_model(model_path), tmp_path / "edge.csv", 40.0, 0.05)
+    out = tmp_path / "sig.yaml"
+    assert main(["signature", str(rec), "--model", str(model_path), "--fault-window", "2.5:10",
+                 "-o", str(out), "--gamma-grid", "0:4:0.5"]) == 0
+    captured = capsys.readouterr()
+    assert "not identified (edge)" in captured.out
+    result = load_model(out)
+    assert result.fault_filter.gamma_f is None
+    assert yaml.safe_load(out.read_text())["fault_filter"]["gamma_f"] is None
+    sig = result.provenance["signature"]
+    assert sig["gamma_f_status"] == "not identified (edge)"
+    assert sig["gamma_at_least_cost"] == pytest.approx(4.0, abs=0.5)
+    # the sequential monitor runs on it; the band method, which needs γ_f, refuses it
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.errors import ConfigError
+
+    Monitor(result)
+    result.detector = {"method": "band"}
+    with pytest.raises(ConfigError, match="gamma_f is not identified"):
+        Monitor(result)
+
+
+def test_signature_reports_the_variance_explained_and_warns_when_low(exact_model, tmp_path,
+                                                                     capsys):
+    model_path = exact_model
+    model = load_model(model_path)
+    for noise, low in ((0.1, False), (1.5, True)):
+        rec = _stepped_fault_recording(model, tmp_path / f"n{noise}.csv", 1.5, noise)
+        out = tmp_path / f"sig{noise}.yaml"
+        assert main(["signature", str(rec), "--model", str(model_path), "--fault-window",
+                     "2.5:10", "-o", str(out), "--gamma-grid", "0:4:0.5"]) == 0
+        captured = capsys.readouterr()
+        vaf = load_model(out).provenance["signature"]["fault_filter_vaf_percent_full_band"]
+        # the noise sets the share: 1/(1 + noise²) of the variance is the friction's
+        assert vaf == pytest.approx(100 / (1 + noise ** 2), abs=5)
+        assert "of the unfiltered fault residual's variance" in captured.out
+        assert ("explains only" in captured.err) is low
+
+
+def test_signature_with_the_model_observer_stores_its_settings(exact_model, tmp_path):
+    model_path = exact_model
+    rec = _stepped_fault_recording(load_model(model_path), tmp_path / "obs.csv", 1.5, 0.1)
+    out = tmp_path / "sig.yaml"
+    assert main(["signature", str(rec), "--model", str(model_path), "--fault-window", "2.5:10",
+                 "-o", str(out), "--gamma-grid", "0:4:0.5",
+                 "--velocity-method", "model_observer"]) == 0
+    velocity = load_model(out).velocity
+    assert velocity["method"] == "model_observer" and velocity["leak_hz"] == 0.02
+
+
 def _bad(args, capsys):
     code = main(args)
     err = capsys.readouterr().err

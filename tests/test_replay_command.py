@@ -117,3 +117,62 @@ def test_summary_line_is_one_line_in_an_80_column_terminal(files, tmp_path, monk
     summary = [line for line in lines if " samples at " in line]
     assert len(summary) == 1 and summary[0].endswith("classification friction"), lines
     assert "first detection 2.9" in summary[0] and len(summary[0]) > 80
+def _trace_rows(path):
+    import csv
+
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    return rows[0], rows[1:]
+
+
+@pytest.mark.parametrize("every", [1, 4])
+def test_trace_csv_and_npz_hold_every_nth_sample_with_the_events_states(files, tmp_path, every):
+    """--trace: the header, one row per N samples, θ as the detector reports it, and the
+    state named, switching where the events say it does."""
+    root, model, rec = files
+    csv_path, npz_path = tmp_path / "trace.csv", tmp_path / "trace.npz"
+    events_path = tmp_path / "ev.jsonl"
+    for path in (csv_path, npz_path):
+        argv = ["replay", str(rec), "--model", str(model), "--trace", str(path),
+                "--events", str(events_path)]
+        if every != 1:
+            argv += ["--trace-every", str(every)]
+        assert main(argv) == 0
+    header, rows = _trace_rows(csv_path)
+    assert header == ["t", "theta1", "theta2", "friction_level", "statistic", "state"]
+    src = scenario_recording("test_case_2")
+    assert len(rows) == -(-len(src) // every)
+    t = np.array([float(r[0]) for r in rows])
+    np.testing.assert_allclose(t, src.t[::every], atol=1e-9)
+    theta1 = np.array([float(r[1]) for r in rows])
+    np.testing.assert_array_equal(theta1, np.array([float(r[3]) for r in rows]))
+    states = np.array([r[5] for r in rows])
+    events = {e["kind"]: e["t"] for e in read_events(events_path)}
+    assert set(states[t < events["calibrated"]]) <= {"starting", "calibrating"}
+    assert set(states[(t > events["calibrated"]) & (t < events["fault_detected"])]) == \
+        {"monitoring"}
+    assert set(states[t >= events["friction_isolated"]]) == {"friction_isolated"}
+    # after isolation θ1 is the friction level the event reports, not NaN
+    assert np.all(np.isfinite(theta1[t >= events["friction_isolated"]]))
+    npz = np.load(npz_path)
+    assert set(npz.files) == set(header)
+    np.testing.assert_allclose(npz["theta1"], theta1, rtol=1e-9, equal_nan=True)
+    assert list(npz["state"]) == list(states)
+
+
+def test_trace_of_the_realtime_path_and_bad_arguments(files, tmp_path, capsys):
+    root, model, _ = files
+    rec = scenario_recording("test_case_2")
+    short = write_recording(tmp_path / "short.csv",
+                            Recording({k: v[:40] for k, v in rec.columns.items()},
+                                      dict(rec.meta)))
+    path = tmp_path / "rt.csv"
+    assert main(["replay", str(short), "--model", str(model), "--realtime", "--trace",
+                 str(path), "--trace-every", "3"]) == 0
+    assert len(_trace_rows(path)[1]) == 14
+    assert main(["replay", str(short), "--model", str(model), "--trace", str(path),
+                 "--trace-every", "0"]) == 2
+    assert main(["replay", str(short), "--model", str(model), "--trace",
+                 str(tmp_path / "no" / "dir.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "--trace-every must be" in err and "cannot write the trace" in err

@@ -20,6 +20,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--summary", metavar="SUMMARY.json", help="write the replay summary")
     parser.add_argument("--plot", metavar="FILE.png",
                         help="acceleration, θ1/θ2 with band and signature, residual, statistic")
+    parser.add_argument("--trace", metavar="FILE",
+                        help="write t, theta1, theta2, friction_level, statistic, state per "
+                             "sample (CSV with a header; .npz with the same names)")
+    parser.add_argument("--trace-every", type=int, default=1, metavar="N",
+                        help="with --trace: every N-th sample (default %(default)s)")
     parser.add_argument("--realtime", action="store_true",
                         help="pace the samples at fs through the per-tick path (as the daemon)")
     parser.add_argument("--dashboard", action="store_true",
@@ -39,6 +44,8 @@ def run(args: argparse.Namespace) -> int:
     if args.dashboard and not args.realtime:
         raise UserError("--dashboard needs --realtime (a batch replay is over before a "
                         "screen could show it)")
+    if args.trace_every < 1:
+        raise UserError("--trace-every must be a whole number >= 1")
     model = load_model(args.model)
     rec = read_recording(args.recording, strict=False, columns=args.columns)
     if not same_rate(rec.fs, model.fs):
@@ -55,6 +62,8 @@ def run(args: argparse.Namespace) -> int:
         events, trace = _paced(monitor, rec)
     else:
         trace_every = max(1, -(-n // TRACE_POINTS)) if args.plot else max(1, n)
+        if args.trace:  # the file and the plot show the same samples
+            trace_every = args.trace_every
         events, trace = _batch(monitor, rec, trace_every)
     snap = monitor.snapshot()
     summary = replay_summary(events, n, model.fs, monitor.settings.method,
@@ -65,6 +74,11 @@ def run(args: argparse.Namespace) -> int:
         write_events(args.events, events)
     if args.summary:
         write_summary(args.summary, summary)
+    if args.trace:
+        from fdi_daemon.detect.trace_file import write_trace
+
+        # the batch path traced every --trace-every sample already; the paced one every one
+        write_trace(args.trace, trace, 1 if trace.every == args.trace_every else args.trace_every)
     if args.plot:
         from fdi_daemon.detect.plots import plot_replay
 
@@ -75,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
         plot_replay(args.plot, trace, events, monitor.gamma_f, monitor.detector.band,
                     monitor.detector.threshold, onset, title=str(args.recording))
     _report(events, summary)
+    if monitor.baseline_note:
+        print(f"note: {monitor.baseline_note}")
     return 0
 
 
@@ -118,6 +134,7 @@ def _paced(monitor, rec, on_tick=None):
     t = np.asarray(cols["t"], dtype=float)
     v_in = np.asarray(cols["v_in"], dtype=float)
     accel = np.asarray(cols["accel"], dtype=float)
+    position = monitor.position_column(rec)
     seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
            else monitor.sample_numbers(t))
     period = 1.0 / monitor.fs_hz
@@ -131,7 +148,8 @@ def _paced(monitor, rec, on_tick=None):
             delay = start + k * period - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            new = monitor.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]), float(accel[k])))
+            new = monitor.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]), float(accel[k]),
+                                      float(position[k])))
             events.extend(new)
             pl, det = monitor.pipeline, monitor.detector
             values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,

@@ -25,7 +25,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="G_e orders as MATLAB oe (default %(default)s)")
     parser.add_argument("--highpass-hz", type=float,
                         help="velocity estimator high-pass cut-off (default: the model's "
-                             "velocity settings, else 1 Hz)")
+                             "velocity settings, else 1 Hz; with model_observer, 0.5 Hz on "
+                             "the residual path)")
+    parser.add_argument("--velocity-method",
+                        choices=("highpass", "model_observer", "position_observer"),
+                        help="velocity estimate: the accelerometer through a high-pass and an "
+                             "integrator, the model-based observer (right in phase at 1-3 Hz), "
+                             "or position and acceleration fused (needs a position column; "
+                             "docs/detector.md). Default: the model's velocity settings, else "
+                             "highpass. The monitor uses the same")
     parser.add_argument("--flat-fraction", type=float, default=0.2,
                         help="flag the profile flat when the 99 %% interval of γ covers more "
                              "than this fraction of the grid (default %(default)s)")
@@ -65,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from fdi_daemon.commands.identify import load_io, parse_range
-    from fdi_daemon.core.velocity import DEFAULT_SETTINGS, VelocityEstimator
+    from fdi_daemon.core.velocity import DEFAULT_SETTINGS
+    from fdi_daemon.core.velocity_observer import velocity_from_settings
     from fdi_daemon.detect.settings import velocity_settings
     from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.errors import ConfigError, UserError
@@ -106,10 +115,13 @@ def run(args: argparse.Namespace) -> int:
                         f"samples; at least {needed} are needed")
 
     settings = velocity_settings(model.velocity or DEFAULT_SETTINGS)
+    if args.velocity_method is not None and args.velocity_method != settings.get("method",
+                                                                                   "highpass"):
+        settings = {"method": args.velocity_method}  # the other method's own defaults
     if args.highpass_hz is not None:
         settings["highpass_hz"] = args.highpass_hz
     try:
-        estimator = VelocityEstimator.from_settings(settings, fs_hz=model.fs)
+        estimator = velocity_from_settings(settings, fs_hz=model.fs)
     except ValueError as exc:
         raise ConfigError(f"{args.model}: velocity: {exc}") from None
 
@@ -123,7 +135,15 @@ def run(args: argparse.Namespace) -> int:
     # residual (eq. 3) and velocity from the recording start, so that filter start-up
     # transients have settled before the window; the fit uses the window only
     residual = sig.plant_residual(nominal_plant(model), v_in, accel)
-    velocity = estimator.run(accel)
+    if estimator.needs_model:
+        velocity = estimator.run(accel, accel - residual)
+    elif estimator.needs_position:
+        if "position" not in rec.columns:
+            raise UserError(f"{args.recording}: velocity method position_observer needs a "
+                            "position column")
+        velocity = estimator.run(accel, np.asarray(rec.columns["position"], dtype=float))
+    else:
+        velocity = estimator.run(accel)
     first, end = int(np.flatnonzero(inside)[0]), int(np.flatnonzero(inside)[-1]) + 1
     start = 0
     if args.reference_window is not None:
@@ -138,10 +158,13 @@ def run(args: argparse.Namespace) -> int:
         fault_fit = sig.fit_fault_filter(residual[start:end], velocity[start:end],
                                          result.gamma_f, orders, first - start, radius)
     full_band_pct = sig.fit_percent(residual[first:end], fault_fit.y_sim)
+    full_band_vaf = sig.variance_accounted_for(residual[first:end], fault_fit.y_sim)
 
     nb, nf, nk = orders
+    # at the grid's edge γ_f is no value: null in the model (the monitor's G_e, fitted at the
+    # edge γ, is kept; the band method, which tracks (1, γ_f), refuses such a model)
     model.fault_filter = FaultFilter(b=fault_fit.b, f=fault_fit.f, nk=nk,
-                                     gamma_f=result.gamma_f)
+                                     gamma_f=None if result.at_edge else result.gamma_f)
     model.velocity = estimator.settings()
     prov = dict(model.provenance)
     prov["signature"] = {
@@ -152,6 +175,9 @@ def run(args: argparse.Namespace) -> int:
         "prefilter_hz": args.prefilter_hz, "lowpass_hz": args.lowpass_hz,
         "max_pole_radius": float(radius),
         "fault_filter_fit_percent_full_band": float(full_band_pct),
+        "fault_filter_vaf_percent_full_band": float(full_band_vaf),
+        "gamma_f_status": result.status,
+        "gamma_at_least_cost": float(result.gamma_f),
         "cost_profile": result.summary(),
         "cost_profile_relative": [round(float(c), 6) for c in result.relative_cost()],
         "recommendation": result.recommendation,
@@ -163,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
 
         plot_signature(args.plot, t_win, result.residual, result,
                        residual_label=_fitted_residual_label(args))
-    _report(args, result, estimator, fault_fit, full_band_pct)
+    _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf)
     return 0
 
 
@@ -244,28 +270,46 @@ def _estimate(sig, residual, velocity, fit_from, grid, orders, prefilter, flat_f
             raise UserError(f"signature: {exc}") from None
 
 
-def _report(args, result, estimator, fault_fit, full_band_pct) -> None:
+def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf) -> None:
     import sys
 
+    from fdi_daemon.ident.signature import LOW_VAF_PERCENT
+
     rel = result.relative_cost()
+    gamma = (f"not identified (edge): least cost at γ = {result.gamma_f:.4g}, the end of the "
+             "grid; stored as null" if result.at_edge else f"{result.gamma_f:.4g}")
+    velocity = estimator.settings()
+    if velocity.get("method") == "position_observer":
+        described = (f"position_observer, crossover {velocity['crossover_hz']:g} Hz, damping "
+                     f"{velocity['damping']:g}")
+    else:
+        described = (f"{velocity.get('method', 'highpass')}, high-pass "
+                     f"{velocity['highpass_hz']:g} Hz order {velocity['highpass_order']}"
+                     + (f", leak {velocity['leak_hz']:g} Hz" if "leak_hz" in velocity else "")
+                     + f", {velocity['integrator']} integrator")
     lines = [
-        f"gamma_f           : {result.gamma_f:.4g} (grid {result.grid[0]:g}..{result.grid[-1]:g}"
+        f"gamma_f           : {gamma} (grid {result.grid[0]:g}..{result.grid[-1]:g}"
         f" step {result.grid[1] - result.grid[0]:g}, refined)",
         f"99 % interval     : {result.interval[0]:.3g} .. {result.interval[1]:.3g}"
         f" (N_eff = {result.effective_samples:.0f})",
         f"cost profile      : SSE(γ)/SSE(γ_f) from {rel.min():.4f} to {rel.max():.4f}"
-        f" ({'FLAT' if result.flat else 'identifiable'})",
-        f"G_e fit           : {result.info['fit_percent']:.2f} % of the residual explained, "
+        f" ({result.status.upper() if result.status != 'identified' else 'identifiable'})",
+        f"G_e fit           : {result.info['fit_percent']:.2f} % of the residual explained "
+        f"(1 - NRMSE), variance accounted for {result.info['vaf_percent']:.1f} %, "
         f"orders [nb nf nk] = {list(result.orders)}",
         f"G_e (model file)  : b = {[round(float(v), 6) for v in fault_fit.b]}, "
-        f"f = {[round(float(v), 6) for v in fault_fit.f]}; {full_band_pct:.2f} % of the "
-        f"unfiltered residual explained",
-        f"velocity          : high-pass {estimator.highpass_hz:g} Hz, order "
-        f"{estimator.highpass_order}, {estimator.integrator} integrator",
+        f"f = {[round(float(v), 6) for v in fault_fit.f]}; explains {full_band_vaf:.1f} % of "
+        f"the unfiltered fault residual's variance ({full_band_pct:.2f} % 1 - NRMSE)",
+        f"velocity          : {described}",
         f"model written     : {args.output}",
     ]
     print("\n".join(lines))
+    if full_band_vaf < LOW_VAF_PERCENT:
+        print(f"fdi signature: warning: G_e x_f explains only {full_band_vaf:.1f} % of the fault "
+              f"residual's variance (< {LOW_VAF_PERCENT:g} %): the friction level will not be "
+              "physical. Use --velocity-method model_observer and a calibration run with the "
+              "rig's operating frequencies (docs/identification.md)", file=sys.stderr)
     if result.flat:
         print(f"fdi signature: warning: {result.recommendation} (G_e x_f explains "
-              f"{result.info['fit_percent']:.1f} % of the residual; 99 % interval of gamma "
-              f"{result.interval[0]:.3g}..{result.interval[1]:.3g})", file=sys.stderr)
+              f"{result.info['vaf_percent']:.1f} % of the residual's variance; 99 % interval "
+              f"of gamma {result.interval[0]:.3g}..{result.interval[1]:.3g})", file=sys.stderr)

@@ -56,6 +56,9 @@ class VelocityEstimator:
     __slots__ = ("fs_hz", "highpass_hz", "highpass_order", "integrator",
                  "lead_compensation_hz", "_filter", "step", "run")
 
+    needs_model = False  # step/run take ẍ only (core.velocity_observer's take x̂̈ too)
+    needs_position = False
+
     def __init__(self, fs_hz: float, highpass_hz: float = 1.0, highpass_order: int = 3,
                  integrator: str = "trapezoid", lead_compensation_hz: float | None = None):
         fs_hz = float(fs_hz)

@@ -126,6 +126,7 @@ class Detector:
         self._guard_until = 0
         self._above = 0
         self._slow_above = 0
+        self._base_above = 0
         self._hold_until = self.warmup_samples
         if self.state == "calibrating":
             self._calibration = []
@@ -144,7 +145,8 @@ class Detector:
         return {"tick": self._tick, "res": self.residual_test.get_state(),
                 "cmd": self.command_test.get_state(), "v": list(self._v_hist),
                 "guard": self._guard_until, "above": self._above,
-                "slow": self._slow_above, "calibration": list(self._calibration)}
+                "slow": self._slow_above, "base": self._base_above,
+                "calibration": list(self._calibration)}
 
     def _restore_state(self, st: dict[str, Any]) -> None:
         self._tick = st["tick"]
@@ -154,12 +156,16 @@ class Detector:
         self._guard_until = st["guard"]
         self._above = st["above"]
         self._slow_above = st["slow"]
+        self._base_above = st["base"]
         self._calibration = list(st["calibration"])
 
     # ------------------------------------------------------------------ per tick
     def step(self, t: float, v_in: float, xhat: float, r: float, g1: float, g2: float,
-             theta1: float, theta2: float) -> list[dict[str, Any]]:
-        """One tick; returns the events it raised (usually none)."""
+             theta1: float, theta2: float, over_baseline: float = math.nan
+             ) -> list[dict[str, Any]]:
+        """One tick; returns the events it raised (usually none). ``over_baseline``: the
+        friction level's excess over the commissioning baseline in units of its margin,
+        (θ1 − median)/max(friction_min_level, k·σ) (NaN: no baseline, or θ not valid)."""
         tick = self._tick
         phi = (g1, g2, xhat, 1.0)
         row = packed_row(phi, r)
@@ -171,14 +177,21 @@ class Detector:
             self._guard_until = tick + self.hold_samples
         self._tick = tick + 1
         self.theta1, self.theta2 = theta1, theta2
-        return self._decide(tick, t, phi, row, r, theta1, theta2)
+        return self._decide(tick, t, phi, row, r, theta1, theta2, over_baseline)
 
-    def _decide(self, tick, t, phi, row, r, theta1, theta2) -> list[dict[str, Any]]:
+    def _decide(self, tick, t, phi, row, r, theta1, theta2, over) -> list[dict[str, Any]]:
         if self._episode is not None:
-            return self._episode.step(self, tick, t, phi, row, r)
+            return self._episode.step(self, tick, t, phi, row, r, over)
         if tick < self._hold_until:
-            self._above = self._slow_above = 0
+            self._above = self._slow_above = self._base_above = 0
             return []
+        # against the commissioning baseline: from the first valid window, calibrated or not
+        self._base_above = self._base_above + 1 if over > 1.0 else 0
+        if self._base_above >= self.slow_samples:
+            self._above = self._slow_above = self._base_above = 0
+            self._episode = _Episode(self, tick, slow=True, baseline=True)
+            self.state = "fault_detected"
+            return [self._event(t, "fault_detected", theta1, theta2, path="baseline")]
         if self.state == "calibrating":
             return self._calibrate(t, theta1, theta2)
         self._above = self._above + 1 if self._alarm_condition(tick, theta1, theta2) else 0
@@ -233,10 +246,12 @@ class Detector:
 
     # ------------------------------------------------------------------ batch
     def run(self, t: np.ndarray, v_in: np.ndarray, xhat: np.ndarray, r: np.ndarray,
-            g1: np.ndarray, g2: np.ndarray, theta1: np.ndarray, theta2: np.ndarray
+            g1: np.ndarray, g2: np.ndarray, theta1: np.ndarray, theta2: np.ndarray,
+            over_baseline: np.ndarray | None = None
             ) -> tuple[list[dict[str, Any]], DetectorTrace]:
         """Batch ``step`` over arrays: the same events, statistic, states and reported θ."""
         n = len(t)
+        over = np.full(n, np.nan) if over_baseline is None else over_baseline
         stat = np.empty(n)
         codes = np.empty(n, dtype=np.int8)
         reported1, reported2 = theta1, theta2  # copied when an episode reports its own θ
@@ -246,14 +261,14 @@ class Detector:
             if self._episode is None:
                 stop = min(n, pos + _CHUNK)
                 done = self._run_quiet(pos, stop, t, v_in, xhat, r, g1, g2, theta1, theta2,
-                                       stat, codes)
+                                       over, stat, codes)
                 pos += done
                 if pos == stop:
                     continue
             # per tick: the tick that raises an event, then an episode until it ends
             while pos < n:
                 events.extend(self.step(t[pos], v_in[pos], xhat[pos], r[pos], g1[pos], g2[pos],
-                                        theta1[pos], theta2[pos]))
+                                        theta1[pos], theta2[pos], over[pos]))
                 stat[pos] = self.statistic
                 codes[pos] = _STATE_CODE[self.state]
                 if reported1 is theta1:
@@ -265,14 +280,14 @@ class Detector:
         return events, DetectorTrace(statistic=stat, state=codes, theta1=reported1,
                                      theta2=reported2)
 
-    def _run_quiet(self, pos, stop, t, v_in, xhat, r, g1, g2, theta1, theta2, stat, codes
-                   ) -> int:
+    def _run_quiet(self, pos, stop, t, v_in, xhat, r, g1, g2, theta1, theta2, over, stat,
+                   codes) -> int:
         """Vectorised ticks [pos, stop) up to the first one that raises an event (which is
         left to ``step``); returns how many ticks it took."""
         saved = self._snapshot_state()
         sl = slice(pos, stop)
         arrays = self._vector_stats(v_in[sl], xhat[sl], r[sl], g1[sl], g2[sl])
-        first = self._first_event(arrays, theta1[sl], theta2[sl])
+        first = self._first_event(arrays, theta1[sl], theta2[sl], over[sl])
         count = stop - pos
         if first is not None:
             self._restore_state(saved)
@@ -281,7 +296,8 @@ class Detector:
             sl = slice(pos, pos + first)
             arrays = self._vector_stats(v_in[sl], xhat[sl], r[sl], g1[sl], g2[sl])
             count = first
-        self._commit_quiet(arrays, theta1[pos:pos + count], theta2[pos:pos + count])
+        self._commit_quiet(arrays, theta1[pos:pos + count], theta2[pos:pos + count],
+                           over[pos:pos + count])
         if count:
             self.theta1, self.theta2 = theta1[pos + count - 1], theta2[pos + count - 1]
         stat[pos:pos + count] = arrays["stat"]
@@ -322,19 +338,31 @@ class Detector:
                                        >= self.settings.friction_min_level)
         return fast & active, slow & active
 
-    def _first_event(self, arrays, theta1, theta2) -> int | None:
+    def _baseline_runs(self, arrays, over) -> np.ndarray:
+        with np.errstate(invalid="ignore"):
+            above = (over > 1.0) & (arrays["ticks"] >= self._hold_until)
+        return _run_lengths(above, self._base_above)
+
+    def _first_event(self, arrays, theta1, theta2, over) -> int | None:
         """Index of the first tick that raises an event, or None."""
+        base_hits = np.flatnonzero(self._baseline_runs(arrays, over) >= self.slow_samples)
+        first_base = int(base_hits[0]) if base_hits.size else None
         if self.state == "calibrating":
             active = np.flatnonzero(arrays["ticks"] >= self._hold_until)
             need = self.calibration_samples - len(self._calibration)
-            return int(active[need - 1]) if active.size >= need else None
+            done = int(active[need - 1]) if active.size >= need else None
+            return min((i for i in (done, first_base) if i is not None), default=None)
         fast, slow = self._quiet_condition(arrays, theta1, theta2)
         hits = np.flatnonzero(
             (_run_lengths(fast, self._above) >= self.settings.persistence_samples)
             | (_run_lengths(slow, self._slow_above) >= self.slow_samples))
-        return int(hits[0]) if hits.size else None
+        first = int(hits[0]) if hits.size else None
+        return min((i for i in (first, first_base) if i is not None), default=None)
 
-    def _commit_quiet(self, arrays, theta1, theta2) -> None:
+    def _commit_quiet(self, arrays, theta1, theta2, over) -> None:
+        runs = self._baseline_runs(arrays, over)
+        if runs.size:
+            self._base_above = int(runs[-1])
         if self.state == "calibrating":
             sel = np.flatnonzero(arrays["ticks"] >= self._hold_until)
             coulomb = np.where(arrays["ok"], arrays["coulomb"], np.nan)
@@ -350,7 +378,8 @@ class Detector:
 class _Episode:
     """One alarm episode: from fault_detected until cleared (always run per tick)."""
 
-    def __init__(self, det: Detector, tick: int, slow: bool = False) -> None:
+    def __init__(self, det: Detector, tick: int, slow: bool = False,
+                 baseline: bool = False) -> None:
         test = det.residual_test
         self.theta_ref = list(test.theta)
         # the Coulomb coefficient friction is measured from: just before the change (fast
@@ -386,6 +415,8 @@ class _Episode:
         # and its frozen reference already holds the fault.
         self.persisted = slow
         self.slow = slow
+        # raised against the commissioning baseline: the level itself is the evidence
+        self.baseline = baseline
 
     def restart(self, det: Detector) -> None:
         """After a data gap: the windows restart, the episode goes on."""
@@ -449,7 +480,7 @@ class _Episode:
             return "harmonics"
         return "load_stopped" if self.load_stopped(det) else None
 
-    def step(self, det: Detector, tick, t, phi, row, r):
+    def step(self, det: Detector, tick, t, phi, row, r, over=math.nan):
         s = det.settings
         moving = math.isfinite(det.theta1)  # the pipeline's window θ: NaN at rest
         self.ticks += 1
@@ -481,17 +512,23 @@ class _Episode:
                 self.level_change = theta[0] - self.coulomb_base
                 if self.level_change >= s.friction_min_level:
                     kind = self._friction_kind(det)
+        if self.baseline:
+            kind = "baseline" if over > 1.0 else None
         if det.state == "fault_detected":
             self.track = self.track + 1 if kind else 0
             if self.track >= s.track_samples and math.isnan(self.evidence):
-                self.evidence = self.level_change
+                # against the baseline: the level's excess over it (units of its margin)
+                self.evidence = over if self.baseline else self.level_change
                 self.evidence_kind = kind
             if not math.isnan(self.evidence) and self.persisted:
                 self.level_change = self.evidence
                 return self._to(det, "friction_isolated", t, theta1, theta2)
             if self.ticks >= det.timeout_samples:
                 return self._to(det, "other_fault", t, theta1, theta2)
-        if det.state == "friction_isolated":
+        if det.state == "friction_isolated" and self.baseline:
+            # gone when the level is back within half the margin of the fault-free one
+            normal = over < 0.5
+        elif det.state == "friction_isolated":
             # gone when the moving reference (which follows the operating point) no longer
             # holds the friction
             test = det.residual_test
@@ -532,7 +569,10 @@ class _Episode:
                            **extra)]
 
     def _clear(self, det, t, theta1, theta2):
-        det.state = "monitoring"
+        # an episode raised against the baseline: the calibration (if any) saw the friction
+        # as normal, so calibrate again on the fault-free rig
+        det.state = "calibrating" if self.baseline or det.band is None else "monitoring"
+        det._calibration = []
         det._episode = None
         det._above = 0
         # the moving reference still holds fault data: wait until it has passed

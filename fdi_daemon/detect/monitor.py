@@ -19,6 +19,7 @@ and the calibrated band are kept).
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -26,11 +27,12 @@ from typing import Any
 
 import numpy as np
 
+from fdi_daemon.detect.baseline import Baseline
 from fdi_daemon.detect.detector import STATES, Detector
 from fdi_daemon.detect.events import make_event
 from fdi_daemon.detect.pipeline import Pipeline
 from fdi_daemon.detect.settings import DetectorSettings
-from fdi_daemon.errors import ConfigError
+from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.io.model_file import FdiModel
 from fdi_daemon.io.recordings import Recording
 from fdi_daemon.io.sample import Sample
@@ -40,6 +42,9 @@ __all__ = ["Monitor", "MonitorTrace"]
 HISTORY_S = 30.0
 HISTORY_POINTS = 300
 _CHUNK = 16384
+
+
+log = logging.getLogger("fdi.monitor")
 
 
 @dataclass
@@ -75,10 +80,27 @@ class Monitor:
         self.model = model
         self.settings = DetectorSettings.from_mapping(detector_map)
         self.fs_hz = float(model.fs)
-        self.gamma_f = float(model.fault_filter.gamma_f)
+        gamma_f = model.fault_filter.gamma_f
+        if gamma_f is None and self.settings.method == "band":
+            raise ConfigError("detector.method band tracks the signature (1, gamma_f), but the "
+                              "model's gamma_f is not identified (null): use method sequential "
+                              "or calibrate the signature again (docs/identification.md)")
+        self.gamma_f = float("nan") if gamma_f is None else float(gamma_f)
         self.detector = Detector(self.settings, self.fs_hz, self.gamma_f)
         self.pipeline = Pipeline(model, self.detector.window_samples,
                                  min_velocity_rms_mps=self.settings.min_velocity_rms_mps)
+        self.baseline = None
+        self.baseline_note = ("the model has no commissioning baseline: friction present "
+                              "when monitoring starts is not reported (run `fdi baseline`)")
+        if model.extra.get("baseline") is not None:
+            if not isinstance(model.extra["baseline"], dict):
+                raise ConfigError("model: baseline must be a mapping (from `fdi baseline`)")
+            self.baseline = Baseline.from_mapping(model.extra["baseline"])
+            self.baseline_note = ""
+            self._margin = np.maximum(0.5 * self.settings.friction_min_level,
+                                      self.settings.band_k * self.baseline.sigma)
+        else:
+            log.info(self.baseline_note)
         self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))
         self._history: deque = deque(maxlen=HISTORY_POINTS)
         self._samples = 0
@@ -114,6 +136,8 @@ class Monitor:
         elif self.accel_limit_mps2 is not None and abs(accel) >= self.accel_limit_mps2:
             accel = None
             reason = reason or "accel saturated"
+        if self.pipeline.needs_position and not math.isfinite(sample.position):
+            reason = reason or "position not finite"  # the velocity holds the last position
         t = sample.t if math.isfinite(sample.t) else self._last_t + 1.0 / self.fs_hz
         if reason:
             self._bad(t, reason, events)
@@ -122,9 +146,11 @@ class Monitor:
         self._v_in = v_in
         self._last_t = t
         pl = self.pipeline
-        pl.step(v_in, accel)
+        pl.step(v_in, accel, sample.position)
+        over = (float(self.over_baseline(pl.theta1, pl.v_rms)) if self.baseline is not None
+                else math.nan)
         events.extend(self.detector.step(t, v_in, pl.xhat, pl.residual, pl.g1, pl.g2,
-                                         pl.theta1, pl.theta2))
+                                         pl.theta1, pl.theta2, over))
         if self._samples % self._history_every == 0:
             self._history.append((t, self.detector.theta1, self.detector.theta2))
         self._samples += 1
@@ -168,6 +194,7 @@ class Monitor:
         t = np.asarray(cols["t"], dtype=float)
         v_in = np.asarray(cols["v_in"], dtype=float)
         accel = np.asarray(cols["accel"], dtype=float)
+        position = self.position_column(rec)
         seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
                else self.sample_numbers(t))
         events: list[dict[str, Any]] = []
@@ -177,7 +204,8 @@ class Monitor:
         while start < n:
             stop = min(n, start + _CHUNK)
             events.extend(self._run_chunk(t[start:stop], v_in[start:stop], accel[start:stop],
-                                          seq[start:stop], parts, trace_every))
+                                          position[start:stop], seq[start:stop], parts,
+                                          trace_every))
             start = stop
             if progress is not None:
                 progress(stop, n)
@@ -185,6 +213,23 @@ class Monitor:
         trace = MonitorTrace(every=trace_every, **{
             k: (np.concatenate(v) if v else np.empty(0)) for k, v in parts.items()})
         return events, trace
+
+    def over_baseline(self, theta1, v_rms):
+        """(θ1 − baseline median)/margin of the bin of the window's velocity RMS; margin =
+        max(friction_min_level, band_k·σ). Above 1: friction beyond the fault-free level."""
+        idx = self.baseline.bin_index(v_rms)
+        return (theta1 - self.baseline.median[idx]) / self._margin[idx]
+
+    def position_column(self, rec: Recording) -> np.ndarray:
+        """The recording's ``position`` (m) when the velocity fuses it, else NaN; a model
+        whose velocity needs position and a recording without it: UserError."""
+        n = len(rec.columns["t"])
+        if not self.pipeline.needs_position:
+            return np.full(n, np.nan)
+        if "position" not in rec.columns:
+            raise UserError("the model's velocity fuses position (velocity.method "
+                            "position_observer) but the recording has no position column")
+        return np.asarray(rec.columns["position"], dtype=float)
 
     def sample_numbers(self, t: np.ndarray) -> np.ndarray:
         """Sample numbers from the time column (recordings without ``seq``)."""
@@ -196,7 +241,8 @@ class Monitor:
         base = 0 if self._last_seq is None else self._last_seq + 1
         return base + np.concatenate([[0], np.cumsum(steps)])
 
-    def _run_chunk(self, t, v_in, accel, seq, parts, trace_every) -> list[dict[str, Any]]:
+    def _run_chunk(self, t, v_in, accel, position, seq, parts, trace_every
+                   ) -> list[dict[str, Any]]:
         events: list[dict[str, Any]] = []
         # split where seq does not advance by exactly one: gaps and dropped samples
         prev = np.concatenate([[self._last_seq if self._last_seq is not None else seq[0] - 1],
@@ -212,21 +258,24 @@ class Monitor:
                     # duplicates / going backwards: drop them one at a time (rare)
                     for k in range(a, b):
                         events.extend(self.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]),
-                                                       float(accel[k]))))
+                                                       float(accel[k]), float(position[k]))))
                     continue
                 events.extend(self._flush_bad())
                 events.append(self._gap(float(t[a]), int(seq[a] - self._last_seq - 1)))
             if step[a] != 1:
                 self._last_seq = int(seq[a]) - 1
-            events.extend(self._run_contiguous(t[a:b], v_in[a:b], accel[a:b], parts,
-                                               trace_every))
+            events.extend(self._run_contiguous(t[a:b], v_in[a:b], accel[a:b], position[a:b],
+                                               parts, trace_every))
             self._last_seq = int(seq[b - 1])
         return events
 
-    def _run_contiguous(self, t, v_in, accel, parts, trace_every) -> list[dict[str, Any]]:
+    def _run_contiguous(self, t, v_in, accel, position, parts, trace_every
+                        ) -> list[dict[str, Any]]:
         """Samples with consecutive seq: good runs batched, bad samples through ``step``."""
         events: list[dict[str, Any]] = []
         bad = ~np.isfinite(v_in) | ~np.isfinite(accel) | ~np.isfinite(t)
+        if self.pipeline.needs_position:
+            bad |= ~np.isfinite(position)
         if self.accel_limit_mps2 is not None:
             with np.errstate(invalid="ignore"):
                 bad |= np.abs(accel) >= self.accel_limit_mps2
@@ -239,20 +288,23 @@ class Monitor:
                 for k in range(a, last):
                     seq = self._last_seq + 1 if self._last_seq is not None else 0
                     events.extend(self.step(Sample(seq, float(t[k]), float(v_in[k]),
-                                                   float(accel[k]))))
+                                                   float(accel[k]), float(position[k]))))
                     self._trace_one(parts, trace_every)
                 a = last
             if a < b:
-                events.extend(self._run_good(t[a:b], v_in[a:b], accel[a:b], parts,
-                                             trace_every))
+                events.extend(self._run_good(t[a:b], v_in[a:b], accel[a:b], position[a:b],
+                                             parts, trace_every))
         return events
 
-    def _run_good(self, t, v_in, accel, parts, trace_every) -> list[dict[str, Any]]:
+    def _run_good(self, t, v_in, accel, position, parts, trace_every
+                  ) -> list[dict[str, Any]]:
         pl = self.pipeline
-        batch = pl.run(v_in, accel)
+        batch = pl.run(v_in, accel, position=position)
         sol_t1, sol_t2 = pl.thetas(batch)
+        over = (self.over_baseline(sol_t1, batch.v_rms) if self.baseline is not None
+                else None)
         events, det_trace = self.detector.run(t, v_in, batch.xhat, batch.residual, batch.g1,
-                                              batch.g2, sol_t1, sol_t2)
+                                              batch.g2, sol_t1, sol_t2, over)
         theta1, theta2 = det_trace.theta1, det_trace.theta2
         n = len(t)
         ticks = self._samples + np.arange(n)
@@ -299,7 +351,7 @@ class Monitor:
             "theta2": _finite(det.theta2),
             "friction_level": _finite(det.theta1),
             "band": det.band,
-            "signature": [1.0, self.gamma_f],
+            "signature": [1.0, _finite(self.gamma_f)],
             "residual_rms": _finite(math.sqrt(syy / count)) if count and syy >= 0 else None,
             "statistic": _finite(det.statistic),
             "threshold": float(det.threshold),

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-from fdi_daemon.core.velocity import DEFAULT_SETTINGS as VELOCITY_DEFAULTS
+from fdi_daemon.core.velocity_observer import velocity_setting_names
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.known_keys import known_settings
 
@@ -22,7 +22,7 @@ METHODS = ("sequential", "band")
 
 def velocity_settings(mapping: Mapping[str, Any] | None) -> dict[str, Any]:
     """The model's ``velocity`` mapping, reduced to the settings of the estimator."""
-    return known_settings(mapping, (*VELOCITY_DEFAULTS, "fs_hz"), "model velocity")
+    return known_settings(mapping, velocity_setting_names(), "model velocity")
 
 
 @dataclass(frozen=True)

@@ -50,6 +50,17 @@ RECOMMENDATION = (
     "--reference-window R0:R1 --lowpass-hz F` on it (docs/identification.md).")
 
 
+EDGE_RECOMMENDATION = (
+    "gamma_f is not identified: the least cost lies at an end of the gamma grid, so the "
+    "minimum may lie beyond it or the signature does not describe the residual. Check the "
+    "share of the residual G_e explains, use the model-based velocity (`--velocity-method "
+    "model_observer`) and a calibration run with low-frequency content "
+    "(configs/scenarios/signature_calibration_multisine.yaml), or widen --gamma-grid.")
+
+#: below this share of the fault residual's variance explained by G_e·x_f, warn
+LOW_VAF_PERCENT = 50.0
+
+
 def gamma_grid(lo: float = 0.0, hi: float = 10.0, step: float = 0.2) -> np.ndarray:
     """The γ grid lo, lo+step, .., hi (inclusive, as in the paper: 51 points by default)."""
     if not (step > 0 and hi > lo):
@@ -121,6 +132,14 @@ class SignatureResult:
     evaluations: int = 0
     info: dict = field(default_factory=dict)
     residual: np.ndarray | None = None  # the fitted (prefiltered) residual of the window
+    at_edge: bool = False  # the least SSE lies at an end of the grid: γ_f is not identified
+
+    @property
+    def status(self) -> str:
+        """"identified", "flat" or "not identified (edge)"."""
+        if self.at_edge:
+            return "not identified (edge)"
+        return "flat" if self.flat else "identified"
 
     def relative_cost(self) -> np.ndarray:
         """SSE(γ)/SSE(γ_f) on the grid."""
@@ -140,6 +159,8 @@ class SignatureResult:
             "depth": float(self.info.get("depth", rel.max() - 1.0)),
             "flat": bool(self.flat),
             "fit_percent": float(self.info.get("fit_percent", float("nan"))),
+            "vaf_percent": float(self.info.get("vaf_percent", float("nan"))),
+            "status": self.status,
         }
 
 
@@ -230,6 +251,7 @@ def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
     evaluations = sum(f.evaluations for f in fits)
     best = int(np.argmin(sse))
     gamma_f, best_fit = float(grid[best]), fits[best]
+    at_edge = len(grid) > 1 and (best == len(grid) - 1 or (best == 0 and grid[0] > 0))
 
     if refine and len(grid) > 1:
         lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]
@@ -258,12 +280,17 @@ def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
     flat = span > 0 and ((interval[1] - interval[0]) > flat_fraction * span
                          or depth < min_depth)
     fit_pct = fit_percent(residual, best_fit.y_sim)
+    vaf = variance_accounted_for(residual, best_fit.y_sim)
+    if at_edge:
+        flat, recommendation = True, EDGE_RECOMMENDATION
+    else:
+        recommendation = RECOMMENDATION if flat else None
     return SignatureResult(
         gamma_f=gamma_f, fit=best_fit, grid=grid, sse=sse, sse_min=best_fit.sse,
         interval=interval, effective_samples=n_eff, flat=bool(flat),
-        recommendation=RECOMMENDATION if flat else None, orders=tuple(orders),
-        evaluations=evaluations, info={"fit_percent": float(fit_pct), "depth": depth},
-        residual=residual)
+        recommendation=recommendation, orders=tuple(orders), evaluations=evaluations,
+        info={"fit_percent": float(fit_pct), "vaf_percent": float(vaf), "depth": depth},
+        residual=residual, at_edge=bool(at_edge))
 
 
 def fit_fault_filter(residual: np.ndarray, velocity: np.ndarray, gamma_f: float,
@@ -274,6 +301,13 @@ def fit_fault_filter(residual: np.ndarray, velocity: np.ndarray, gamma_f: float,
     u = friction_signal(np.asarray(velocity, dtype=float), gamma_f)[fit_from:]
     return fit_output_error(u, np.asarray(residual, dtype=float)[fit_from:], *orders,
                             max_pole_radius=max_pole_radius)
+
+
+def variance_accounted_for(residual: np.ndarray, y_sim: np.ndarray) -> float:
+    """VAF = 100·(1 − var(r − ŷ)/var(r)): % of the residual's variance that ŷ explains."""
+    r = np.asarray(residual, dtype=float)
+    spread = float(np.var(r))
+    return 100.0 * (1.0 - float(np.var(r - y_sim)) / spread) if spread > 0 else float("nan")
 
 
 def fit_percent(residual: np.ndarray, y_sim: np.ndarray) -> float:

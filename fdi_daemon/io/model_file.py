@@ -41,7 +41,7 @@ class FaultFilter:
     b: np.ndarray
     f: np.ndarray
     nk: int = 0
-    gamma_f: float = 0.0
+    gamma_f: float | None = 0.0  # None: not identified (the cost's minimum at the grid edge)
 
 
 @dataclass
@@ -65,7 +65,7 @@ class FdiModel:
         if self.fault_filter is not None:
             ff = self.fault_filter
             out["fault_filter"] = {"b": _floats(ff.b), "f": _floats(ff.f), "nk": int(ff.nk),
-                                   "gamma_f": float(ff.gamma_f)}
+                                   "gamma_f": None if ff.gamma_f is None else float(ff.gamma_f)}
         for key in ("velocity", "detector", "provenance"):
             value = getattr(self, key)
             if value:
@@ -112,12 +112,13 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
         if not isinstance(nk, int) or isinstance(nk, bool) or nk < 0:
             raise ConfigError(f"{source}: fault_filter.nk must be a whole number >= 0")
         gamma = ff.get("gamma_f", 0.0)
-        if isinstance(gamma, bool) or not isinstance(gamma, (int, float)) or not math.isfinite(gamma):
-            raise ConfigError(f"{source}: fault_filter.gamma_f must be a finite number")
+        if gamma is not None and (isinstance(gamma, bool) or not isinstance(gamma, (int, float))
+                                  or not math.isfinite(gamma)):
+            raise ConfigError(f"{source}: fault_filter.gamma_f must be a finite number or null")
         fault_filter = FaultFilter(
             b=_coefficients(ff, "b", f"{source}: fault_filter"),
             f=_coefficients(ff, "f", f"{source}: fault_filter", monic=True),
-            nk=nk, gamma_f=float(gamma))
+            nk=nk, gamma_f=None if gamma is None else float(gamma))
     sections = {key: _mapping(data, key, source, required=False)
                 for key in ("velocity", "detector", "provenance")}
     extra = {k: v for k, v in data.items() if k not in SECTIONS}

@@ -1,0 +1,169 @@
+"""`fdi baseline` and the monitor against it (issue 13 items 1 and 5, detector side)."""
+
+import numpy as np
+import pytest
+import yaml
+from conftest_detect import MODEL, SCENARIOS, first_event
+
+from fdi_daemon.cli import main
+from fdi_daemon.detect.baseline import Baseline, fit_baseline
+from fdi_daemon.detect.monitor import Monitor
+from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.model_file import load_model
+from fdi_daemon.io.recordings import write_recording
+from fdi_daemon.io.sample import Sample
+from hil_sim.scenarios import load_scenario, scenario_from_dict, simulate
+
+
+@pytest.fixture(scope="module")
+def fault_free(tmp_path_factory):
+    """10 fault-free minutes of changing operation."""
+    rec = simulate(load_scenario(SCENARIOS / "fault_free_hour.yaml"), duration_s=600.0)
+    return write_recording(tmp_path_factory.mktemp("ff") / "ff.npz", rec)
+
+
+def _with_baseline(root, model, fault_free):
+    out = root / "model.yaml"
+    assert main(["baseline", str(fault_free), "--model", str(model), "-o", str(out)]) == 0
+    return load_model(out)
+
+
+@pytest.fixture(scope="module")
+def baseline_model(tmp_path_factory, fault_free):
+    """The shipped model (high-pass velocity) with a baseline."""
+    return _with_baseline(tmp_path_factory.mktemp("baseline"), MODEL, fault_free)
+
+
+@pytest.fixture(scope="module")
+def position_baseline_model(tmp_path_factory, fault_free):
+    """A signature with the LVDT fused (a physical level, docs/detector.md §4a), with a
+    baseline."""
+    root = tmp_path_factory.mktemp("position_baseline")
+    paired = write_recording(root / "paired.npz", simulate(
+        load_scenario(SCENARIOS / "signature_calibration_paired.yaml")))
+    model = root / "signature.yaml"
+    assert main(["signature", str(paired), "--model", str(MODEL), "--fault-window", "22:42",
+                 "--reference-window", "1:21", "--lowpass-hz", "10", "--velocity-method",
+                 "position_observer", "-o", str(model)]) == 0
+    return _with_baseline(root, model, fault_free)
+
+
+def _friction_from_start(excitation, supply, seed=0):
+    return simulate(scenario_from_dict({
+        "name": "friction_at_start", "duration_s": 20.0, "seed": seed,
+        "centring_gain_v_per_m": 30.0, "excitation": excitation,
+        "events": [{"t_s": 0.0, "bearing_supply": supply}]}))
+
+
+SINE = [{"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0}]
+MULTISINE = [{"kind": "multisine", "amplitudes_v": [0.6, 0.5, 0.4],
+              "frequencies_hz": [3.3, 5.0, 8.0]}]
+
+
+def test_the_baseline_holds_bins_with_provenance_and_its_source_stays_silent(baseline_model):
+    base = baseline_model.extra["baseline"]
+    assert 2 <= len(base["bins"]) <= 8
+    assert base["provenance"]["source_sha256"] and "fdi baseline" in base["provenance"]["command"]
+    assert base["provenance"]["alarm_episodes_on_source"] == 0
+    for b in base["bins"]:
+        assert abs(b["level_median"]) < 0.2 and b["seconds"] >= 20.0
+    Baseline.from_mapping(base)
+
+
+def _reported_against_the_baseline(model, rec):
+    events, _ = Monitor(model).run(rec)
+    detected = first_event(events, "fault_detected")
+    isolated = first_event(events, "friction_isolated")
+    assert detected is not None and detected["path"] == "baseline"
+    assert isolated is not None and isolated["friction_evidence"] == "baseline"
+    assert "cleared" not in [e["kind"] for e in events]
+    return isolated["t"]
+
+
+@pytest.mark.parametrize("excitation, supply", [(SINE, 0.45), (MULTISINE, 0.65)],
+                         ids=["full_size_sine", "smaller_multisine"])
+def test_friction_present_at_start_is_reported_against_the_baseline(
+        baseline_model, position_baseline_model, excitation, supply):
+    """Bearing supply low from t = 0 (the calibrated fault, and 0.42 of it): without a
+    baseline the calibration learns the friction as normal (no alarm); with one, friction
+    from the first valid window: within 5 s where the level is physical (position fused);
+    with the high-pass velocity the smaller fault under the multisine reads 0.22 instead of
+    0.42 and is found only at 10 s."""
+    rec = _friction_from_start(excitation, supply)
+    without, _ = Monitor(load_model(MODEL)).run(rec)
+    assert "fault_detected" not in [e["kind"] for e in without]
+    assert _reported_against_the_baseline(position_baseline_model, rec) <= 5.0
+    highpass_t = _reported_against_the_baseline(baseline_model, rec)
+    assert highpass_t <= (5.0 if excitation is SINE else 12.0)
+
+
+def test_fault_free_operation_against_the_baseline_is_silent(baseline_model,
+                                                            position_baseline_model):
+    """Another stretch of fault-free changing operation (another seed)."""
+    rec = simulate(load_scenario(SCENARIOS / "fault_free_hour.yaml"), seed=1, duration_s=300.0)
+    for model in (baseline_model, position_baseline_model):
+        events, _ = Monitor(model).run(rec)
+        assert [e["kind"] for e in events] == ["calibrated"]
+
+
+def test_step_and_batch_give_the_same_events_against_the_baseline(baseline_model):
+    rec = _friction_from_start(SINE, 0.45)
+    batch, trace = Monitor(baseline_model).run(rec)
+    mon = Monitor(baseline_model)
+    stepped = []
+    for k in range(len(rec)):
+        stepped.extend(mon.step(Sample(k, float(rec.t[k]), float(rec.v_in[k]),
+                                       float(rec.accel[k]))))
+    assert stepped == batch
+
+
+def test_fit_baseline_bins_and_refuses_too_little_data():
+    rng = np.random.default_rng(0)
+    v = rng.uniform(0.01, 0.05, 256 * 100)
+    level = 0.05 + 0.5 * v + 0.01 * rng.standard_normal(v.size)  # the level rises with speed
+    bins = fit_baseline(level, v, 256.0, min_seconds=20.0, max_bins=8)
+    assert len(bins) == 5  # 100 s of data, 20 s per bin
+    centres = np.array([np.mean(b["v_rms_mps"]) for b in bins])
+    medians = np.array([b["level_median"] for b in bins])
+    np.testing.assert_allclose(medians, 0.05 + 0.5 * centres, atol=3e-3)
+    for b in bins:
+        assert b["level_sigma"] == pytest.approx(0.01, rel=0.15)
+    with pytest.raises(ValueError, match="at least 20 s"):
+        fit_baseline(level[:256 * 10], v[:256 * 10], 256.0)
+
+
+def test_a_broken_baseline_is_one_clear_error(tmp_path, capsys):
+    data = yaml.safe_load(MODEL.read_text())
+    data["baseline"] = {"bins": [{"v_rms_mps": [0.02, 0.01], "level_median": 0.0,
+                                  "level_sigma": 0.01}]}
+    path = tmp_path / "m.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match="baseline"):
+        Monitor(load_model(path))
+    rec = write_recording(tmp_path / "r.npz", _friction_from_start(SINE, 1.0))
+    assert main(["replay", str(rec), "--model", str(path)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_friction_present_at_start_and_removed_is_cleared(baseline_model):
+    """Raised against the baseline, cleared on the level: bearing supply 45 % from 0 s,
+    restored at 10 s: one episode, cleared after the window has left the friction."""
+    rec = simulate(scenario_from_dict({
+        "name": "friction_at_start_removed", "duration_s": 20.0, "seed": 0,
+        "centring_gain_v_per_m": 30.0, "excitation": SINE,
+        "events": [{"t_s": 0.0, "bearing_supply": 0.45}, {"t_s": 10.0, "bearing_supply": 1.0}]}))
+    events, _ = Monitor(baseline_model).run(rec)
+    kinds = [e["kind"] for e in events]
+    assert kinds.count("fault_detected") == 1 and "friction_isolated" in kinds
+    cleared = first_event(events, "cleared")
+    assert cleared is not None and 10.0 < cleared["t"] < 13.0
+    assert kinds[-1] in ("cleared", "calibrated")  # calibrates once the rig is fault-free
+
+
+def test_too_little_fault_free_data_is_one_clear_error(tmp_path, capsys):
+    rec = write_recording(tmp_path / "short.npz", _friction_from_start(SINE, 1.0))
+    assert main(["baseline", str(rec), "--model", str(MODEL), "-o",
+                 str(tmp_path / "m.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "at least 20 s" in err
+    assert not (tmp_path / "m.yaml").exists()

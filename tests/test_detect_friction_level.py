@@ -1,0 +1,145 @@
+"""The friction level as a physical quantity (issue 12), against the simulator's truth.
+
+The models: the shipped plant (configs/model_sim_rig.yaml) with a signature identified by
+`fdi signature --velocity-method model_observer` (or ``position_observer``: the LVDT fused
+with the accelerometer) on the paired 6 Hz calibration run (bearing supply 45 %).
+Truths come from the simulator, never from the code under test:
+- γ_f: bearing_viscous_per_n / bearing_mu_kinetic of hil_sim.rig.params (the contact
+  friction is μ·N·sign v + c·N·v, so viscous/Coulomb = c/μ whatever the contact force N);
+- a fault's size: its Coulomb force μ·N over the calibration fault's, i.e. the mean
+  contact force N of the air bearing (ground-truth column ``contact_force``) after the
+  fault over that of the calibration run's fault window (the seal's friction is there
+  before and after, and is not part of the fault).
+"""
+
+import numpy as np
+import pytest
+from conftest_detect import MODEL, scenario_recording
+
+from fdi_daemon.cli import main
+from fdi_daemon.detect.monitor import Monitor
+from fdi_daemon.io.model_file import load_model
+from fdi_daemon.io.recordings import write_recording
+from hil_sim.rig.params import RigParams
+
+CALIBRATION = "signature_calibration_paired"
+
+
+def _signature(tmp_path_factory, method):
+    root = tmp_path_factory.mktemp(method)
+    rec = write_recording(root / "paired.npz", scenario_recording(CALIBRATION))
+    out = root / "model.yaml"
+    assert main(["signature", str(rec), "--model", str(MODEL), "--fault-window", "22:42",
+                 "--reference-window", "1:21", "--lowpass-hz", "10",
+                 "--velocity-method", method, "-o", str(out)]) == 0
+    return load_model(out)
+
+
+@pytest.fixture(scope="module")
+def observer_model(tmp_path_factory):
+    return _signature(tmp_path_factory, "model_observer")
+
+
+@pytest.fixture(scope="module")
+def position_model(tmp_path_factory):
+    return _signature(tmp_path_factory, "position_observer")
+
+
+def _fault_size(rec, fault_t):
+    cal = scenario_recording(CALIBRATION)
+    calibrated = np.mean(cal.columns["contact_force"][cal.t >= 22.0])
+    return float(np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5]) / calibrated)
+
+
+def _level(model, rec, after_t):
+    events, trace = Monitor(model).run(rec)
+    theta1 = trace.theta1[(trace.t >= after_t) & np.isfinite(trace.theta1)]
+    return events, theta1
+
+
+def test_gamma_f_within_20_percent_of_the_rigs_with_an_interval_holding_it(observer_model):
+    params = RigParams()
+    truth = params.bearing_viscous_per_n / params.bearing_mu_kinetic
+    sig = observer_model.provenance["signature"]
+    assert sig["gamma_f_status"] == "identified"
+    assert abs(observer_model.fault_filter.gamma_f / truth - 1) <= 0.2
+    lo, hi = sig["cost_profile"]["interval_99"]
+    assert lo <= truth <= hi
+    assert sig["fault_filter_vaf_percent_full_band"] >= 50.0
+
+
+def test_a_fault_of_known_size_is_reported_at_its_size(observer_model):
+    """Test case 1 (bearing supply 65 %, 0.42 of the calibrated fault): within ±10 %."""
+    rec = scenario_recording("test_case_1")
+    truth = _fault_size(rec, 3.05)
+    assert 0.35 < truth < 0.5  # the scenario is what this test means it to be
+    events, theta1 = _level(observer_model, rec, 3.05 + 1.5)
+    assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "friction_isolated"]
+    assert abs(np.median(theta1) / truth - 1) <= 0.10
+
+
+@pytest.mark.xfail(strict=True, reason="measured: a bearing supply cut (2.3x the calibrated "
+                   "fault, the load held 12 % of the time) reads 0.59 and is other_fault "
+                   "with the observer (docs/detector.md)")
+def test_a_large_fault_is_reported_at_its_size(observer_model):
+    rec = scenario_recording("test_case_2")
+    truth = _fault_size(rec, 2.9)
+    events, theta1 = _level(observer_model, rec, 2.9 + 1.5)
+    assert [e["kind"] for e in events][-1] == "friction_isolated"
+    assert abs(np.median(theta1) / truth - 1) <= 0.10
+
+
+def _steady():
+    return scenario_recording("steady_friction_changing_operation")
+
+
+def test_a_steady_fault_under_changing_operation_is_one_episode(observer_model):
+    """Bearing supply 45 % from 20 s under 160 s of changing operation (1-9 Hz, 0.8-1.6 V):
+    one episode, never cleared. With the high-pass model it was cleared and raised three
+    times (docs/detector.md)."""
+    events, _ = Monitor(observer_model).run(_steady())
+    kinds = [e["kind"] for e in events]
+    assert kinds == ["calibrated", "fault_detected", "friction_isolated"]
+    assert 20.0 <= events[1]["t"] <= 20.1
+
+
+@pytest.mark.xfail(strict=True, reason="measured: 5th-95th percentile at -51/+77 % of the "
+                   "median (0.72 against a truth of 1.0): on this rig G_e from one 6 Hz "
+                   "calibration does not describe friction at 1-3 Hz (docs/identification.md)")
+def test_a_steady_faults_level_stays_within_20_percent_of_its_median(observer_model):
+    rec = _steady()
+    _, theta1 = _level(observer_model, rec, 30.0)
+    median = np.median(theta1)
+    lo, hi = np.percentile(theta1, [5, 95])
+    assert lo >= 0.8 * median and hi <= 1.2 * median
+    assert abs(median / _fault_size(rec, 20.0) - 1) <= 0.10
+
+
+def test_with_position_a_large_fault_is_reported_at_its_size(position_model):
+    """The LVDT fused with the accelerometer: test case 2 (2.3x the calibrated fault) is
+    isolated as friction and reported within ±10 % (measured +8 %)."""
+    rec = scenario_recording("test_case_2")
+    truth = _fault_size(rec, 2.9)
+    assert 2.0 < truth < 2.6
+    events, theta1 = _level(position_model, rec, 2.9 + 1.5)
+    assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "friction_isolated"]
+    assert abs(np.median(theta1) / truth - 1) <= 0.10
+    params = RigParams()
+    gamma_truth = params.bearing_viscous_per_n / params.bearing_mu_kinetic
+    assert abs(position_model.fault_filter.gamma_f / gamma_truth - 1) <= 0.2
+
+
+def test_with_position_a_steady_faults_median_level_is_its_size(position_model):
+    """Under changing operation the median level from 10 s after the fault is within 10 %
+    of the truth (measured −1 %)."""
+    rec = _steady()
+    _, theta1 = _level(position_model, rec, 30.0)
+    assert abs(np.median(theta1) / _fault_size(rec, 20.0) - 1) <= 0.10
+
+
+@pytest.mark.xfail(strict=True, reason="measured: cleared and raised again 3 times: at "
+                   "1.8 Hz the load sticks 11 % of the time, θ slides to (0.05, -34) along "
+                   "the g1/g2 valley and the moving reference loses the friction")
+def test_with_position_a_steady_fault_is_one_episode(position_model):
+    events, _ = Monitor(position_model).run(_steady())
+    assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "friction_isolated"]

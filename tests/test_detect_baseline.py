@@ -167,3 +167,15 @@ def test_too_little_fault_free_data_is_one_clear_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "at least 20 s" in err
     assert not (tmp_path / "m.yaml").exists()
+
+
+def test_the_status_snapshot_carries_the_baseline_of_the_operating_condition(baseline_model):
+    """The daemon's alarm lifecycle measures the level above this (service/alarm_keeper.py)."""
+    rec = simulate(load_scenario(SCENARIOS / "fault_free_hour.yaml"), seed=2, duration_s=20.0)
+    mon = Monitor(baseline_model)
+    mon.run(rec)
+    snap = mon.snapshot()
+    base = Baseline.from_mapping(baseline_model.extra["baseline"])
+    expect = base.median[int(base.bin_index(mon.pipeline.v_rms))]
+    assert snap["baseline_level"] == pytest.approx(expect, rel=1e-12)
+    assert Monitor(load_model(MODEL)).snapshot()["baseline_level"] is None

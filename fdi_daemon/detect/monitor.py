@@ -214,6 +214,13 @@ class Monitor:
             k: (np.concatenate(v) if v else np.empty(0)) for k, v in parts.items()})
         return events, trace
 
+    def baseline_level(self) -> float | None:
+        """The commissioning baseline's fault-free level at the current operating condition
+        (the bin of the window's velocity RMS); None without a baseline."""
+        if self.baseline is None:
+            return None
+        return _finite(self.baseline.median[int(self.baseline.bin_index(self.pipeline.v_rms))])
+
     def over_baseline(self, theta1, v_rms):
         """(θ1 − baseline median)/margin of the bin of the window's velocity RMS; margin =
         max(friction_min_level, band_k·σ). Above 1: friction beyond the fault-free level."""
@@ -350,6 +357,7 @@ class Monitor:
             "theta1": _finite(det.theta1),
             "theta2": _finite(det.theta2),
             "friction_level": _finite(det.theta1),
+            "baseline_level": self.baseline_level(),
             "band": det.band,
             "signature": [1.0, _finite(self.gamma_f)],
             "residual_rms": _finite(math.sqrt(syy / count)) if count and syy >= 0 else None,

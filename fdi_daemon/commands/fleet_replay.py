@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     jobs = [(file, models.model_for(file)) for file in files]
 
     progress, task = _progress(len(jobs))
-    with progress, dask_client(args.scheduler, workers) as client:
+    with dask_client(args.scheduler, workers) as client, progress:
         rows = replay_fleet(jobs, client, on_row=lambda row: progress.advance(task))
     if args.out is not None:
         write_table(args.out, rows)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import time
 
 HELP = "replay many recordings (each with its rig's model) on a Dask cluster: one row per file"
 
@@ -44,16 +45,23 @@ def run(args: argparse.Namespace) -> int:
     jobs = [(file, models.model_for(file)) for file in files]
 
     progress, task = _progress(len(jobs))
+    started = time.monotonic()
     with dask_client(args.scheduler, workers) as client, progress:
+        ready = time.monotonic()
         rows = replay_fleet(jobs, client, on_row=lambda row: progress.advance(task))
+        done = time.monotonic()
     if args.out is not None:
         write_table(args.out, rows)
     else:
         _print_table(rows)
     errors = sum(row["error"] is not None for row in rows)
     alarms = sum(bool(row["alarm_episodes"]) for row in rows)
+    recorded_s = sum(row["samples"] / row["fs"] for row in rows if row["samples"])
     print(f"{len(rows)} recording(s): {alarms} with alarms, {errors} with errors"
           + (f"; table in {args.out}" if args.out else ""))
+    print(f"{recorded_s:.0f} s of recordings replayed in {done - ready:.1f} s "
+          f"({recorded_s / max(done - ready, 1e-9):.0f}x real time) after "
+          f"{ready - started:.1f} s to start the cluster")
     return 0
 
 

@@ -259,3 +259,33 @@ def test_parquet_without_pyarrow_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "pyarrow", None)
     with pytest.raises(UserError, match=r"fdi\[fleet\]"):
         write_table(tmp_path / "r.parquet", [summary_row("f.csv", None, error="x")])
+
+
+@pytest.mark.slow
+def test_a_scheduler_address_runs_on_that_cluster(fleet, tmp_path):
+    """--scheduler: the work goes to a running cluster (here one on 127.0.0.1)."""
+    from dask.distributed import LocalCluster
+
+    root, files, model_map = fleet
+    out = tmp_path / "r.csv"
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        assert main(["fleet-replay", f"{root}/recs/rig-a-0*.csv", "--model-map",
+                     str(model_map), "--scheduler", cluster.scheduler_address,
+                     "--out", str(out)]) == 0
+        assert "replay_row" in cluster.scheduler.task_prefixes  # the tasks ran there
+    rows = _read_csv_rows(out)
+    models = ModelMap.load(model_map)
+    wanted = [f for f in files if Path(f).match("rig-a-0*.csv")]
+    assert rows == [replay_row(f, models.model_for(f)) for f in wanted]
+
+
+def test_without_dask_the_error_names_the_extra(monkeypatch):
+    import sys
+
+    from fdi_daemon.fleet.cluster import dask_client
+
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    with pytest.raises(UserError, match=r"fdi\[fleet\]"):
+        with dask_client(None, 1):
+            pass

@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
           + (f"; table in {args.out}" if args.out else ""))
     print(f"{recorded_s:.0f} s of recordings replayed in {done - ready:.1f} s "
           f"({recorded_s / max(done - ready, 1e-9):.0f}x real time) after "
-          f"{ready - started:.1f} s to start the cluster")
+          f"{ready - started:.1f} s to start (or reach) the cluster")
     return 0
 
 

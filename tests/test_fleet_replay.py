@@ -289,3 +289,24 @@ def test_without_dask_the_error_names_the_extra(monkeypatch):
     with pytest.raises(UserError, match=r"fdi\[fleet\]"):
         with dask_client(None, 1):
             pass
+
+
+@pytest.mark.slow
+def test_a_worker_that_dies_on_a_file_is_that_files_row(fleet, tmp_path):
+    from dask.distributed import Client, LocalCluster
+
+    from fdi_daemon.fleet.cluster import replay_fleet
+    from fleet_support import replay_or_die
+
+    root, files, _ = fleet
+    killer = tmp_path / "rig-a-kill.csv"
+    killer.write_text(Path(files[1]).read_text())
+    jobs = [(files[1], str(MODEL)), (str(killer), str(MODEL)), (files[2], str(MODEL))]
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        rows = replay_fleet(jobs, client, task=replay_or_die)
+    assert rows[0] == replay_row(files[1], str(MODEL))
+    assert rows[2] == replay_row(files[2], str(MODEL))
+    assert rows[1]["file"] == str(killer) and rows[1]["samples"] is None
+    error = rows[1]["error"]
+    assert error.startswith("worker failed: KilledWorker") and "\n" not in error

@@ -46,27 +46,44 @@ def dask_client(scheduler: str | None, workers: int):
 
 
 def replay_fleet(jobs: Sequence[tuple[str, str | None]], client,
-                 on_row: Callable[[dict[str, Any]], None] | None = None
+                 on_row: Callable[[dict[str, Any]], None] | None = None,
+                 task: Callable[[str, str | None], dict[str, Any]] = replay_row
                  ) -> list[dict[str, Any]]:
     """One row per ``(recording, model file or None)``, in the order of ``jobs``.
 
-    Every file is one task (`replay_row`); a task that fails anyway (a worker that died)
-    gives a row with the error. ``on_row(row)`` is called as each row arrives.
+    Every file is one ``task(file, model)`` (`replay_row`, which never raises). A task
+    that fails anyway (its worker process died, on every retry Dask made) is run once more
+    alone on the cluster: a worker killed by one file also fails the tasks it held, and
+    those then succeed. A file whose task fails alone too gives a row with the error.
+    ``on_row(row)`` is called as each row is final.
     """
     dd = _distributed()
     files = [file for file, _ in jobs]
     models = [model for _, model in jobs]
-    futures = client.map(replay_row, files, models, pure=False)
+    futures = client.map(task, files, models, pure=False)
     position = {future.key: i for i, future in enumerate(futures)}
     rows: list[dict[str, Any]] = [{} for _ in jobs]
+    failed = []
     for future in dd.as_completed(futures):
         i = position[future.key]
         try:
             rows[i] = future.result()
-        except Exception as exc:  # the task itself never raises: the worker failed
+        except Exception:  # the task itself never raises: its worker died
+            failed.append(i)
+            continue
+        finally:
+            future.release()
+        if on_row is not None:
+            on_row(rows[i])
+    for i in sorted(failed):
+        alone = client.submit(task, files[i], models[i], pure=False)
+        try:
+            rows[i] = alone.result()
+        except Exception as exc:
             rows[i] = summary_row(files[i], models[i],
                                   error=f"worker failed: {type(exc).__name__}: {exc}")
-        future.release()
+        finally:
+            alone.release()
         if on_row is not None:
             on_row(rows[i])
     return rows

@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "sim": "sim",
     "diagnose": "diagnose",
     "replay": "replay",
+    "fleet-replay": "fleet_replay",
     "bench": "bench",
     "trend": "trend",
     "baseline": "baseline",

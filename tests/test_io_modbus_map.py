@@ -71,3 +71,30 @@ def test_fault_registers_match_the_rig():
         assert mm.FAULT_REGISTERS[name][1] == FAULTS[name][1]
     offsets = sorted(off for off, _ in mm.FAULT_REGISTERS.values())
     assert offsets == list(range(0, mm.FAULT_REGS, 2))
+
+
+@pytest.mark.parametrize("word_order, expected", [
+    ("big", [0x0000, 0x03E8, 0x3FA0, 0x0000, 0xC060, 0x0000, 0x3B03, 0x126F]),
+    ("little", [0x03E8, 0x0000, 0x0000, 0x3FA0, 0x0000, 0xC060, 0x126F, 0x3B03]),
+])
+def test_slot_words_are_the_documented_example(word_order, expected):
+    # docs/protocols.md: slot of seq 1000, v_in 1.25 V, accel -3.5 m/s², position 0.002 m
+    assert mm.encode_slot(1000, 1.25, -3.5, 0.002, word_order) == expected
+    (slot,) = mm.decode_slots(expected, word_order)
+    assert (slot.seq, slot.v_in, slot.accel) == (1000, 1.25, -3.5)
+    assert slot.position == float(np.float32(0.002))
+
+
+def test_header_words_are_the_documented_example():
+    h = mm.Header(1001, 256, mm.STATUS_RUNNING, 256, 256, mm.MAP_VERSION,
+                  mm.WORDS_PER_SAMPLE, 1.0, 1.0, 1.0)
+    assert mm.encode_header(h, "big") == [0x0000, 0x03E9, 0x0100, 0x0001, 0x0100, 0x0100,
+                                          0x0001, 0x0008, 0x3F80, 0x0000, 0x3F80, 0x0000,
+                                          0x3F80, 0x0000, 0x0000, 0x0000]
+
+
+def test_a_value_needs_exactly_two_registers():
+    with pytest.raises(ValueError):
+        mm.decode_f32([0x3F80], "big")
+    with pytest.raises(ValueError):
+        mm.decode_u32([0, 1, 2], "little")

@@ -35,39 +35,33 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from fdi_daemon.detect.monitor import Monitor
-    from fdi_daemon.detect.summary import replay_summary, write_summary
+    from fdi_daemon.detect.summary import write_summary
     from fdi_daemon.errors import UserError
-    from fdi_daemon.io.model_file import load_model
-    from fdi_daemon.io.recordings import read_recording, same_rate
+    from fdi_daemon.fleet.replay_one import replay_recording
 
     if args.dashboard and not args.realtime:
         raise UserError("--dashboard needs --realtime (a batch replay is over before a "
                         "screen could show it)")
     if args.trace_every < 1:
         raise UserError("--trace-every must be a whole number >= 1")
-    model = load_model(args.model)
-    rec = read_recording(args.recording, strict=False, columns=args.columns)
-    if not same_rate(rec.fs, model.fs):
-        raise UserError(f"{args.recording}: sampled at {rec.fs:g} Hz but the model is for "
-                        f"{model.fs:g} Hz")
-    monitor = Monitor(model)
-    n = len(rec)
-    if args.realtime and args.dashboard:
-        from fdi_daemon.dashboard.replay_view import replay_with_dashboard
 
-        events, trace = replay_with_dashboard(lambda on_tick: _paced(monitor, rec, on_tick),
-                                              monitor, str(args.recording), args.model, n)
-    elif args.realtime:
-        events, trace = _paced(monitor, rec)
-    else:
+    def runner(monitor, rec):
+        n = len(rec)
+        if args.realtime and args.dashboard:
+            from fdi_daemon.dashboard.replay_view import replay_with_dashboard
+
+            return replay_with_dashboard(lambda on_tick: _paced(monitor, rec, on_tick),
+                                         monitor, str(args.recording), args.model, n)
+        if args.realtime:
+            return _paced(monitor, rec)
         trace_every = max(1, -(-n // TRACE_POINTS)) if args.plot else max(1, n)
         if args.trace:  # the file and the plot show the same samples
             trace_every = args.trace_every
-        events, trace = _batch(monitor, rec, trace_every)
-    snap = monitor.snapshot()
-    summary = replay_summary(events, n, model.fs, monitor.settings.method,
-                             (snap["theta1"], snap["theta2"]))
+        return _batch(monitor, rec, trace_every)
+
+    replay = replay_recording(args.recording, args.model, runner, columns=args.columns)
+    rec, monitor, events, trace, summary = (replay.recording, replay.monitor, replay.events,
+                                            replay.trace, replay.summary)
     if args.events:
         from fdi_daemon.detect.events import write_events
 

@@ -48,11 +48,17 @@ a write completes and reads back what it applied.
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass
 from typing import Literal, Sequence
 
+from pymodbus.client.mixin import ModbusClientMixin
+
 WordOrder = Literal["big", "little"]
+
+# pymodbus's own conversion (byte order big endian within a register, word order as given)
+_DATATYPE = ModbusClientMixin.DATATYPE
+_to_registers = ModbusClientMixin.convert_to_registers
+_from_registers = ModbusClientMixin.convert_from_registers
 
 MAP_VERSION = 1
 HEADER_REGS = 16
@@ -82,38 +88,33 @@ def _check_order(word_order: str) -> None:
         raise ValueError(f"word order {word_order!r} is not 'big' or 'little'")
 
 
-def _split(raw: bytes, word_order: WordOrder) -> list[int]:
-    hi, lo = struct.unpack(">HH", raw)
-    return [hi, lo] if word_order == "big" else [lo, hi]
-
-
-def _join(words: Sequence[int], word_order: WordOrder) -> bytes:
+def _check_pair(words: Sequence[int]) -> None:
     if len(words) != 2:
         raise ValueError(f"a 32-bit value takes 2 registers, got {len(words)}")
-    hi, lo = (words[0], words[1]) if word_order == "big" else (words[1], words[0])
-    return struct.pack(">HH", hi, lo)
 
 
 def encode_u32(value: int, word_order: WordOrder) -> list[int]:
     """Two registers of an unsigned 32-bit value (taken modulo 2**32)."""
     _check_order(word_order)
-    return _split(struct.pack(">I", value & 0xFFFFFFFF), word_order)
+    return _to_registers(int(value) & 0xFFFFFFFF, _DATATYPE.UINT32, word_order)
 
 
 def decode_u32(words: Sequence[int], word_order: WordOrder) -> int:
     _check_order(word_order)
-    return struct.unpack(">I", _join(words, word_order))[0]
+    _check_pair(words)
+    return _from_registers(list(words), _DATATYPE.UINT32, word_order)
 
 
 def encode_f32(value: float, word_order: WordOrder) -> list[int]:
     """Two registers of an IEEE-754 float32 (big-endian bytes within each register)."""
     _check_order(word_order)
-    return _split(struct.pack(">f", value), word_order)
+    return _to_registers(float(value), _DATATYPE.FLOAT32, word_order)
 
 
 def decode_f32(words: Sequence[int], word_order: WordOrder) -> float:
     _check_order(word_order)
-    return struct.unpack(">f", _join(words, word_order))[0]
+    _check_pair(words)
+    return _from_registers(list(words), _DATATYPE.FLOAT32, word_order)
 
 
 @dataclass(frozen=True)
@@ -161,8 +162,8 @@ def decode_header(regs: Sequence[int], word_order: WordOrder) -> Header:
 def encode_slot(seq: int, v_in: float, accel: float, position: float,
                 word_order: WordOrder) -> list[int]:
     """Eight registers of one FIFO slot (raw register values, before scaling)."""
-    return (encode_u32(seq, word_order) + encode_f32(v_in, word_order)
-            + encode_f32(accel, word_order) + encode_f32(position, word_order))
+    return encode_u32(seq, word_order) + _to_registers(
+        [float(v_in), float(accel), float(position)], _DATATYPE.FLOAT32, word_order)
 
 
 def decode_slots(regs: Sequence[int], word_order: WordOrder,
@@ -171,12 +172,12 @@ def decode_slots(regs: Sequence[int], word_order: WordOrder,
     if len(regs) % WORDS_PER_SAMPLE:
         raise ValueError(f"slot block of {len(regs)} registers is not a multiple of 8")
     out = []
+    _check_order(word_order)
     for i in range(0, len(regs), WORDS_PER_SAMPLE):
-        r = regs[i:i + WORDS_PER_SAMPLE]
-        out.append(SlotSample(decode_u32(r[0:2], word_order),
-                              decode_f32(r[2:4], word_order) * scales[0],
-                              decode_f32(r[4:6], word_order) * scales[1],
-                              decode_f32(r[6:8], word_order) * scales[2]))
+        r = list(regs[i:i + WORDS_PER_SAMPLE])
+        v_in, accel, position = _from_registers(r[2:8], _DATATYPE.FLOAT32, word_order)
+        out.append(SlotSample(decode_u32(r[0:2], word_order), v_in * scales[0],
+                              accel * scales[1], position * scales[2]))
     return out
 
 

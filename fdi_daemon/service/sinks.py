@@ -31,7 +31,6 @@ import logging
 import math
 import os
 import socket
-import struct
 import sys
 import threading
 import time
@@ -39,6 +38,10 @@ from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TextIO
+
+from pymodbus.client.mixin import ModbusClientMixin
+from pymodbus.constants import ExcCodes
+from pymodbus.pdu import ExceptionResponse, ReadCoilsRequest
 
 from fdi_daemon.alarms.lifecycle import LIFECYCLE_KINDS
 from fdi_daemon.detect.events import ALARM_KINDS as EVENT_ALARM_KINDS
@@ -451,7 +454,10 @@ STATUS_REGISTER_COUNT = 53
 #: writable registers: name -> address
 COMMAND_REGISTERS = {"alarm_command": 51, "shelve_minutes": 52}
 _SIZES = {"u16": 1, "u32": 2, "f32": 2, "f64": 4}
-_FORMATS = {"u16": ">H", "u32": ">I", "f32": ">f", "f64": ">d"}
+_DATATYPE = ModbusClientMixin.DATATYPE
+#: register type -> pymodbus data type (its conversion: high word first, big-endian bytes)
+_DATATYPES = {"u16": _DATATYPE.UINT16, "u32": _DATATYPE.UINT32, "f32": _DATATYPE.FLOAT32,
+              "f64": _DATATYPE.FLOAT64}
 
 
 def status_values(snapshot: dict[str, Any], heartbeat: int) -> dict[str, float | int]:
@@ -509,8 +515,8 @@ def encode_status(values: dict[str, Any]) -> list[int]:
         else:
             value = 0 if not isinstance(value, (int, float)) or not math.isfinite(value) else value
             value = min(max(int(value), 0), (1 << (16 * _SIZES[kind])) - 1)
-        raw = struct.pack(_FORMATS[kind], value)
-        regs[address:address + _SIZES[kind]] = struct.unpack(f">{_SIZES[kind]}H", raw)
+        words = ModbusClientMixin.convert_to_registers(value, _DATATYPES[kind], "big")
+        regs[address:address + len(words)] = words
     return regs
 
 
@@ -518,9 +524,31 @@ def decode_status(regs: list[int]) -> dict[str, float | int]:
     """Inverse of `encode_status` (what an independent client does with the map)."""
     out: dict[str, float | int] = {}
     for name, address, kind, _ in STATUS_REGISTERS:
-        words = regs[address:address + _SIZES[kind]]
-        out[name] = struct.unpack(_FORMATS[kind], struct.pack(f">{len(words)}H", *words))[0]
+        words = list(regs[address:address + _SIZES[kind]])
+        out[name] = ModbusClientMixin.convert_from_registers(words, _DATATYPES[kind], "big")
     return out
+
+
+#: the unit id of a Modbus TCP server "addressed directly" (Modbus Messaging on TCP/IP
+#: Implementation Guide, 4.4.2: the IP address selects the server, the unit id is 0xFF)
+DIRECT_DEVICE_ID = 255
+
+
+class _RefusedReadCoils(ReadCoilsRequest):
+    """Function code 1 answered with exception 1 (illegal function): the map has no bits.
+
+    Registered as the server's decoder entry for the code (pymodbus ``custom_pdu``), so the
+    refusal comes before any address check, as the Modbus specification orders them.
+    """
+
+    async def datastore_update(self, context, device_id):
+        return ExceptionResponse(self.function_code, ExcCodes.ILLEGAL_FUNCTION)
+
+
+class _RefusedReadDiscreteInputs(_RefusedReadCoils):
+    """Function code 2, refused like function code 1."""
+
+    function_code = 2
 
 
 class ModbusStatusServer:
@@ -530,7 +558,9 @@ class ModbusStatusServer:
     latest snapshot. Writes are refused (exception 1), except to `COMMAND_REGISTERS` when
     ``requests`` is given: 1 to ``alarm_command`` acknowledges, 2 unshelves, N > 0 to
     ``shelve_minutes`` shelves for N minutes; a request refused by the alarm is answered
-    with exception 3 (illegal data value).
+    with exception 3 (illegal data value). Bit reads (function codes 1, 2) are refused with
+    exception 1 (illegal function). Answers the configured device id and 255 (addressed
+    directly); any other id gets exception 11.
     """
 
     def __init__(self, board: StatusBoard, host: str = "127.0.0.1", port: int = 5020,
@@ -559,15 +589,13 @@ class ModbusStatusServer:
     async def _other_device(function_code, start_address, address, count, registers,
                             set_values):
         """Requests to any other device id: 'gateway target failed to respond'."""
-        from pymodbus.constants import ExcCodes
-
         return ExcCodes.GATEWAY_NO_RESPONSE
 
     async def _refresh(self, function_code, start_address, address, count, registers,
                        set_values):
-        from pymodbus.constants import ExcCodes
-
-        if set_values is not None:
+        if set_values is not None:  # registers are written with 6 and 16 only (not coils)
+            if function_code not in (6, 16):
+                return ExcCodes.ILLEGAL_FUNCTION
             return self._command(address, list(set_values))
         values = status_values(self.board.snapshot(), self.board.updates & 0xFFFF)
         registers[:STATUS_REGISTER_COUNT] = encode_status(values)
@@ -576,8 +604,6 @@ class ModbusStatusServer:
 
     def _command(self, address: int, values: list[int]):
         """A write to the command registers (see the class docstring)."""
-        from pymodbus.constants import ExcCodes
-
         commands = {COMMAND_REGISTERS["alarm_command"]: {1: "acknowledge", 2: "unshelve"}}
         if self.requests_handler is None or len(values) != 1 \
                 or address not in COMMAND_REGISTERS.values():
@@ -618,10 +644,12 @@ class ModbusStatusServer:
             return [SimData(0, count=STATUS_REGISTER_COUNT, values=0,
                             datatype=DataType.REGISTERS)]
 
-        devices = [SimDevice(id=self.device_id, simdata=block(), action=self._refresh)]
-        if self.device_id != 0:
+        served = dict.fromkeys((self.device_id, DIRECT_DEVICE_ID))
+        devices = [SimDevice(id=i, simdata=block(), action=self._refresh) for i in served]
+        if 0 not in served:  # pymodbus answers unknown ids from device 0
             devices.append(SimDevice(id=0, simdata=block(), action=self._other_device))
-        server = ModbusTcpServer(devices, address=(self.host, self.port))
+        server = ModbusTcpServer(devices, address=(self.host, self.port),
+                                 custom_pdu=[_RefusedReadCoils, _RefusedReadDiscreteInputs])
         await server.serve_forever(background=True)
         if server.transport is None:
             raise OSError("cannot listen (address in use?)")

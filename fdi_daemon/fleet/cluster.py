@@ -1,0 +1,89 @@
+"""The rows of many recordings, computed on a Dask cluster (``dask.distributed``).
+
+By default a `LocalCluster` on this machine: worker processes (one thread each, so the
+numba kernels of different files run in parallel), scheduler and workers listening on
+127.0.0.1 only, no dashboard. With a scheduler address, the workers of that cluster do the
+work: they need fdi installed and must see the recordings and model files at the same paths.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from fdi_daemon.errors import UserError
+from fdi_daemon.fleet.replay_one import replay_row, summary_row
+
+INSTALL_HINT = "pip install 'fdi[fleet]'"
+
+
+def _distributed():
+    try:
+        import dask.distributed as dd
+    except ImportError:
+        raise UserError(f"fleet replay needs dask.distributed: {INSTALL_HINT}") from None
+    return dd
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None, workers: int):
+    """A client of the given scheduler, or of a fresh local cluster of ``workers`` processes."""
+    dd = _distributed()
+    if scheduler is not None:
+        try:
+            client = dd.Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+        with client:
+            yield client
+        return
+    with dd.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                         host="127.0.0.1", dashboard_address=None,
+                         silence_logs=logging.ERROR) as cluster, dd.Client(cluster) as client:
+        yield client
+
+
+def replay_fleet(jobs: Sequence[tuple[str, str | None]], client,
+                 on_row: Callable[[dict[str, Any]], None] | None = None,
+                 task: Callable[[str, str | None], dict[str, Any]] = replay_row
+                 ) -> list[dict[str, Any]]:
+    """One row per ``(recording, model file or None)``, in the order of ``jobs``.
+
+    Every file is one ``task(file, model)`` (`replay_row`, which never raises). A task
+    that fails anyway (its worker process died, on every retry Dask made) is run once more
+    alone on the cluster: a worker killed by one file also fails the tasks it held, and
+    those then succeed. A file whose task fails alone too gives a row with the error.
+    ``on_row(row)`` is called as each row is final.
+    """
+    dd = _distributed()
+    files = [file for file, _ in jobs]
+    models = [model for _, model in jobs]
+    futures = client.map(task, files, models, pure=False)
+    position = {future.key: i for i, future in enumerate(futures)}
+    rows: list[dict[str, Any]] = [{} for _ in jobs]
+    failed = []
+    for future in dd.as_completed(futures):
+        i = position[future.key]
+        try:
+            rows[i] = future.result()
+        except Exception:  # the task itself never raises: its worker died
+            failed.append(i)
+            continue
+        finally:
+            future.release()
+        if on_row is not None:
+            on_row(rows[i])
+    for i in sorted(failed):
+        alone = client.submit(task, files[i], models[i], pure=False)
+        try:
+            rows[i] = alone.result()
+        except Exception as exc:
+            rows[i] = summary_row(files[i], models[i],
+                                  error=f"worker failed: {type(exc).__name__}: {exc}")
+        finally:
+            alone.release()
+        if on_row is not None:
+            on_row(rows[i])
+    return rows

@@ -1,0 +1,104 @@
+"""Replay one recording through the monitor: the one code path of `fdi replay` and
+`fdi fleet-replay`.
+
+`replay_recording` loads the model, reads the recording (gaps and duplicates reported, not
+refused), checks that both have the same rate, runs the monitor and summarizes
+(`fdi_daemon.detect.summary.replay_summary`). How the monitor runs is the caller's choice:
+by default the batch path `Monitor.run` (the whole file at once); `fdi replay` passes its
+own runner for the progress bar, the real-time pacing or the dashboard.
+`summary_row` turns the summary into one row of the fleet table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+#: (monitor, recording) -> (events, trace)
+Runner = Callable[[Any, Any], tuple[list[dict[str, Any]], Any]]
+
+#: columns of the fleet table, in order (docs/fleet.md)
+ROW_COLUMNS = ("file", "model", "samples", "fs", "alarm_episodes", "first_detection_t",
+               "isolated_t", "classification", "friction_level_final", "gaps",
+               "missing_samples", "bad_samples", "error")
+
+
+@dataclass
+class Replay:
+    """What one replay produced (the monitor keeps its final state for plots)."""
+
+    recording: Any  # fdi_daemon.io.recordings.Recording
+    monitor: Any  # fdi_daemon.detect.monitor.Monitor
+    events: list[dict[str, Any]]
+    trace: Any  # fdi_daemon.detect.monitor.MonitorTrace
+    summary: dict[str, Any]
+
+
+def run_batch(monitor, rec):
+    """The batch path without a trace (only the events and the final state count)."""
+    return monitor.run(rec, trace_every=max(1, len(rec)))
+
+
+def replay_recording(recording: str | Path, model_path: str | Path,
+                     runner: Runner = run_batch,
+                     columns: Mapping[str, str] | None = None) -> Replay:
+    """Replay ``recording`` with the model file ``model_path``; UserError on bad input.
+
+    columns: fdi name -> the file's column name (``--columns``), as `read_recording` takes.
+    """
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.detect.summary import replay_summary
+    from fdi_daemon.errors import UserError
+    from fdi_daemon.io.model_file import load_model
+    from fdi_daemon.io.recordings import read_recording, same_rate
+
+    model = load_model(model_path)
+    rec = read_recording(recording, strict=False, columns=columns)
+    if not same_rate(rec.fs, model.fs):
+        raise UserError(f"{recording}: sampled at {rec.fs:g} Hz but the model is for "
+                        f"{model.fs:g} Hz")
+    monitor = Monitor(model)
+    events, trace = runner(monitor, rec)
+    snap = monitor.snapshot()
+    summary = replay_summary(events, len(rec), model.fs, monitor.settings.method,
+                             (snap["theta1"], snap["theta2"]))
+    return Replay(rec, monitor, events, trace, summary)
+
+
+def summary_row(file: str, model: str | None, summary: dict[str, Any] | None = None,
+                error: str | None = None) -> dict[str, Any]:
+    """One row of the fleet table from a replay summary, or from the error that stopped it."""
+    s = summary or {}
+    return {
+        "file": file,
+        "model": model,
+        "samples": s.get("samples"),
+        "fs": s.get("fs"),
+        "alarm_episodes": s.get("alarm_episodes"),
+        "first_detection_t": s.get("first_detection_t"),
+        "isolated_t": s.get("isolated_t"),
+        "classification": s.get("classification"),
+        "friction_level_final": s.get("friction_level_final"),
+        "gaps": (s.get("event_counts") or {}).get("data_gap", 0) if summary else None,
+        "missing_samples": s.get("missing_samples"),
+        "bad_samples": s.get("bad_samples"),
+        "error": error,
+    }
+
+
+def replay_row(file: str, model: str | None) -> dict[str, Any]:
+    """Replay one file and return its row; a bad file gives a row with its error, never
+    an exception (runs on a Dask worker)."""
+    from fdi_daemon.errors import UserError
+
+    if model is None:
+        return summary_row(file, None, error="no model: the model map has no pattern for "
+                                             "this file")
+    try:
+        return summary_row(file, model, replay_recording(file, model).summary)
+    except UserError as exc:
+        return summary_row(file, model, error=str(exc))
+    except Exception as exc:  # a bug in fdi on one file must not stop the fleet
+        return summary_row(file, model, error=f"internal error: {type(exc).__name__}: {exc}")

@@ -29,12 +29,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="pace the samples at fs through the per-tick path (as the daemon)")
     parser.add_argument("--dashboard", action="store_true",
                         help="with --realtime: show the live dashboard while replaying (q stops)")
+    parser.add_argument("--alarms", metavar="CONFIG.yaml",
+                        help="the alarm lifecycle's settings and status period from this daemon "
+                             "config (default: the built-in alarms section)")
     add_columns_option(parser)
 
 
 def run(args: argparse.Namespace) -> int:
+    import math
+
     import numpy as np
 
+    from fdi_daemon.alarms.replay import merge_events, status_stride
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.detect.summary import replay_summary, write_summary
     from fdi_daemon.errors import UserError
@@ -51,8 +57,13 @@ def run(args: argparse.Namespace) -> int:
     if not same_rate(rec.fs, model.fs):
         raise UserError(f"{args.recording}: sampled at {rec.fs:g} Hz but the model is for "
                         f"{model.fs:g} Hz")
+    settings, status_period_s = _alarm_settings(args.alarms)
     monitor = Monitor(model)
     n = len(rec)
+    stride = status_stride(model.fs, status_period_s)
+    # rows the trace file or the plot shows (the batch path traces them and the readings')
+    shown = args.trace_every if args.trace else (max(1, -(-n // TRACE_POINTS)) if args.plot
+                                                 else stride)
     if args.realtime and args.dashboard:
         from fdi_daemon.dashboard.replay_view import replay_with_dashboard
 
@@ -61,10 +72,8 @@ def run(args: argparse.Namespace) -> int:
     elif args.realtime:
         events, trace = _paced(monitor, rec)
     else:
-        trace_every = max(1, -(-n // TRACE_POINTS)) if args.plot else max(1, n)
-        if args.trace:  # the file and the plot show the same samples
-            trace_every = args.trace_every
-        events, trace = _batch(monitor, rec, trace_every)
+        events, trace = _batch(monitor, rec, math.gcd(shown, stride))
+    events = merge_events(events, _alarm_events(monitor, events, trace, stride, settings))
     snap = monitor.snapshot()
     summary = replay_summary(events, n, model.fs, monitor.settings.method,
                              (snap["theta1"], snap["theta2"]))
@@ -77,8 +86,7 @@ def run(args: argparse.Namespace) -> int:
     if args.trace:
         from fdi_daemon.detect.trace_file import write_trace
 
-        # the batch path traced every --trace-every sample already; the paced one every one
-        write_trace(args.trace, trace, 1 if trace.every == args.trace_every else args.trace_every)
+        write_trace(args.trace, trace, shown // trace.every)
     if args.plot:
         from fdi_daemon.detect.plots import plot_replay
 
@@ -86,12 +94,48 @@ def run(args: argparse.Namespace) -> int:
         if "fault_active" in rec.columns:
             active = np.flatnonzero(np.asarray(rec["fault_active"]) > 0.5)
             onset = float(rec.t[active[0]]) if active.size else None
-        plot_replay(args.plot, trace, events, monitor.gamma_f, monitor.detector.band,
-                    monitor.detector.threshold, onset, title=str(args.recording))
+        plot_replay(args.plot, _thinned(trace, shown // trace.every), events, monitor.gamma_f,
+                    monitor.detector.band, monitor.detector.threshold, onset,
+                    title=str(args.recording))
     _report(events, summary)
     if monitor.baseline_note:
         print(f"note: {monitor.baseline_note}")
     return 0
+
+
+def _alarm_settings(path: str | None):
+    """(alarm settings, status period s): a daemon config's (`--alarms`), else the defaults."""
+    from fdi_daemon.alarms.lifecycle import AlarmSettings
+    from fdi_daemon.alarms.replay import STATUS_PERIOD_S
+
+    if path is None:
+        return AlarmSettings(), STATUS_PERIOD_S
+    from fdi_daemon.service.config import load_config
+
+    config = load_config(path)
+    return config.alarms["settings"], float(config.service["status_period_s"])
+
+
+def _alarm_events(monitor, events: list, trace, stride: int, settings) -> list:
+    """The alarm lifecycle over the replay: readings every ``stride`` samples of the trace
+    (`fdi_daemon.alarms.replay`)."""
+    from fdi_daemon.alarms.replay import level_readings, replay_alarms
+
+    rows = slice(None, None, stride // trace.every)
+    times, levels = level_readings(trace.t[rows], trace.theta1[rows],
+                                   monitor.baseline_levels(trace.v_rms[rows]))
+    return replay_alarms(events, times, levels, settings)
+
+
+def _thinned(trace, step: int):
+    """Every ``step``-th row of a `MonitorTrace`."""
+    import dataclasses
+
+    if step == 1:
+        return trace
+    arrays = {f.name: getattr(trace, f.name)[::step] for f in dataclasses.fields(trace)
+              if f.name != "every"}
+    return dataclasses.replace(trace, every=trace.every * step, **arrays)
 
 
 def _progress(total: int, label: str):
@@ -138,7 +182,7 @@ def _paced(monitor, rec, on_tick=None):
     seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
            else monitor.sample_numbers(t))
     period = 1.0 / monitor.fs_hz
-    names = ("t", "accel", "residual", "theta1", "theta2", "statistic", "state")
+    names = ("t", "accel", "residual", "theta1", "theta2", "statistic", "state", "v_rms")
     out = {k: np.empty(n) for k in names}
     events = []
     progress, task = (None, None) if on_tick is not None else _progress(n, "replay (real time)")
@@ -153,7 +197,7 @@ def _paced(monitor, rec, on_tick=None):
             events.extend(new)
             pl, det = monitor.pipeline, monitor.detector
             values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
-                      det.theta2, det.statistic, STATES.index(det.state))
+                      det.theta2, det.statistic, STATES.index(det.state), pl.v_rms)
             for name, value in zip(names, values):
                 out[name][k] = value
             if on_tick is not None:
@@ -176,6 +220,10 @@ def _line(event: dict) -> str:
         extra += f"  count={event['count']} ({event.get('reason', '')})"
     if "missing_samples" in event:
         extra += f"  missing={event['missing_samples']}"
+    if "alarm_id" in event:
+        level = event.get("level")
+        extra += (f"  alarm {event['alarm_id']} {event['state']} priority {event['priority']}"
+                  f"  level={'-' if level is None else f'{level:.3g}'}")
     return f"{event['t']:10.4f} s  {event['kind']}{extra}"
 
 
@@ -191,6 +239,7 @@ def _report(events: list, summary: dict) -> None:
     cls = summary["classification"] or "none"
     det = summary["first_detection_t"]
     console.print(f"{summary['samples']} samples at {summary['fs']:g} Hz: "
-                  f"{summary['alarm_episodes']} alarm episode(s), first detection "
+                  f"{summary['alarm_episodes']} alarm episode(s) ({summary['alarms']} "
+                  f"alarm(s), peak priority {summary['alarm_peak_priority']}), first detection "
                   f"{'-' if det is None else f'{det:.4f} s'}, classification {cls}",
                   highlight=False)

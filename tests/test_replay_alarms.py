@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest_detect import sim_rig_model
-from fdi_daemon.alarms.lifecycle import AlarmLifecycle
+from fdi_daemon.alarms.lifecycle import AlarmLifecycle, AlarmSettings
 from fdi_daemon.alarms.replay import (level_readings, merge_events, replay_alarms,
                                       status_stride)
 from fdi_daemon.cli import main
@@ -141,3 +141,46 @@ def test_alarm_settings_come_from_a_daemon_config(rig, tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text(head + "alarms:\n  steps: [0.5, 0.2]\n")
     assert main(["replay", str(creeping), "--model", str(model), "--alarms", str(bad)]) == 2
+
+
+def test_replay_decides_as_the_daemons_alarm_keeper_against_a_baseline(rig):
+    """The daemon's own alarm point (`AlarmKeeper`, clock = sample time) fed as the loop
+    does: per-tick Monitor.step, each detector event, and a status snapshot (friction level,
+    baseline level of the operating condition) every status period. `fdi replay` with a
+    model that has a baseline gives the same lifecycle events."""
+    from fdi_daemon.alarms.replay import LIFECYCLE_INPUTS
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.io.model_file import load_model
+    from fdi_daemon.io.recordings import read_recording
+    from fdi_daemon.io.sample import Sample
+    from fdi_daemon.service.alarm_keeper import AlarmKeeper
+
+    root, model, quiet, creeping = rig
+    based = root / "model_baseline.yaml"
+    assert main(["baseline", str(quiet), "--model", str(model), "-o", str(based)]) == 0
+    _, replayed = _replay(root, based, creeping, "based")
+
+    rec = read_recording(creeping)
+    monitor = Monitor(load_model(based))
+    assert monitor.baseline is not None
+    clock = [0.0]
+    keeper = AlarmKeeper(AlarmSettings(), "model", clock=lambda: clock[0])
+    stride = status_stride(monitor.fs_hz)
+    daemon, baselines = [], set()
+    for k in range(len(rec)):
+        clock[0] = float(rec.t[k])
+        for event in monitor.step(Sample(k, float(rec.t[k]), float(rec.columns["v_in"][k]),
+                                         float(rec.columns["accel"][k]), float("nan"))):
+            if event["kind"] in LIFECYCLE_INPUTS:
+                daemon += keeper.detector_event(event)
+        if k % stride == 0:
+            snapshot = {"t": clock[0], "monitor": monitor.snapshot()}
+            baselines.add(snapshot["monitor"]["baseline_level"])
+            daemon += keeper.status(snapshot)[0]
+    assert len(baselines) > 1  # the baseline's bin followed the operating condition
+    replayed = [e for e in replayed if e["kind"].startswith("alarm_")]
+    assert [e["kind"] for e in replayed] == [e["kind"] for e in daemon]
+    assert [e["kind"] for e in daemon][:1] == ["alarm_raised"]
+    for a, b in zip(replayed, daemon):
+        assert (a["t"], a["time"], a["priority"]) == (b["t"], b["time"], b["priority"])
+        assert a["level"] == pytest.approx(b["level"], rel=1e-9, abs=1e-12)

@@ -14,7 +14,7 @@ recording's sample time as the clock:
 
 Both are merged in time order and run through `AlarmLifecycle.run` (the batch path, equal
 to ``step`` per input). The lifecycle's events carry ``t`` (sample time, s) like the
-daemon's, and ``time`` is the same sample time.
+daemon's; they carry no ``time`` (a replay's wall clock says nothing about the recording).
 """
 
 from __future__ import annotations
@@ -65,10 +65,11 @@ def _inputs(events: list[dict[str, Any]], times: np.ndarray, levels: np.ndarray
 
 def replay_alarms(events: list[dict[str, Any]], times: np.ndarray, levels: np.ndarray,
                   settings: AlarmSettings | None = None) -> list[dict[str, Any]]:
-    """The lifecycle's events for a replay's detector ``events`` (time-ordered) and level
-    readings ``(times, levels)``; each stamped with ``t`` (the sample time, s)."""
+    """The lifecycle's events for a replay's detector ``events`` and level readings
+    ``(times, levels)``. The lifecycle's clock, the sample time, becomes ``t`` (s); a replay's
+    events carry no ``time`` (docs/service.md, "Event lines")."""
     lifecycle = AlarmLifecycle(settings)
-    return [{"t": e["time"], **e} for e in lifecycle.run(_inputs(events, times, levels))]
+    return [{"t": e.pop("time"), **e} for e in lifecycle.run(_inputs(events, times, levels))]
 
 
 def merge_events(detector: list[dict[str, Any]], alarms: list[dict[str, Any]]

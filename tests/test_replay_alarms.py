@@ -60,6 +60,22 @@ def test_levels_are_above_the_baseline_or_the_level_itself_without_one():
     assert status_stride(5.0) == 1
 
 
+@pytest.mark.parametrize("n", [1000, 400_000, 400_001, 1_843_200, 10_400_001, 10**8])
+@pytest.mark.parametrize("stride", [1, 26, 100])
+def test_the_plots_rows_are_bounded_and_share_the_readings_trace(n, stride):
+    """--plot traces every k-th sample (at most TRACE_POINTS rows); k divides the readings'
+    stride or is a multiple of it, so one batch trace at gcd(k, stride) holds both and is
+    never denser than the plot's or the readings' own."""
+    import math
+
+    from fdi_daemon.commands.replay import TRACE_POINTS, _plot_every
+
+    every = _plot_every(n, stride)
+    assert -(-n // every) <= TRACE_POINTS
+    assert stride % every == 0 or every % stride == 0
+    assert math.gcd(every, stride) == min(every, stride)
+
+
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
     """The simulated rig's model, and a fault-free and a creeping-fault recording of the

@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     n = len(rec)
     stride = status_stride(model.fs, status_period_s)
     # rows the trace file or the plot shows (the batch path traces them and the readings')
-    shown = args.trace_every if args.trace else (max(1, -(-n // TRACE_POINTS)) if args.plot
+    shown = args.trace_every if args.trace else (_plot_every(n, stride) if args.plot
                                                  else stride)
     if args.realtime and args.dashboard:
         from fdi_daemon.dashboard.replay_view import replay_with_dashboard
@@ -125,6 +125,15 @@ def _alarm_events(monitor, events: list, trace, stride: int, settings) -> list:
     times, levels = level_readings(trace.t[rows], trace.theta1[rows],
                                    monitor.baseline_levels(trace.v_rms[rows]))
     return replay_alarms(events, times, levels, settings)
+
+
+def _plot_every(n: int, stride: int) -> int:
+    """Plot every n-th sample: at most `TRACE_POINTS` rows, and a divisor or a multiple of
+    the readings' ``stride`` so that one batch trace serves both."""
+    need = max(1, -(-n // TRACE_POINTS))
+    if need >= stride:
+        return stride * -(-need // stride)
+    return min(d for d in range(need, stride + 1) if stride % d == 0)
 
 
 def _thinned(trace, step: int):

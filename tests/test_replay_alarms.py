@@ -164,12 +164,12 @@ def test_replay_decides_as_the_daemons_alarm_keeper_against_a_baseline(rig):
     does: per-tick Monitor.step, each detector event, and a status snapshot (friction level,
     baseline level of the operating condition) every status period. `fdi replay` with a
     model that has a baseline gives the same lifecycle events."""
-    from fdi_daemon.alarms.replay import LIFECYCLE_INPUTS
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.io.model_file import load_model
     from fdi_daemon.io.recordings import read_recording
     from fdi_daemon.io.sample import Sample
     from fdi_daemon.service.alarm_keeper import AlarmKeeper
+    from fdi_daemon.service.loop import ALARM_INPUTS
 
     root, model, quiet, creeping = rig
     based = root / "model_baseline.yaml"
@@ -187,7 +187,7 @@ def test_replay_decides_as_the_daemons_alarm_keeper_against_a_baseline(rig):
         clock[0] = float(rec.t[k])
         for event in monitor.step(Sample(k, float(rec.t[k]), float(rec.columns["v_in"][k]),
                                          float(rec.columns["accel"][k]), float("nan"))):
-            if event["kind"] in LIFECYCLE_INPUTS:
+            if event["kind"] in ALARM_INPUTS:
                 daemon += keeper.detector_event(event)
         if k % stride == 0:
             snapshot = {"t": clock[0], "monitor": monitor.snapshot()}

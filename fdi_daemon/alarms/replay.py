@@ -25,13 +25,12 @@ from typing import Any
 
 import numpy as np
 
-from fdi_daemon.alarms.lifecycle import DETECTOR_FAULT_KINDS, AlarmLifecycle, AlarmSettings
+from fdi_daemon.alarms.lifecycle import AlarmLifecycle, AlarmSettings
+from fdi_daemon.service.loop import ALARM_INPUTS
 
 __all__ = ["STATUS_PERIOD_S", "status_stride", "level_readings", "replay_alarms",
            "merge_events"]
 
-#: the detector events the lifecycle acts on (the daemon's loop feeds these)
-LIFECYCLE_INPUTS = (*DETECTOR_FAULT_KINDS, "cleared")
 #: the daemon's status refresh period (s): service.status_period_s's default
 STATUS_PERIOD_S = 0.1
 
@@ -57,7 +56,7 @@ def _inputs(events: list[dict[str, Any]], times: np.ndarray, levels: np.ndarray
             ) -> Iterator[tuple[float, float | None, Mapping[str, Any] | None]]:
     """(time, level, event) in time order; at a tie the detector event first."""
     detector = sorted((float(e["t"]), 0, k, None, e) for k, e in enumerate(events)
-                      if e["kind"] in LIFECYCLE_INPUTS)
+                      if e["kind"] in ALARM_INPUTS)  # what the daemon's loop hands on
     readings = ((float(t), 1, k, float(v), None) for k, (t, v) in enumerate(zip(times, levels)))
     for now, _, _, level, event in heapq.merge(detector, readings, key=lambda x: x[:3]):
         yield now, level, event

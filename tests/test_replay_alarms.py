@@ -201,3 +201,34 @@ def test_replay_decides_as_the_daemons_alarm_keeper_against_a_baseline(rig):
         assert (a["t"], a["priority"]) == (b["t"], b["priority"]) and "time" not in a
         assert b["time"] == b["t"]  # the keeper's clock was the sample time
         assert a["level"] == pytest.approx(b["level"], rel=1e-9, abs=1e-12)
+
+
+def test_a_duplicated_sample_leaves_the_trace_and_the_alarms_alike(rig, monkeypatch):
+    """A sample sent twice is dropped; the batch trace kept no row for the rest of its
+    16384-sample chunk, which moved every later reading: the trace has one row per accepted
+    sample, thinned alike, and batch and paced replays give the same alarm events."""
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.io.model_file import load_model
+    from fdi_daemon.io.recordings import Recording, read_recording
+
+    root, model, _, creeping = rig
+    rec = read_recording(creeping)
+    cols = {k: np.asarray(v) for k, v in rec.columns.items()}
+    cols.setdefault("seq", np.arange(len(rec)))
+    again = 150 * 256  # before the first detection (about 160 s)
+    rows = np.concatenate([np.arange(again), [again - 1], np.arange(again, len(rec))])
+    dup = write_recording(root / "dup.npz",
+                          Recording({k: v[rows] for k, v in cols.items()}, dict(rec.meta)))
+    full = Monitor(load_model(model)).run(read_recording(dup, strict=False), trace_every=1)[1]
+    thinned = Monitor(load_model(model)).run(read_recording(dup, strict=False),
+                                                trace_every=26)[1]
+    assert full.t.size == len(rec)
+    np.testing.assert_array_equal(thinned.t, full.t[::26])
+    np.testing.assert_array_equal(thinned.theta1, full.theta1[::26])
+    _, batch = _replay(root, model, dup, "dup_batch")
+    monkeypatch.setattr(time, "sleep", lambda _s: None)
+    _, paced = _replay(root, model, dup, "dup_paced", "--realtime")
+    batch, paced = ([e for e in events if e["kind"].startswith("alarm_")]
+                    for events in (batch, paced))
+    assert batch and [(e["kind"], e["t"]) for e in batch] == [(e["kind"], e["t"]) for e in paced]
+    assert [e["level"] for e in batch] == pytest.approx([e["level"] for e in paced], rel=1e-9)

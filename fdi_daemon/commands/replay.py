@@ -194,6 +194,7 @@ def _paced(monitor, rec, on_tick=None):
     names = ("t", "accel", "residual", "theta1", "theta2", "statistic", "state", "v_rms")
     out = {k: np.empty(n) for k in names}
     events = []
+    rows, last_seq = 0, None
     progress, task = (None, None) if on_tick is not None else _progress(n, "replay (real time)")
     start = time.monotonic()
     with progress if progress is not None else contextlib.nullcontext():
@@ -204,11 +205,14 @@ def _paced(monitor, rec, on_tick=None):
             new = monitor.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]), float(accel[k]),
                                       float(position[k])))
             events.extend(new)
-            pl, det = monitor.pipeline, monitor.detector
-            values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
-                      det.theta2, det.statistic, STATES.index(det.state), pl.v_rms)
-            for name, value in zip(names, values):
-                out[name][k] = value
+            if last_seq is None or seq[k] > last_seq:  # not dropped: a row, as Monitor.run
+                last_seq = int(seq[k])
+                pl, det = monitor.pipeline, monitor.detector
+                values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
+                          det.theta2, det.statistic, STATES.index(det.state), pl.v_rms)
+                for name, value in zip(names, values):
+                    out[name][rows] = value
+                rows += 1
             if on_tick is not None:
                 on_tick(monitor, float(t[k]), new)
                 continue
@@ -217,6 +221,7 @@ def _paced(monitor, rec, on_tick=None):
             if k % 256 == 0:
                 progress.update(task, completed=k + 1)
     events.extend(monitor.finish())
+    out = {name: values[:rows] for name, values in out.items()}
     trace = MonitorTrace(every=1, state=out.pop("state").astype(np.int8), **out)
     return events, trace
 

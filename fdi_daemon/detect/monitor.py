@@ -269,10 +269,14 @@ class Monitor:
                 continue
             if step[a] != 1 and self._last_seq is not None:
                 if seq[a] <= self._last_seq:
-                    # duplicates / going backwards: drop them one at a time (rare)
+                    # duplicates / going backwards: drop them one at a time (rare); the
+                    # samples after them in this run are traced like any other
                     for k in range(a, b):
+                        ticks = self._samples
                         events.extend(self.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]),
                                                        float(accel[k]), float(position[k]))))
+                        if self._samples > ticks:
+                            self._trace_one(parts, trace_every)
                     continue
                 events.extend(self._flush_bad())
                 events.append(self._gap(float(t[a]), int(seq[a] - self._last_seq - 1)))

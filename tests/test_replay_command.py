@@ -35,7 +35,8 @@ def test_a_csv_of_another_tool_with_rounded_times_replays(files, tmp_path):
                      "--events", str(tmp_path / name)]) == 0
     kinds = [[e["kind"] for e in read_events(tmp_path / name)]
              for name in ("ev_own.jsonl", "ev_other.jsonl")]
-    assert kinds[0] == kinds[1] == ["calibrated", "fault_detected", "friction_isolated"]
+    assert kinds[0] == kinds[1] == ["calibrated", "fault_detected", "alarm_raised",
+                                    "friction_isolated"]
 
 
 def test_replay_writes_events_summary_and_plot(files, capsys):
@@ -51,7 +52,9 @@ def test_replay_writes_events_summary_and_plot(files, capsys):
     assert summary["classification"] == "friction" and summary["alarm_episodes"] == 1
     assert 2.9 <= summary["first_detection_t"] <= summary["isolated_t"]
     events = read_events(root / "ev.jsonl")
-    assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "friction_isolated"]
+    assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "alarm_raised",
+                                           "friction_isolated"]
+    assert summary["alarms"] == 1 and summary["alarm_peak_priority"] >= 1
     assert (root / "fig.png").stat().st_size > 10_000
     assert "classification friction" in capsys.readouterr().out
 

@@ -29,10 +29,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="pace the samples at fs through the per-tick path (as the daemon)")
     parser.add_argument("--dashboard", action="store_true",
                         help="with --realtime: show the live dashboard while replaying (q stops)")
+    parser.add_argument("--alarms", metavar="CONFIG.yaml",
+                        help="the alarm lifecycle's settings and status period from this daemon "
+                             "config (default: the built-in alarms section)")
     add_columns_option(parser)
 
 
 def run(args: argparse.Namespace) -> int:
+    import math
+
     import numpy as np
 
     from fdi_daemon.detect.summary import write_summary
@@ -45,8 +50,15 @@ def run(args: argparse.Namespace) -> int:
     if args.trace_every < 1:
         raise UserError("--trace-every must be a whole number >= 1")
 
-    def runner(monitor, rec):
+    settings, status_period_s = _alarm_settings(args.alarms)
+    # rows the trace file or the plot shows (the batch path traces them and the readings')
+    shown = 1
+
+    def runner(monitor, rec, stride):
+        nonlocal shown
         n = len(rec)
+        shown = args.trace_every if args.trace else (_plot_every(n, stride) if args.plot
+                                                     else stride)
         if args.realtime and args.dashboard:
             from fdi_daemon.dashboard.replay_view import replay_with_dashboard
 
@@ -54,12 +66,10 @@ def run(args: argparse.Namespace) -> int:
                                          monitor, str(args.recording), args.model, n)
         if args.realtime:
             return _paced(monitor, rec)
-        trace_every = max(1, -(-n // TRACE_POINTS)) if args.plot else max(1, n)
-        if args.trace:  # the file and the plot show the same samples
-            trace_every = args.trace_every
-        return _batch(monitor, rec, trace_every)
+        return _batch(monitor, rec, math.gcd(shown, stride))
 
-    replay = replay_recording(args.recording, args.model, runner, columns=args.columns)
+    replay = replay_recording(args.recording, args.model, runner, columns=args.columns,
+                              alarm_settings=settings, status_period_s=status_period_s)
     rec, monitor, events, trace, summary = (replay.recording, replay.monitor, replay.events,
                                             replay.trace, replay.summary)
     if args.events:
@@ -71,8 +81,7 @@ def run(args: argparse.Namespace) -> int:
     if args.trace:
         from fdi_daemon.detect.trace_file import write_trace
 
-        # the batch path traced every --trace-every sample already; the paced one every one
-        write_trace(args.trace, trace, 1 if trace.every == args.trace_every else args.trace_every)
+        write_trace(args.trace, trace, shown // trace.every)
     if args.plot:
         from fdi_daemon.detect.plots import plot_replay
 
@@ -80,12 +89,46 @@ def run(args: argparse.Namespace) -> int:
         if "fault_active" in rec.columns:
             active = np.flatnonzero(np.asarray(rec["fault_active"]) > 0.5)
             onset = float(rec.t[active[0]]) if active.size else None
-        plot_replay(args.plot, trace, events, monitor.gamma_f, monitor.detector.band,
-                    monitor.detector.threshold, onset, title=str(args.recording))
+        plot_replay(args.plot, _thinned(trace, shown // trace.every), events, monitor.gamma_f,
+                    monitor.detector.band, monitor.detector.threshold, onset,
+                    title=str(args.recording))
     _report(events, summary)
     if monitor.baseline_note:
         print(f"note: {monitor.baseline_note}")
     return 0
+
+
+def _alarm_settings(path: str | None):
+    """(alarm settings, status period s): a daemon config's (`--alarms`), else the defaults."""
+    from fdi_daemon.alarms.lifecycle import AlarmSettings
+    from fdi_daemon.alarms.replay import STATUS_PERIOD_S
+
+    if path is None:
+        return AlarmSettings(), STATUS_PERIOD_S
+    from fdi_daemon.service.config import load_config
+
+    config = load_config(path)
+    return config.alarms["settings"], float(config.service["status_period_s"])
+
+
+def _plot_every(n: int, stride: int) -> int:
+    """Plot every n-th sample: at most `TRACE_POINTS` rows, and a divisor or a multiple of
+    the readings' ``stride`` so that one batch trace serves both."""
+    need = max(1, -(-n // TRACE_POINTS))
+    if need >= stride:
+        return stride * -(-need // stride)
+    return min(d for d in range(need, stride + 1) if stride % d == 0)
+
+
+def _thinned(trace, step: int):
+    """Every ``step``-th row of a `MonitorTrace`."""
+    import dataclasses
+
+    if step == 1:
+        return trace
+    arrays = {f.name: getattr(trace, f.name)[::step] for f in dataclasses.fields(trace)
+              if f.name != "every"}
+    return dataclasses.replace(trace, every=trace.every * step, **arrays)
 
 
 def _progress(total: int, label: str):
@@ -132,9 +175,10 @@ def _paced(monitor, rec, on_tick=None):
     seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
            else monitor.sample_numbers(t))
     period = 1.0 / monitor.fs_hz
-    names = ("t", "accel", "residual", "theta1", "theta2", "statistic", "state")
+    names = ("t", "accel", "residual", "theta1", "theta2", "statistic", "state", "v_rms")
     out = {k: np.empty(n) for k in names}
     events = []
+    rows, last_seq = 0, None
     progress, task = (None, None) if on_tick is not None else _progress(n, "replay (real time)")
     start = time.monotonic()
     with progress if progress is not None else contextlib.nullcontext():
@@ -145,11 +189,14 @@ def _paced(monitor, rec, on_tick=None):
             new = monitor.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]), float(accel[k]),
                                       float(position[k])))
             events.extend(new)
-            pl, det = monitor.pipeline, monitor.detector
-            values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
-                      det.theta2, det.statistic, STATES.index(det.state))
-            for name, value in zip(names, values):
-                out[name][k] = value
+            if last_seq is None or seq[k] > last_seq:  # not dropped: a row, as Monitor.run
+                last_seq = int(seq[k])
+                pl, det = monitor.pipeline, monitor.detector
+                values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
+                          det.theta2, det.statistic, STATES.index(det.state), pl.v_rms)
+                for name, value in zip(names, values):
+                    out[name][rows] = value
+                rows += 1
             if on_tick is not None:
                 on_tick(monitor, float(t[k]), new)
                 continue
@@ -158,6 +205,7 @@ def _paced(monitor, rec, on_tick=None):
             if k % 256 == 0:
                 progress.update(task, completed=k + 1)
     events.extend(monitor.finish())
+    out = {name: values[:rows] for name, values in out.items()}
     trace = MonitorTrace(every=1, state=out.pop("state").astype(np.int8), **out)
     return events, trace
 
@@ -170,6 +218,10 @@ def _line(event: dict) -> str:
         extra += f"  count={event['count']} ({event.get('reason', '')})"
     if "missing_samples" in event:
         extra += f"  missing={event['missing_samples']}"
+    if "alarm_id" in event:
+        level = event.get("level")
+        extra += (f"  alarm {event['alarm_id']} {event['state']} priority {event['priority']}"
+                  f"  level={'-' if level is None else f'{level:.3g}'}")
     return f"{event['t']:10.4f} s  {event['kind']}{extra}"
 
 
@@ -185,6 +237,7 @@ def _report(events: list, summary: dict) -> None:
     cls = summary["classification"] or "none"
     det = summary["first_detection_t"]
     console.print(f"{summary['samples']} samples at {summary['fs']:g} Hz: "
-                  f"{summary['alarm_episodes']} alarm episode(s), first detection "
+                  f"{summary['alarm_episodes']} alarm episode(s) ({summary['alarms']} "
+                  f"alarm(s), peak priority {summary['alarm_peak_priority']}), first detection "
                   f"{'-' if det is None else f'{det:.4f} s'}, classification {cls}",
                   highlight=False)

@@ -59,6 +59,7 @@ class MonitorTrace:
     theta2: np.ndarray
     statistic: np.ndarray
     state: np.ndarray  # int8 codes into detect.detector.STATES
+    v_rms: np.ndarray  # the window's velocity RMS (m/s): the baseline's operating condition
 
 
 class Monitor:
@@ -199,7 +200,7 @@ class Monitor:
                else self.sample_numbers(t))
         events: list[dict[str, Any]] = []
         parts: dict[str, list[np.ndarray]] = {k: [] for k in (
-            "t", "accel", "residual", "theta1", "theta2", "statistic", "state")}
+            "t", "accel", "residual", "theta1", "theta2", "statistic", "state", "v_rms")}
         start = 0
         while start < n:
             stop = min(n, start + _CHUNK)
@@ -219,7 +220,13 @@ class Monitor:
         (the bin of the window's velocity RMS); None without a baseline."""
         if self.baseline is None:
             return None
-        return _finite(self.baseline.median[int(self.baseline.bin_index(self.pipeline.v_rms))])
+        return _finite(self.baseline_levels(self.pipeline.v_rms))
+
+    def baseline_levels(self, v_rms_mps):
+        """`baseline_level` at each velocity RMS (m/s; array or scalar); NaN without one."""
+        if self.baseline is None:
+            return np.full(np.shape(v_rms_mps), np.nan)
+        return self.baseline.median[self.baseline.bin_index(v_rms_mps)]
 
     def over_baseline(self, theta1, v_rms):
         """(θ1 − baseline median)/margin of the bin of the window's velocity RMS; margin =
@@ -262,10 +269,14 @@ class Monitor:
                 continue
             if step[a] != 1 and self._last_seq is not None:
                 if seq[a] <= self._last_seq:
-                    # duplicates / going backwards: drop them one at a time (rare)
+                    # duplicates / going backwards: drop them one at a time (rare); the
+                    # samples after them in this run are traced like any other
                     for k in range(a, b):
+                        ticks = self._samples
                         events.extend(self.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]),
                                                        float(accel[k]), float(position[k]))))
+                        if self._samples > ticks:
+                            self._trace_one(parts, trace_every)
                     continue
                 events.extend(self._flush_bad())
                 events.append(self._gap(float(t[a]), int(seq[a] - self._last_seq - 1)))
@@ -321,7 +332,8 @@ class Monitor:
         keep = np.flatnonzero(ticks % trace_every == 0)
         for name, values in (("t", t), ("accel", accel), ("residual", batch.residual),
                              ("theta1", theta1), ("theta2", theta2),
-                             ("statistic", det_trace.statistic), ("state", det_trace.state)):
+                             ("statistic", det_trace.statistic), ("state", det_trace.state),
+                             ("v_rms", batch.v_rms)):
             parts[name].append(np.asarray(values)[keep])
         self._samples += n
         self._v_in = float(v_in[-1])
@@ -339,7 +351,7 @@ class Monitor:
         values = {"t": self._last_t, "accel": pl.residual + pl.xhat, "residual": pl.residual,
                   "theta1": self.detector.theta1, "theta2": self.detector.theta2,
                   "statistic": self.detector.statistic,
-                  "state": STATES.index(self.detector.state)}
+                  "state": STATES.index(self.detector.state), "v_rms": pl.v_rms}
         for name, value in values.items():
             parts[name].append(np.array([value], dtype=np.int8 if name == "state" else float))
 

@@ -24,7 +24,12 @@ def _finite_or_none(value: float) -> float | None:
 def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, method: str,
                    theta_final: tuple[float | None, float | None]) -> dict[str, Any]:
     """``{"samples", "fs", "first_detection_t", "isolated_t", "classification",
-    "theta_final", "alarm_episodes", ...}`` (DESIGN.md keys first)."""
+    "theta_final", "alarm_episodes", ...}`` (DESIGN.md keys first).
+
+    ``alarm_episodes``: the detector's episodes (``fault_detected`` events); ``alarms``: the
+    alarm lifecycle's alarms (``alarm_raised``, `fdi_daemon.alarms.replay`) and
+    ``alarm_peak_priority`` the highest priority any of them reached (0: none).
+    """
     kinds = [e["kind"] for e in events]
     first_detection = _first(events, "fault_detected")
     isolated = _first(events, "friction_isolated")
@@ -44,6 +49,10 @@ def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, met
         "classification": classification,
         "theta_final": theta_final,
         "alarm_episodes": kinds.count("fault_detected"),
+        "alarms": kinds.count("alarm_raised"),
+        "alarm_peak_priority": max((int(e["priority"]) for e in events
+                                    if e["kind"] in ("alarm_raised", "alarm_priority")),
+                                   default=0),
         "other_fault_t": other,
         "method": method,
         "friction_level_final": theta_final[0],

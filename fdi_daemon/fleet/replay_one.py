@@ -2,8 +2,9 @@
 `fdi fleet-replay`.
 
 `replay_recording` loads the model, reads the recording (gaps and duplicates reported, not
-refused), checks that both have the same rate, runs the monitor and summarizes
-(`fdi_daemon.detect.summary.replay_summary`). How the monitor runs is the caller's choice:
+refused), checks that both have the same rate, runs the monitor, runs the alarm lifecycle
+over its events and level readings as the daemon would (`fdi_daemon.alarms.replay`) and
+summarizes (`fdi_daemon.detect.summary.replay_summary`). How the monitor runs is the caller's choice:
 by default the batch path `Monitor.run` (the whole file at once); `fdi replay` passes its
 own runner for the progress bar, the real-time pacing or the dashboard.
 `summary_row` turns the summary into one row of the fleet table.
@@ -16,11 +17,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-#: (monitor, recording) -> (events, trace)
-Runner = Callable[[Any, Any], tuple[list[dict[str, Any]], Any]]
+#: (monitor, recording, stride) -> (events, trace); the trace's ``every`` divides ``stride``,
+#: the samples between two level readings of the alarm lifecycle
+Runner = Callable[[Any, Any, int], tuple[list[dict[str, Any]], Any]]
 
 #: columns of the fleet table, in order (docs/fleet.md)
-ROW_COLUMNS = ("file", "model", "samples", "fs", "alarm_episodes", "first_detection_t",
+ROW_COLUMNS = ("file", "model", "samples", "fs", "alarm_episodes", "alarms",
+               "alarm_peak_priority", "first_detection_t",
                "isolated_t", "classification", "friction_level_final", "gaps",
                "missing_samples", "bad_samples", "error")
 
@@ -36,18 +39,23 @@ class Replay:
     summary: dict[str, Any]
 
 
-def run_batch(monitor, rec):
-    """The batch path without a trace (only the events and the final state count)."""
-    return monitor.run(rec, trace_every=max(1, len(rec)))
+def run_batch(monitor, rec, stride: int):
+    """The batch path, traced only where the alarm lifecycle reads the level."""
+    return monitor.run(rec, trace_every=stride)
 
 
 def replay_recording(recording: str | Path, model_path: str | Path,
                      runner: Runner = run_batch,
-                     columns: Mapping[str, str] | None = None) -> Replay:
+                     columns: Mapping[str, str] | None = None,
+                     alarm_settings=None, status_period_s: float | None = None) -> Replay:
     """Replay ``recording`` with the model file ``model_path``; UserError on bad input.
 
     columns: fdi name -> the file's column name (``--columns``), as `read_recording` takes.
+    alarm_settings (`AlarmSettings`, default its defaults) and status_period_s (default
+    the daemon's) set the alarm lifecycle as the daemon's config would.
     """
+    from fdi_daemon.alarms.replay import (STATUS_PERIOD_S, alarm_events, merge_events,
+                                          status_stride)
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.detect.summary import replay_summary
     from fdi_daemon.errors import UserError
@@ -60,7 +68,9 @@ def replay_recording(recording: str | Path, model_path: str | Path,
         raise UserError(f"{recording}: sampled at {rec.fs:g} Hz but the model is for "
                         f"{model.fs:g} Hz")
     monitor = Monitor(model)
-    events, trace = runner(monitor, rec)
+    stride = status_stride(model.fs, status_period_s or STATUS_PERIOD_S)
+    events, trace = runner(monitor, rec, stride)
+    events = merge_events(events, alarm_events(monitor, events, trace, stride, alarm_settings))
     snap = monitor.snapshot()
     summary = replay_summary(events, len(rec), model.fs, monitor.settings.method,
                              (snap["theta1"], snap["theta2"]))
@@ -77,6 +87,8 @@ def summary_row(file: str, model: str | None, summary: dict[str, Any] | None = N
         "samples": s.get("samples"),
         "fs": s.get("fs"),
         "alarm_episodes": s.get("alarm_episodes"),
+        "alarms": s.get("alarms"),
+        "alarm_peak_priority": s.get("alarm_peak_priority"),
         "first_detection_t": s.get("first_detection_t"),
         "isolated_t": s.get("isolated_t"),
         "classification": s.get("classification"),

@@ -95,7 +95,8 @@ def _single_replay_row(file: str, model: str | None, tmp: Path, capsys) -> dict:
 
 def _read_csv_rows(path: Path) -> list[dict]:
     """The CSV table with its values typed back (empty cell = None)."""
-    ints = {"samples", "alarm_episodes", "gaps", "missing_samples", "bad_samples"}
+    ints = {"samples", "alarm_episodes", "alarms", "alarm_peak_priority", "gaps",
+            "missing_samples", "bad_samples"}
     floats = {"fs", "first_detection_t", "isolated_t", "friction_level_final"}
     rows = []
     with open(path, newline="") as fh:

@@ -11,7 +11,8 @@ from fdi_daemon.fleet.replay_one import ROW_COLUMNS
 
 #: Parquet column types (pyarrow type names); CSV writes an empty cell for a missing value
 PARQUET_TYPES = {"file": "string", "model": "string", "samples": "int64", "fs": "float64",
-                 "alarm_episodes": "int64", "first_detection_t": "float64",
+                 "alarm_episodes": "int64", "alarms": "int64",
+                 "alarm_peak_priority": "int64", "first_detection_t": "float64",
                  "isolated_t": "float64", "classification": "string",
                  "friction_level_final": "float64", "gaps": "int64",
                  "missing_samples": "int64", "bad_samples": "int64", "error": "string"}

@@ -6,7 +6,7 @@ import pytest
 
 matplotlib.use("Agg")
 
-pytest_plugins = ["conftest_ident", "conftest_sim"]
+pytest_plugins = ["conftest_ident", "conftest_sim", "mqtt_support"]
 
 
 @pytest.fixture(autouse=True)

@@ -22,6 +22,18 @@ needs_mosquitto = pytest.mark.skipif(
                               ".ci/run installs it)")
 
 
+#: brokers started and not stopped yet: `stop_brokers` ends them after every test, also a
+#: failed one (a broker left running outlives the test run)
+RUNNING: set["Broker"] = set()
+
+
+@pytest.fixture(autouse=True)
+def stop_brokers():
+    yield
+    for broker in list(RUNNING):
+        broker.stop()
+
+
 def free_port() -> int:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
@@ -48,6 +60,7 @@ class Broker:
     def start(self, timeout_s: float = 20.0) -> "Broker":
         self.proc = subprocess.Popen([MOSQUITTO, "-c", str(self.config)],
                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        RUNNING.add(self)
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
@@ -69,6 +82,7 @@ class Broker:
                 self.proc.kill()
                 self.proc.wait(5)
         self.proc = None
+        RUNNING.discard(self)
 
     def tail(self) -> str:
         text = self.log.read_text(errors="replace") if self.log.exists() else ""

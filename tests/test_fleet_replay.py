@@ -292,20 +292,40 @@ def test_without_dask_the_error_names_the_extra(monkeypatch):
             pass
 
 
+#: a worker that dies on a file, in a process of its own: the test suite's own state
+#: (signal handlers, threads, other clusters) must not decide whether the Nanny sees the
+#: death, and a cluster that never answers fails the test instead of hanging the suite
+_DIES = """
+import json, sys
+from dask.distributed import Client, LocalCluster
+from fdi_daemon.fleet.cluster import replay_fleet
+from fleet_support import replay_or_die
+if __name__ == "__main__":  # the worker processes are spawned: they import this file
+    jobs = json.loads(sys.argv[1])
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        print(json.dumps(replay_fleet([tuple(j) for j in jobs], client, task=replay_or_die)))
+"""
+
+
 @pytest.mark.slow
 def test_a_worker_that_dies_on_a_file_is_that_files_row(fleet, tmp_path):
-    from dask.distributed import Client, LocalCluster
-
-    from fdi_daemon.fleet.cluster import replay_fleet
-    from fleet_support import replay_or_die
+    import subprocess
+    import sys
 
     root, files, _ = fleet
     killer = tmp_path / "rig-a-kill.csv"
     killer.write_text(Path(files[1]).read_text())
     jobs = [(files[1], str(MODEL)), (str(killer), str(MODEL)), (files[2], str(MODEL))]
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster, Client(cluster) as client:
-        rows = replay_fleet(jobs, client, task=replay_or_die)
+    tests = Path(__file__).resolve().parent
+    script = tmp_path / "dies.py"
+    script.write_text(_DIES)
+    done = subprocess.run([sys.executable, str(script), json.dumps(jobs)], cwd=tests,
+                          env={**__import__("os").environ,
+                               "PYTHONPATH": f"{tests}:{tests.parent}"},
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = json.loads(done.stdout.strip().splitlines()[-1])
     assert rows[0] == replay_row(files[1], str(MODEL))
     assert rows[2] == replay_row(files[2], str(MODEL))
     assert rows[1]["file"] == str(killer) and rows[1]["samples"] is None

@@ -103,12 +103,30 @@ _PASSES = 4
 
 
 @njit(cache=True)
-def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs):
+def _slope(chain_n, vb0, fs):
+    """dv/dy of the state chain this sample (`_states` is affine in y)."""
+    if chain_n == 0:
+        return vb0
+    if chain_n == 1:
+        return 1.0
+    return fs
+
+
+@njit(cache=True)
+def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs,
+            phi_out):
     n = a.size - 1
     m = bmat.shape[1] - 1
     ncol = bmat.shape[0]
     y = np.empty(y_ff.size)
     phi = np.zeros(ncol)
+    # stick: at v = 0 every dry-friction column (sign v; a Stribeck excess is at its full
+    # value there) takes the same s ∈ [−1, 1]; g = dv/ds this sample
+    dry = 0.0
+    for j in range(ncol):
+        if kind[j] == 0 or kind[j] == 2:
+            dry += bmat[j, 0]
+    g = dry * _slope(chain_n, vb[0], fs)
     for k in range(y_ff.size):
         acc = 0.0
         for i in range(n):
@@ -117,13 +135,38 @@ def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phis
             for j in range(ncol):
                 acc += bmat[j, i + 1] * phist[j, i]
         base = y_ff[k] + acc
-        yk = base
-        for _ in range(_PASSES):
-            v, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
+        stuck = False
+        if g < 0.0:
+            # held at rest: the other forces at v = 0, then the s that keeps v = 0
             yk = base
-            for j in range(ncol):
-                phi[j] = _phi_k(kind[j], par[j], v, x)
-                yk += bmat[j, 0] * phi[j]
+            for _ in range(_PASSES):
+                v, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
+                yk = base
+                for j in range(ncol):
+                    if kind[j] != 0 and kind[j] != 2:
+                        phi[j] = _phi_k(kind[j], par[j], 0.0, x)
+                        yk += bmat[j, 0] * phi[j]
+            v0, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
+            if abs(v0) <= -g:  # the dry friction available stops the mass within the step
+                # held: v = 0 (velocity, position output); an acceleration output must be
+                # 0 too (the trapezoid's v = 0 alone would make it ring), if it can be
+                sk = -yk / dry if chain_n == 0 else -v0 / g
+                if abs(sk) <= 1.0:
+                    stuck = True
+                    for j in range(ncol):
+                        if kind[j] == 0 or kind[j] == 2:
+                            phi[j] = sk
+                            yk += bmat[j, 0] * sk
+                    if chain_n == 0:
+                        s1[:] = 0.0  # at rest: no velocity carried into the next sample
+        if not stuck:  # slides: friction opposes the motion
+            yk = base
+            for _ in range(_PASSES):
+                v, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
+                yk = base
+                for j in range(ncol):
+                    phi[j] = _phi_k(kind[j], par[j], v, x)
+                    yk += bmat[j, 0] * phi[j]
         # commit the chain with the sample's output
         if chain_n == 0:
             v = _df2t(vb, va, s1, yk)
@@ -142,6 +185,8 @@ def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phis
         if m > 0:
             for j in range(ncol):
                 phist[j, 0] = phi[j]
+        for j in range(ncol):
+            phi_out[k, j] = phi[j]
         y[k] = yk
     return y
 
@@ -171,9 +216,17 @@ class ForceLoop:
 
     def run(self, y_ff: np.ndarray) -> np.ndarray:
         """y = y_ff + G_F F(v, x) over an array, continuing from the current state."""
-        return _kernel(np.ascontiguousarray(y_ff, dtype=float), self.a, self.bmat, self.kind,
-                       self.par, self.chain_n, self.vb, self.va, self.s1, self.s2, self.prev,
-                       self.zhist, self.phist, float(self.fs))
+        return self.trace(y_ff)[0]
+
+    def trace(self, y_ff: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(y, φ): the output and the regressors the loop applied (per sample, per column;
+        a dry-friction column holds the stick value s ∈ [−1, 1] while the mass is at rest)."""
+        y_ff = np.ascontiguousarray(y_ff, dtype=float)
+        phi = np.empty((y_ff.size, self.kind.size))
+        y = _kernel(y_ff, self.a, self.bmat, self.kind, self.par, self.chain_n, self.vb,
+                    self.va, self.s1, self.s2, self.prev, self.zhist, self.phist,
+                    float(self.fs), phi)
+        return y, phi
 
     def step(self, y_ff: float) -> float:
         return float(self.run(np.array([y_ff]))[0])
@@ -217,7 +270,6 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
     """
     from fdi_daemon.diagnose.effects import SPECS, FittedEffect, columns, least_squares, \
         physical_report
-    from fdi_daemon.diagnose.signals import StateChain
 
     width = len(ctx.a_dom)
     if not any(e.name == "loop_stiffness" for e in effects):
@@ -236,9 +288,10 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
 
     def run(theta_ff, nums):
         with np.errstate(all="ignore"):
-            y = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).run(ctx.y0 + x_ff @ theta_ff)
+            y, phi = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).trace(
+                ctx.y0 + x_ff @ theta_ff)
             sse = float(np.sum((y_meas - y)[fit] ** 2))
-        return y, (sse if np.isfinite(sse) else np.inf)
+        return y, phi, (sse if np.isfinite(sse) else np.inf)
 
     # 1. feed-forward start, 2. amplitudes on B̂ in the loop
     x_fb = np.column_stack([signal.lfilter(ctx.b_dom, ctx.a_dom, _phi(k, p, ctx.v, ctx.x))
@@ -260,20 +313,20 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
     if float(sol.fun @ sol.fun) < float(r0 @ r0):
         theta = sol.x
     best_ff, best_nums = theta[:n_ff], np.outer(theta[n_ff:], b_path)
-    y, best = run(best_ff, best_nums)
-    # 3. free numerators, passes on the loop's own motion
+    y, phi, best = run(best_ff, best_nums)
+    # 3. free numerators, passes on the regressors the loop applied (its own motion; the
+    #    stick value while the mass is held)
     for _ in range(PASSES if np.all(np.isfinite(y)) else 0):
-        v, x = StateChain(ctx.chain[0], ctx.chain[3], ctx.highpass_hz).run(y)
-        xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, _phi(k, p, v, x)), width)
-                       for k, p in cols]
+        xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), width)
+                       for j in range(len(cols))]
         target = least_squares(np.column_stack(xs)[fit], ctx.target[fit])
         start = np.concatenate([best_ff, best_nums.ravel()])
         before = best
         for frac in (1.0, 0.5, 0.25, 0.125):
             trial = start + frac * (target - start)
-            y_try, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
+            y_try, phi_try, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
             if sse < best:
-                y, best = y_try, sse
+                y, phi, best = y_try, phi_try, sse
                 best_ff, best_nums = trial[:n_ff], trial[n_ff:].reshape(len(cols), width)
                 break
         if best > 0.999 * before:
@@ -284,7 +337,7 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
             k = len(kinds(e.name, e.param))
             new = FittedEffect(e.name, e.param, list(best_nums[row:row + k]),
                                n_linear=k * width, centre=e.centre, n_free=k * width)
-            new.physical = force_report(new, ctx, y)
+            new.physical = force_report(new, ctx, y, phi[:, row:row + k])
             row += k
         else:
             k = e.n_linear
@@ -306,8 +359,9 @@ _FORCE_LABELS = {"coulomb_friction": ["coulomb_level"],
 _FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 
 
-def force_report(eff, ctx, y: np.ndarray) -> dict:
-    """Size and physical check of a force effect, from the augmented motion.
+def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray) -> dict:
+    """Size and physical check of a force effect, from the augmented motion ``y`` and the
+    regressors ``phi`` (samples × the effect's columns) the loop applied.
 
     ``<label>_input_equivalent``: the input per unit of φ that the force takes away,
     c = −⟨Ĝφ, G_Fφ⟩/⟨Ĝφ, Ĝφ⟩ on the training part (v, x the augmented motion): the friction
@@ -324,7 +378,7 @@ def force_report(eff, ctx, y: np.ndarray) -> dict:
     if not np.all(np.isfinite(y)):
         return {"diverged": True, "plausible": False}
     n, vb, va, fs = ctx.chain
-    v, x = StateChain(n, fs, ctx.highpass_hz).run(y)
+    v, _ = StateChain(n, fs, ctx.highpass_hz).run(y)
     fit = ctx.split.fit
     out: dict = {}
     if eff.param is not None:
@@ -332,11 +386,9 @@ def force_report(eff, ctx, y: np.ndarray) -> dict:
         out["stribeck_velocity_unit"] = "velocity units"
     plausible = True
     vv = float(v[fit] @ v[fit]) or 1.0
-    for label, (kind, par), b in zip(_FORCE_LABELS[eff.name], kinds(eff.name, eff.param),
-                                     eff.coefficients):
-        phi = _phi(kind, par, v, x)
-        c = signal.lfilter(b, ctx.a_dom, phi)
-        g = signal.lfilter(ctx.b_dom, ctx.a_dom, phi)[fit]
+    for j, (label, b) in enumerate(zip(_FORCE_LABELS[eff.name], eff.coefficients)):
+        c = signal.lfilter(b, ctx.a_dom, phi[:, j])
+        g = signal.lfilter(ctx.b_dom, ctx.a_dom, phi[:, j])[fit]
         gg = float(g @ g)
         out[f"{label}_input_equivalent"] = -float(g @ c[fit]) / gg if gg > 0 else 0.0
         if eff.name in _FRICTION:

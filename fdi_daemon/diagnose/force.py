@@ -13,6 +13,13 @@ This sample's force moves this sample's output (b_j0 ≠ 0: an acceleration foll
 once), and the states depend on that output: the pair is solved by a few fixed-point passes
 (the chain's direct term is T/2 per integration, so the passes converge fast).
 
+Stick–slip (time-stepping Coulomb, as `hil_sim.msd`): at v = 0 the dry-friction columns
+(sign v and a Stribeck excess) take one value s ∈ [−1, 1] instead of sign v. If the dry
+friction available stops the mass within the step (|v with s = 0| ≤ |dv/ds|), the mass is
+at rest: s holds it (v = 0; an acceleration output is 0 too, and the velocity state is
+cleared) when |s| ≤ 1, otherwise the drive restarts it with the friction at full level
+against it. Else the mass slides and friction opposes the motion.
+
 y_ff is everything fed forward from the input (Ĝ u, the linear refit, input and output
 effects). The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
 m ẍ + c ẋ + k x = F − F_f moves with the plant's poles), and its numerator B_F (one per
@@ -114,7 +121,7 @@ def _slope(chain_n, vb0, fs):
 
 @njit(cache=True)
 def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs,
-            phi_out):
+            phi_out, v_out):
     n = a.size - 1
     m = bmat.shape[1] - 1
     ncol = bmat.shape[0]
@@ -135,7 +142,7 @@ def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phis
             for j in range(ncol):
                 acc += bmat[j, i + 1] * phist[j, i]
         base = y_ff[k] + acc
-        stuck = False
+        stopped = False
         if g < 0.0:
             # held at rest: the other forces at v = 0, then the s that keeps v = 0
             yk = base
@@ -149,17 +156,18 @@ def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phis
             v0, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
             if abs(v0) <= -g:  # the dry friction available stops the mass within the step
                 # held: v = 0 (velocity, position output); an acceleration output must be
-                # 0 too (the trapezoid's v = 0 alone would make it ring), if it can be
-                sk = -yk / dry if chain_n == 0 else -v0 / g
-                if abs(sk) <= 1.0:
-                    stuck = True
-                    for j in range(ncol):
-                        if kind[j] == 0 or kind[j] == 2:
-                            phi[j] = sk
-                            yk += bmat[j, 0] * sk
-                    if chain_n == 0:
-                        s1[:] = 0.0  # at rest: no velocity carried into the next sample
-        if not stuck:  # slides: friction opposes the motion
+                # 0 too (the trapezoid's v = 0 alone would make it ring), if it can be;
+                # if not, the mass restarts from rest within the step, friction against
+                # the drive at its full level
+                stopped = True
+                sk = min(1.0, max(-1.0, -yk / dry if chain_n == 0 else -v0 / g))
+                for j in range(ncol):
+                    if kind[j] == 0 or kind[j] == 2:
+                        phi[j] = sk
+                        yk += bmat[j, 0] * sk
+                if chain_n == 0:
+                    s1[:] = 0.0  # at rest within the step: no velocity carried over
+        if not stopped:  # slides through the step: friction opposes the motion
             yk = base
             for _ in range(_PASSES):
                 v, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
@@ -172,9 +180,12 @@ def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phis
             v = _df2t(vb, va, s1, yk)
             _df2t(vb, va, s2, v)
         elif chain_n == 1:
+            v = yk
             _df2t(vb, va, s1, yk)
         else:
+            v = (yk - prev[0]) * fs
             prev[0] = yk
+        v_out[k] = v
         for i in range(n - 1, 0, -1):
             zhist[i] = zhist[i - 1]
         if n > 0:
@@ -218,15 +229,17 @@ class ForceLoop:
         """y = y_ff + G_F F(v, x) over an array, continuing from the current state."""
         return self.trace(y_ff)[0]
 
-    def trace(self, y_ff: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(y, φ): the output and the regressors the loop applied (per sample, per column;
-        a dry-friction column holds the stick value s ∈ [−1, 1] while the mass is at rest)."""
+    def trace(self, y_ff: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(y, φ, v): the output, the regressors the loop applied (per sample, per column;
+        a dry-friction column holds the stick value s ∈ [−1, 1] while the mass is at rest)
+        and the loop's velocity (0 while held)."""
         y_ff = np.ascontiguousarray(y_ff, dtype=float)
         phi = np.empty((y_ff.size, self.kind.size))
+        v = np.empty(y_ff.size)
         y = _kernel(y_ff, self.a, self.bmat, self.kind, self.par, self.chain_n, self.vb,
                     self.va, self.s1, self.s2, self.prev, self.zhist, self.phist,
-                    float(self.fs), phi)
-        return y, phi
+                    float(self.fs), phi, v)
+        return y, phi, v
 
     def step(self, y_ff: float) -> float:
         return float(self.run(np.array([y_ff]))[0])
@@ -288,10 +301,10 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
 
     def run(theta_ff, nums):
         with np.errstate(all="ignore"):
-            y, phi = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).trace(
+            y, phi, v = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).trace(
                 ctx.y0 + x_ff @ theta_ff)
             sse = float(np.sum((y_meas - y)[fit] ** 2))
-        return y, phi, (sse if np.isfinite(sse) else np.inf)
+        return (y, phi, v), (sse if np.isfinite(sse) else np.inf)
 
     # 1. feed-forward start, 2. amplitudes on B̂ in the loop
     x_fb = np.column_stack([signal.lfilter(ctx.b_dom, ctx.a_dom, _phi(k, p, ctx.v, ctx.x))
@@ -313,7 +326,7 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
     if float(sol.fun @ sol.fun) < float(r0 @ r0):
         theta = sol.x
     best_ff, best_nums = theta[:n_ff], np.outer(theta[n_ff:], b_path)
-    y, phi, best = run(best_ff, best_nums)
+    (y, phi, v), best = run(best_ff, best_nums)
     # 3. free numerators, passes on the regressors the loop applied (its own motion; the
     #    stick value while the mass is held)
     for _ in range(PASSES if np.all(np.isfinite(y)) else 0):
@@ -324,9 +337,9 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
         before = best
         for frac in (1.0, 0.5, 0.25, 0.125):
             trial = start + frac * (target - start)
-            y_try, phi_try, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
+            traced, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
             if sse < best:
-                y, phi, best = y_try, phi_try, sse
+                (y, phi, v), best = traced, sse
                 best_ff, best_nums = trial[:n_ff], trial[n_ff:].reshape(len(cols), width)
                 break
         if best > 0.999 * before:
@@ -337,7 +350,7 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
             k = len(kinds(e.name, e.param))
             new = FittedEffect(e.name, e.param, list(best_nums[row:row + k]),
                                n_linear=k * width, centre=e.centre, n_free=k * width)
-            new.physical = force_report(new, ctx, y, phi[:, row:row + k])
+            new.physical = force_report(new, ctx, y, phi[:, row:row + k], v)
             row += k
         else:
             k = e.n_linear
@@ -359,9 +372,10 @@ _FORCE_LABELS = {"coulomb_friction": ["coulomb_level"],
 _FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 
 
-def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray) -> dict:
-    """Size and physical check of a force effect, from the augmented motion ``y`` and the
-    regressors ``phi`` (samples × the effect's columns) the loop applied.
+def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray) -> dict:
+    """Size and physical check of a force effect, from the augmented motion: output ``y``,
+    the regressors ``phi`` (samples × the effect's columns) and the velocity ``v`` of the
+    loop (`ForceLoop.trace`).
 
     ``<label>_input_equivalent``: the input per unit of φ that the force takes away,
     c = −⟨Ĝφ, G_Fφ⟩/⟨Ĝφ, Ĝφ⟩ on the training part (v, x the augmented motion): the friction
@@ -373,12 +387,9 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray) -> dict:
     higher near v = 0). Otherwise the fit is not ``plausible`` and is never named. The
     power test needs no knowledge of how force enters, unlike the sign of c.
     """
-    from fdi_daemon.diagnose.signals import StateChain
-
     if not np.all(np.isfinite(y)):
         return {"diverged": True, "plausible": False}
     n, vb, va, fs = ctx.chain
-    v, _ = StateChain(n, fs, ctx.highpass_hz).run(y)
     fit = ctx.split.fit
     out: dict = {}
     if eff.param is not None:

@@ -86,10 +86,14 @@ def test_coulomb_friction_breaks_away_slides_and_brings_the_mass_to_rest():
     # at rest until the drive exceeds the friction (2 sin = 1)
     first = int(np.argmax(accel != 0.0))
     assert drive[first - 1] <= 1.0 < drive[first]
-    # sliding: friction at its full level, against the motion
+    # sliding: friction at its full level, against the motion at the start or the end of
+    # the step; at a reversal that the friction cannot hold, at most one sample per
+    # reversal where the per-sample fixed point ends on the other sign
     sliding = velocity != 0.0
-    np.testing.assert_array_equal(s[sliding], np.sign(velocity[sliding]))
+    np.testing.assert_array_equal(np.abs(s[sliding]), 1.0)
     before = np.r_[0.0, velocity[:-1]]
+    against = (s == np.sign(velocity)) | (s == np.sign(before))
+    assert np.sum(~against[sliding]) <= np.sum(velocity * before < 0)
     assert np.sum(velocity * before < 0) >= 2  # it did reverse
     # without drive the friction stops the mass and holds it (no chatter about v = 0)
     stopped = int(np.argmax((np.arange(accel.size) > FS) & (accel == 0.0)))

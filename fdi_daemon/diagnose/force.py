@@ -16,9 +16,9 @@ once), and the states depend on that output: the pair is solved by a few fixed-p
 Stick–slip (time-stepping Coulomb, as `hil_sim.msd`): at v = 0 the dry-friction columns
 (sign v and a Stribeck excess) take one value s ∈ [−1, 1] instead of sign v. If the dry
 friction available stops the mass within the step (|v with s = 0| ≤ |dv/ds|), the mass is
-at rest: s holds it (v = 0; an acceleration output is 0 too, and the velocity state is
-cleared) when |s| ≤ 1, otherwise the drive restarts it with the friction at full level
-against it. Else the mass slides and friction opposes the motion.
+held by s (v = 0; an acceleration output is 0 too, and the velocity state is cleared) when
+that takes |s| ≤ 1. Otherwise it slides and the friction opposes the motion (at a reversal
+that the friction cannot hold, the fixed point may end on either sign for one sample).
 
 y_ff is everything fed forward from the input (Ĝ u, the linear refit, input and output
 effects). The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
@@ -155,18 +155,17 @@ def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phis
                         yk += bmat[j, 0] * phi[j]
             v0, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
             if abs(v0) <= -g:  # the dry friction available stops the mass within the step
-                # held: v = 0 (velocity, position output); an acceleration output must be
-                # 0 too (the trapezoid's v = 0 alone would make it ring), if it can be;
-                # if not, the mass restarts from rest within the step, friction against
-                # the drive at its full level
-                stopped = True
-                sk = min(1.0, max(-1.0, -yk / dry if chain_n == 0 else -v0 / g))
-                for j in range(ncol):
-                    if kind[j] == 0 or kind[j] == 2:
-                        phi[j] = sk
-                        yk += bmat[j, 0] * sk
-                if chain_n == 0:
-                    s1[:] = 0.0  # at rest within the step: no velocity carried over
+                # held if it can be: v = 0 (velocity, position output); an acceleration
+                # output must be 0 too (the trapezoid's v = 0 alone would make it ring)
+                sk = -yk / dry if chain_n == 0 else -v0 / g
+                if abs(sk) <= 1.0:
+                    stopped = True
+                    for j in range(ncol):
+                        if kind[j] == 0 or kind[j] == 2:
+                            phi[j] = sk
+                            yk += bmat[j, 0] * sk
+                    if chain_n == 0:
+                        s1[:] = 0.0  # at rest within the step: no velocity carried over
         if not stopped:  # slides through the step: friction opposes the motion
             yk = base
             for _ in range(_PASSES):

@@ -1,8 +1,10 @@
-"""Shared, cached data for the diagnose tests: the §V model with one hidden effect each."""
+"""Shared, cached data for the diagnose tests: the §V model with one hidden effect each,
+machines like the real ones, and the simulated pneumatic rig with one fault each."""
 
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
@@ -74,3 +76,38 @@ def gain_fault_recording(gain_ratio: float = 1.2, seed: int = 2):
     """The §V model whose actuator gain is off by ``gain_ratio`` (the nominal model is not)."""
     u = multisine(DURATION_S, FS, 0.3, 12.0, 0.5, seed=1)
     return simulate_recording(MsdParams(gain_n_per_v=10.0 * gain_ratio, **NOISE), u, seed=seed)
+
+
+# ---------------------------------------------------------------- the pneumatic rig (hil_sim.rig)
+
+#: the rig's nominal model: `fdi identify` on the fault-free identification chirp
+#: (configs/scenarios/ident_chirp.yaml; provenance in the file)
+RIG_MODEL = Path(__file__).resolve().parents[1] / "configs" / "model_sim_rig.yaml"
+RIG_FS = 256.0
+
+
+def rig_model() -> tuple[np.ndarray, np.ndarray]:
+    from fdi_daemon.io.model_file import load_model
+
+    model = load_model(RIG_MODEL)
+    return model.plant_b, model.plant_a
+
+
+@lru_cache(maxsize=None)
+def rig_recording(fault: str | None = None, value: float = 0.0, rms_v: float = 0.4,
+                  duration_s: float = 30.0):
+    """(v_in, accel) of the simulated pneumatic rig (`hil_sim.rig.Rig`, seed 4) driven by a
+    1–12 Hz multisine of ``rms_v`` after 1 s at rest, with ``fault`` switched on from the
+    start: ``bearing_supply`` (a fraction of nominal: below ≈ 0.8 the block touches and
+    Coulomb contact friction acts on the load) or one of `hil_sim.rig.FAULTS`."""
+    from hil_sim.rig import Rig
+
+    rig = Rig(seed=4)
+    if fault == "bearing_supply":
+        rig.set_bearing_supply(value)
+    elif fault is not None:
+        rig.set_fault(fault, value)
+    rig.run(np.zeros(int(RIG_FS)))
+    out = rig.run(multisine(duration_s, RIG_FS, 1.0, 12.0, rms_v, seed=3))
+    return out["v_in"], out["accel"]
+

@@ -41,6 +41,68 @@ def test_force_loop_step_chunks_and_whole_array_agree(n_kind):
         np.testing.assert_allclose(s1, s2, rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.parametrize("n_kind", [0, 1, 2])
+def test_force_loop_contract_holds_through_stick_slip(n_kind):
+    # dry friction that opposes the motion (negative b_0): the mass sticks at times
+    cols = [(0, 0.0), (2, 0.05), (1, 0.0)]  # sign v, Stribeck excess, v
+    scale = 0.01 if n_kind == 2 else 1.0  # within a step a force moves a position little
+    nums = scale * np.array([[-0.3, 0.2, 0.0], [-0.2, 0.1, 0.0], [0.0, -0.5, 0.0]])
+    chain = StateChain(n_kind, FS, 0.2).coefficients
+    y_ff = 2.0 * np.sin(2 * np.pi * 1.5 * np.arange(700) / FS)
+    whole = ForceLoop(A, cols, nums, chain)
+    y_whole, phi, _ = whole.trace(y_ff)
+    single = ForceLoop(A, cols, nums, chain)
+    y_single = np.array([single.step(float(v)) for v in y_ff])
+    np.testing.assert_allclose(y_single, y_whole, rtol=1e-12, atol=1e-15)
+    for s1, s2 in zip(single.state, whole.state):
+        np.testing.assert_allclose(s1, s2, rtol=1e-12, atol=1e-15)
+    held = np.abs(phi[:, 0]) < 1.0
+    assert held.sum() > 5  # it did stick ...
+    assert (~held).sum() > 100  # ... and slide
+
+
+def _mass_with_coulomb(drive_amplitude):
+    """a = F_drive/m − (F_c/m)·s on a free mass (acceleration output, F_c/m = 1 m/s²):
+    1 s of a 2 Hz drive, then 1 s without."""
+    loop = ForceLoop(np.array([1.0]), [(0, 0.0)], [[-1.0]],
+                     StateChain(0, FS, 0.2).coefficients)
+    t = np.arange(512) / FS
+    drive = np.where(t < 1.0, drive_amplitude * np.sin(2 * np.pi * 2.0 * t), 0.0)
+    accel, phi, velocity = loop.trace(drive)
+    return drive, accel, phi[:, 0], velocity
+
+
+def test_coulomb_friction_holds_a_mass_that_the_drive_cannot_break_away():
+    drive, accel, s, velocity = _mass_with_coulomb(0.8)  # below F_c/m
+    np.testing.assert_allclose(accel, 0.0, atol=1e-12)  # friction equals the drive
+    np.testing.assert_allclose(s, drive, atol=1e-12)  # s = F_drive/F_c, inside [−1, 1]
+    np.testing.assert_array_equal(velocity, 0.0)
+
+
+def test_coulomb_friction_breaks_away_slides_and_brings_the_mass_to_rest():
+    drive, accel, s, velocity = _mass_with_coulomb(2.0)
+    np.testing.assert_allclose(accel, drive - s, atol=1e-12)
+    assert np.all(np.abs(s) <= 1.0)
+    # at rest until the drive exceeds the friction (2 sin = 1)
+    first = int(np.argmax(accel != 0.0))
+    assert drive[first - 1] <= 1.0 < drive[first]
+    # sliding: friction at its full level, against the motion at the start or the end of
+    # the step; at a reversal that the friction cannot hold, at most one sample per
+    # reversal where the per-sample fixed point ends on the other sign
+    sliding = velocity != 0.0
+    np.testing.assert_array_equal(np.abs(s[sliding]), 1.0)
+    before = np.r_[0.0, velocity[:-1]]
+    against = (s == np.sign(velocity)) | (s == np.sign(before))
+    assert np.sum(~against[sliding]) <= np.sum(velocity * before < 0)
+    assert np.sum(velocity * before < 0) >= 2  # it did reverse
+    # without drive the friction stops the mass and holds it (no chatter about v = 0)
+    stopped = int(np.argmax((np.arange(accel.size) > FS) & (accel == 0.0)))
+    assert FS < stopped < 1.5 * FS
+    np.testing.assert_array_equal(accel[stopped:], 0.0)
+    np.testing.assert_array_equal(s[stopped + 1:], 0.0)
+    np.testing.assert_array_equal(velocity[stopped:], 0.0)
+
+
 def test_a_linear_force_in_the_loop_is_the_closed_loop_filter():
     # position output (x = y), force θ·x through B/A with b0 = 0: y = A/(A − θB) y_ff
     theta, b = -0.3, np.array([0.0, 0.5, 0.2])

@@ -13,6 +13,13 @@ This sample's force moves this sample's output (b_j0 ≠ 0: an acceleration foll
 once), and the states depend on that output: the pair is solved by a few fixed-point passes
 (the chain's direct term is T/2 per integration, so the passes converge fast).
 
+Stick–slip (time-stepping Coulomb, as `hil_sim.msd`): at v = 0 the dry-friction columns
+(sign v and a Stribeck excess) take one value s ∈ [−1, 1] instead of sign v. If the dry
+friction available stops the mass within the step (|v with s = 0| ≤ |dv/ds|), the mass is
+held by s (v = 0; an acceleration output is 0 too, and the velocity state is cleared) when
+that takes |s| ≤ 1. Otherwise it slides and the friction opposes the motion (at a reversal
+that the friction cannot hold, the fixed point may end on either sign for one sample).
+
 y_ff is everything fed forward from the input (Ĝ u, the linear refit, input and output
 effects). The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
 m ẍ + c ẋ + k x = F − F_f moves with the plant's poles), and its numerator B_F (one per
@@ -103,12 +110,30 @@ _PASSES = 4
 
 
 @njit(cache=True)
-def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs):
+def _slope(chain_n, vb0, fs):
+    """dv/dy of the state chain this sample (`_states` is affine in y)."""
+    if chain_n == 0:
+        return vb0
+    if chain_n == 1:
+        return 1.0
+    return fs
+
+
+@njit(cache=True)
+def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs,
+            phi_out, v_out):
     n = a.size - 1
     m = bmat.shape[1] - 1
     ncol = bmat.shape[0]
     y = np.empty(y_ff.size)
     phi = np.zeros(ncol)
+    # stick: at v = 0 every dry-friction column (sign v; a Stribeck excess is at its full
+    # value there) takes the same s ∈ [−1, 1]; g = dv/ds this sample
+    dry = 0.0
+    for j in range(ncol):
+        if kind[j] == 0 or kind[j] == 2:
+            dry += bmat[j, 0]
+    g = dry * _slope(chain_n, vb[0], fs)
     for k in range(y_ff.size):
         acc = 0.0
         for i in range(n):
@@ -117,21 +142,49 @@ def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phis
             for j in range(ncol):
                 acc += bmat[j, i + 1] * phist[j, i]
         base = y_ff[k] + acc
-        yk = base
-        for _ in range(_PASSES):
-            v, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
+        stopped = False
+        if g < 0.0:
+            # held at rest: the other forces at v = 0, then the s that keeps v = 0
             yk = base
-            for j in range(ncol):
-                phi[j] = _phi_k(kind[j], par[j], v, x)
-                yk += bmat[j, 0] * phi[j]
+            for _ in range(_PASSES):
+                v, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
+                yk = base
+                for j in range(ncol):
+                    if kind[j] != 0 and kind[j] != 2:
+                        phi[j] = _phi_k(kind[j], par[j], 0.0, x)
+                        yk += bmat[j, 0] * phi[j]
+            v0, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
+            if abs(v0) <= -g:  # the dry friction available stops the mass within the step
+                # held if it can be: v = 0 (velocity, position output); an acceleration
+                # output must be 0 too (the trapezoid's v = 0 alone would make it ring)
+                sk = -yk / dry if chain_n == 0 else -v0 / g
+                if abs(sk) <= 1.0:
+                    stopped = True
+                    for j in range(ncol):
+                        if kind[j] == 0 or kind[j] == 2:
+                            phi[j] = sk
+                            yk += bmat[j, 0] * sk
+                    if chain_n == 0:
+                        s1[:] = 0.0  # at rest within the step: no velocity carried over
+        if not stopped:  # slides through the step: friction opposes the motion
+            yk = base
+            for _ in range(_PASSES):
+                v, x = _states(chain_n, vb[0], s1, s2, prev, fs, yk)
+                yk = base
+                for j in range(ncol):
+                    phi[j] = _phi_k(kind[j], par[j], v, x)
+                    yk += bmat[j, 0] * phi[j]
         # commit the chain with the sample's output
         if chain_n == 0:
             v = _df2t(vb, va, s1, yk)
             _df2t(vb, va, s2, v)
         elif chain_n == 1:
+            v = yk
             _df2t(vb, va, s1, yk)
         else:
+            v = (yk - prev[0]) * fs
             prev[0] = yk
+        v_out[k] = v
         for i in range(n - 1, 0, -1):
             zhist[i] = zhist[i - 1]
         if n > 0:
@@ -142,6 +195,8 @@ def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phis
         if m > 0:
             for j in range(ncol):
                 phist[j, 0] = phi[j]
+        for j in range(ncol):
+            phi_out[k, j] = phi[j]
         y[k] = yk
     return y
 
@@ -171,9 +226,19 @@ class ForceLoop:
 
     def run(self, y_ff: np.ndarray) -> np.ndarray:
         """y = y_ff + G_F F(v, x) over an array, continuing from the current state."""
-        return _kernel(np.ascontiguousarray(y_ff, dtype=float), self.a, self.bmat, self.kind,
-                       self.par, self.chain_n, self.vb, self.va, self.s1, self.s2, self.prev,
-                       self.zhist, self.phist, float(self.fs))
+        return self.trace(y_ff)[0]
+
+    def trace(self, y_ff: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(y, φ, v): the output, the regressors the loop applied (per sample, per column;
+        a dry-friction column holds the stick value s ∈ [−1, 1] while the mass is at rest)
+        and the loop's velocity (0 while held)."""
+        y_ff = np.ascontiguousarray(y_ff, dtype=float)
+        phi = np.empty((y_ff.size, self.kind.size))
+        v = np.empty(y_ff.size)
+        y = _kernel(y_ff, self.a, self.bmat, self.kind, self.par, self.chain_n, self.vb,
+                    self.va, self.s1, self.s2, self.prev, self.zhist, self.phist,
+                    float(self.fs), phi, v)
+        return y, phi, v
 
     def step(self, y_ff: float) -> float:
         return float(self.run(np.array([y_ff]))[0])
@@ -217,7 +282,6 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
     """
     from fdi_daemon.diagnose.effects import SPECS, FittedEffect, columns, least_squares, \
         physical_report
-    from fdi_daemon.diagnose.signals import StateChain
 
     width = len(ctx.a_dom)
     if not any(e.name == "loop_stiffness" for e in effects):
@@ -236,9 +300,10 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
 
     def run(theta_ff, nums):
         with np.errstate(all="ignore"):
-            y = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).run(ctx.y0 + x_ff @ theta_ff)
+            y, phi, v = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).trace(
+                ctx.y0 + x_ff @ theta_ff)
             sse = float(np.sum((y_meas - y)[fit] ** 2))
-        return y, (sse if np.isfinite(sse) else np.inf)
+        return (y, phi, v), (sse if np.isfinite(sse) else np.inf)
 
     # 1. feed-forward start, 2. amplitudes on B̂ in the loop
     x_fb = np.column_stack([signal.lfilter(ctx.b_dom, ctx.a_dom, _phi(k, p, ctx.v, ctx.x))
@@ -260,20 +325,20 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
     if float(sol.fun @ sol.fun) < float(r0 @ r0):
         theta = sol.x
     best_ff, best_nums = theta[:n_ff], np.outer(theta[n_ff:], b_path)
-    y, best = run(best_ff, best_nums)
-    # 3. free numerators, passes on the loop's own motion
+    (y, phi, v), best = run(best_ff, best_nums)
+    # 3. free numerators, passes on the regressors the loop applied (its own motion; the
+    #    stick value while the mass is held)
     for _ in range(PASSES if np.all(np.isfinite(y)) else 0):
-        v, x = StateChain(ctx.chain[0], ctx.chain[3], ctx.highpass_hz).run(y)
-        xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, _phi(k, p, v, x)), width)
-                       for k, p in cols]
+        xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), width)
+                       for j in range(len(cols))]
         target = least_squares(np.column_stack(xs)[fit], ctx.target[fit])
         start = np.concatenate([best_ff, best_nums.ravel()])
         before = best
         for frac in (1.0, 0.5, 0.25, 0.125):
             trial = start + frac * (target - start)
-            y_try, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
+            traced, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
             if sse < best:
-                y, best = y_try, sse
+                (y, phi, v), best = traced, sse
                 best_ff, best_nums = trial[:n_ff], trial[n_ff:].reshape(len(cols), width)
                 break
         if best > 0.999 * before:
@@ -284,7 +349,7 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
             k = len(kinds(e.name, e.param))
             new = FittedEffect(e.name, e.param, list(best_nums[row:row + k]),
                                n_linear=k * width, centre=e.centre, n_free=k * width)
-            new.physical = force_report(new, ctx, y)
+            new.physical = force_report(new, ctx, y, phi[:, row:row + k], v)
             row += k
         else:
             k = e.n_linear
@@ -306,8 +371,10 @@ _FORCE_LABELS = {"coulomb_friction": ["coulomb_level"],
 _FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 
 
-def force_report(eff, ctx, y: np.ndarray) -> dict:
-    """Size and physical check of a force effect, from the augmented motion.
+def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray) -> dict:
+    """Size and physical check of a force effect, from the augmented motion: output ``y``,
+    the regressors ``phi`` (samples × the effect's columns) and the velocity ``v`` of the
+    loop (`ForceLoop.trace`).
 
     ``<label>_input_equivalent``: the input per unit of φ that the force takes away,
     c = −⟨Ĝφ, G_Fφ⟩/⟨Ĝφ, Ĝφ⟩ on the training part (v, x the augmented motion): the friction
@@ -319,12 +386,9 @@ def force_report(eff, ctx, y: np.ndarray) -> dict:
     higher near v = 0). Otherwise the fit is not ``plausible`` and is never named. The
     power test needs no knowledge of how force enters, unlike the sign of c.
     """
-    from fdi_daemon.diagnose.signals import StateChain
-
     if not np.all(np.isfinite(y)):
         return {"diverged": True, "plausible": False}
     n, vb, va, fs = ctx.chain
-    v, x = StateChain(n, fs, ctx.highpass_hz).run(y)
     fit = ctx.split.fit
     out: dict = {}
     if eff.param is not None:
@@ -332,11 +396,9 @@ def force_report(eff, ctx, y: np.ndarray) -> dict:
         out["stribeck_velocity_unit"] = "velocity units"
     plausible = True
     vv = float(v[fit] @ v[fit]) or 1.0
-    for label, (kind, par), b in zip(_FORCE_LABELS[eff.name], kinds(eff.name, eff.param),
-                                     eff.coefficients):
-        phi = _phi(kind, par, v, x)
-        c = signal.lfilter(b, ctx.a_dom, phi)
-        g = signal.lfilter(ctx.b_dom, ctx.a_dom, phi)[fit]
+    for j, (label, b) in enumerate(zip(_FORCE_LABELS[eff.name], eff.coefficients)):
+        c = signal.lfilter(b, ctx.a_dom, phi[:, j])
+        g = signal.lfilter(ctx.b_dom, ctx.a_dom, phi[:, j])[fit]
         gg = float(g @ g)
         out[f"{label}_input_equivalent"] = -float(g @ c[fit]) / gg if gg > 0 else 0.0
         if eff.name in _FRICTION:

@@ -15,8 +15,9 @@ A candidate is accepted when p < ALPHA, Δ score < 0, it removes at least MIN_RE
 the held-out error energy (statistically significant but practically void improvements —
 a discretisation mismatch of a few per cent, say — are not a missing effect) and its
 physical coefficients are plausible (`effects.physical_report`); the best accepted (lowest
-score) is named — unless a candidate that contains it (Stribeck contains Coulomb) beats it
-in a nested F-test at ALPHA. Then every remaining candidate is tried on top of it (jointly
+score) is named — unless it is one of a nested pair (Stribeck contains Coulomb, a force
+offset a sensor offset) and the nested F-test at ALPHA says otherwise: the larger only when
+it is significantly better than the smaller. Then every remaining candidate is tried on top of it (jointly
 refitted) for a second effect, with the same test. No accepted candidate: "no significant missing effect".
 """
 
@@ -38,7 +39,9 @@ ALPHA = 1e-3
 #: smallest share of the held-out error energy (SSE) an effect must remove to be named
 MIN_REDUCTION = 0.05
 #: effects that contain another as a special case (Stribeck with no excess is Coulomb)
-NESTS = {"stribeck_friction": "coulomb_friction"}
+NESTS = {"stribeck_friction": "coulomb_friction",
+         # a constant force through the free force path settles to a constant output
+         "force_offset": "sensor_offset"}
 #: how many effects are added at most (the first, then one more)
 MAX_EFFECTS = 2
 
@@ -153,9 +156,13 @@ def nested_p_value(larger: Candidate, smaller: Candidate, n_eff: float) -> float
 
 
 def _prefer_nesting(best: Candidate, accepted: list[Candidate], n_eff: float) -> Candidate:
-    """The best-scored candidate, unless one that contains it is significantly better
-    (nested F-test at ALPHA): BIC alone under-rewards extra parameters when n_eff is small."""
+    """Of a nested pair (`NESTS`), the larger only when it is significantly better than the
+    smaller (nested F-test at ALPHA), whichever of the two scored best: BIC alone
+    under-rewards extra parameters when n_eff is small, and a larger effect that only
+    scores level with the smaller one explains nothing more."""
     for c in accepted:
+        if NESTS.get(best.name) == c.name and nested_p_value(best, c, n_eff) >= ALPHA:
+            return c
         if NESTS.get(c.name) == best.name and nested_p_value(c, best, n_eff) < ALPHA:
             return c
     return best

@@ -1,0 +1,57 @@
+"""Blind tests on the simulated pneumatic rig (`hil_sim.rig`, issue 14 item 6): one fault
+switched on from the start of each recording, the nominal model the shipped
+`configs/model_sim_rig.yaml` (`fdi identify` on the fault-free identification chirp). Each
+diagnosis sees only the recording and the model; the truth is compared at the end."""
+
+from __future__ import annotations
+
+import pytest
+
+from fdi_daemon.diagnose.workflow import run_diagnose
+from tests.diagnose_cases import RIG_FS, rig_model, rig_recording
+
+pytestmark = pytest.mark.slow
+
+#: what the rig does before any fault: its rod seal has Coulomb friction with a little
+#: stiction (`hil_sim/rig/params.py`), which may rightly be named
+SEAL = {"coulomb_friction", "stribeck_friction"}
+
+
+def _diagnose(fault, value, **excitation):
+    u, y = rig_recording(fault, value, **excitation)
+    b, a = rig_model()
+    return run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+
+
+#: the multisine that makes the friction and the sensor's range matter: 0.8 V RMS for 40 s
+STRONG = {"rms_v": 0.8, "duration_s": 40.0}
+
+
+@pytest.mark.parametrize("fault,value,right,excitation", [
+    ("accel_bias", 0.3, {"sensor_offset"}, {}),
+    ("accel_saturation", 0.05, {"output_saturation"}, STRONG),
+    # contact friction: Coulomb with a little stiction (μs/μk = 1.1)
+    ("bearing_supply", 0.75, {"coulomb_friction", "stribeck_friction"}, STRONG),
+    # heavy contact friction: the mass sticks for long stretches
+    ("bearing_supply", 0.55, {"coulomb_friction", "stribeck_friction"}, STRONG),
+])
+def test_rig_fault_is_named_and_gap_halves(fault, value, right, excitation):
+    result = _diagnose(fault, value, **excitation)
+    assert right & set(result.named[:2]), f"{fault}: named {result.named}"
+    assert result.gap_after <= 0.5 * result.gap_before
+
+
+@pytest.mark.xfail(strict=True, reason="names input_saturation: the valve's own nonlinearity "
+                   "(flapper travel, nozzle curtain area) is not in the linear model "
+                   "(docs/diagnose.md §9)")
+def test_rig_without_fault_names_nothing_or_its_seal_friction():
+    result = _diagnose(None, 0.0, **STRONG)
+    assert set(result.named) <= SEAL
+
+
+@pytest.mark.xfail(strict=True, reason="the refit absorbs the gain drop ('unexplained'): a "
+                   "pure gain leaves the valve's nonlinearity, above the noise floor; "
+                   "input_saturation is named instead (docs/diagnose.md §9)")
+def test_rig_valve_gain_fault_is_named():
+    result = _diagnose("valve_gain", 0.7, **STRONG)
+    assert result.named[:1] == ["gain_fault"]

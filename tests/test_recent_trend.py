@@ -99,7 +99,7 @@ def test_a_full_trend_is_under_one_kilobyte_of_json():
 
 def test_minutes_without_readings_are_skipped():
     recent = RecentTrend()
-    recent.add({"minute": int(START // 60), "level_mean": None, "level_max": None,
+    recent.add({"minute": int(START // 60) - 1, "level_mean": None, "level_max": None,
                 "readings": 0})
     assert recent.summary(START + 60) is None
     recent.add({"minute": int(START // 60), "level_mean": 0.5, "level_max": 0.7,
@@ -110,3 +110,71 @@ def test_minutes_without_readings_are_skipped():
     assert trend["mean"][-1] == pytest.approx((0.5 * 2 + 0.2 * 6) / 8)
     assert trend["max"][-1] == 0.7
     assert json.loads(json.dumps(trend)) == trend
+
+
+def test_a_restart_recalls_the_last_hours_from_the_trend_store(tmp_path):
+    """The rows the first keeper finished go to the store (as the sink thread does); a new
+    keeper (the restarted daemon) reads them back and shows the same buckets."""
+    from fdi_daemon.service.trend import TrendStore
+
+    clock = Clock(START)
+    keeper = AlarmKeeper(AlarmSettings(), "model", clock=clock)
+    store = TrendStore(tmp_path / "trend.sqlite")
+    rng = np.random.default_rng(5)
+    for k in range(int(5 * 3600 / READING_S)):
+        clock.now = START + k * READING_S
+        level = BASELINE + 0.05 * k * READING_S / 3600 + 0.02 * rng.standard_normal()
+        _, row = keeper.status({"monitor": {"friction_level": level,
+                                            "baseline_level": BASELINE}})
+        if row is not None:
+            store.append(row)
+    store.close()
+    before = keeper.summary()["trend"]
+    restarted = AlarmKeeper(AlarmSettings(), "model", clock=clock)
+    assert restarted.summary()["trend"] is None
+    assert restarted.recall_trend(tmp_path / "trend.sqlite") == 5 * 60 - 1
+    after = restarted.summary()["trend"]
+    assert after["end"] == before["end"]
+    assert [v is None for v in after["mean"]] == [v is None for v in before["mean"]]
+    for key in ("mean", "max"):  # the store keeps 1/1000 of the signature
+        assert [v for v in after[key] if v is not None] == pytest.approx(
+            [v for v in before[key] if v is not None], abs=1.5e-3)
+    # the minute in progress at the restart, finished again by the new keeper, counts once
+    restarted.recent.add({"minute": int(clock.now // 60) - 1, "level_mean": 9.0,
+                          "level_max": 9.0, "readings": 6})
+    assert restarted.summary()["trend"] == after
+    assert restarted.recall_trend(tmp_path / "missing.sqlite") == 0
+
+
+def test_the_restarted_daemon_shows_the_hours_before_its_restart(tmp_path):
+    """`Daemon.alarm_keeper` on a state file of the same model refills the snapshot's trend
+    from ``trend.sqlite``; another model's rows (no state file of its own) are not shown."""
+    import time
+
+    from fdi_daemon.service.config import config_from_dict
+    from fdi_daemon.service.daemon import Daemon
+    from fdi_daemon.service.state_file import write_state
+    from fdi_daemon.service.trend import TrendStore
+    from reliability_support import load_test_model, model_path
+
+    config = config_from_dict({"link": {"kind": "replay", "path": "rec.csv"},
+                               "model": {"path": str(model_path())},
+                               "service": {"state_dir": str(tmp_path)}}, "rig.yaml", tmp_path)
+    model = load_test_model()
+    first = Daemon().alarm_keeper(config, model)
+    assert first.summary()["trend"] is None
+    store = TrendStore(config.output_path(config.alarms["trend"]))
+    now_minute = int(time.time() // 60)
+    for minute in range(now_minute - 90, now_minute):
+        store.append({"minute": minute, "level_mean": 0.3, "level_min": 0.2, "level_max": 0.4,
+                      "baseline": BASELINE, "command_rms_v": 1.0, "readings": 600,
+                      "samples": 15360, "priority": 1, "alarm_state": 1})
+    store.close()
+    other = load_test_model()
+    other.fault_filter.gamma_f += 1.0  # another unit of the level, no state file of its own
+    assert Daemon().alarm_keeper(config, other).summary()["trend"] is None
+    write_state(config.output_path(config.alarms["state_file"]), first.state({}))
+    trend = Daemon().alarm_keeper(config, model).summary()["trend"]
+    shown = [v for v in trend["mean"] if v is not None]
+    assert len(shown) in (9, 10) and set(shown) == {0.3}  # 90 minutes: 9-10 buckets
+    assert set(v for v in trend["max"] if v is not None) == {0.4}

@@ -25,6 +25,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from fdi_daemon.alarms.lifecycle import STATE_CODES, AlarmLifecycle, AlarmSettings
@@ -87,6 +88,11 @@ class AlarmKeeper:
 
     def samples(self, batch: list[Sample]) -> dict[str, Any] | None:
         return self._finished(self.trend.samples(self._clock(), [s.v_in for s in batch]))
+
+    def recall_trend(self, path: str | Path) -> int:
+        """The last hours of the trend store at ``path`` for the snapshot (after a restart);
+        returns the minute rows read."""
+        return self.recent.load(path, self._clock())
 
     def take_pending(self) -> list[dict[str, Any]]:
         """Events of requests answered since the last call (for the loop to emit)."""

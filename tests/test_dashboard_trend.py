@@ -123,3 +123,20 @@ def test_event_rows_at_80x24_stay_whole_with_the_trend_panel():
     assert "20.547 s friction_isolated  Δθ1 +1.6 harmonics" in text
     assert "20.020 s fault_detected     stat 64.7/30 fast" in text
     assert "2.387 s calibrated         samples 256" in text
+
+
+def test_alarm_event_rows_show_priority_step_and_level():
+    snapshot = make_snapshot("friction_isolated", n_alarms=0)
+    common = {"time": 1_780_000_000.0, "alarm_id": 1, "state": "unacknowledged",
+              "shelved": False}
+    snapshot["alarms"] = daemon_events() + [
+        {"t": 20.020, "kind": "alarm_raised", **common, "priority": 1, "level": 1.33,
+         "cause": "fault_detected", "classification": "friction"},
+        {"t": 89.137, "kind": "alarm_priority", **common, "priority": 2, "level": 1.331,
+         "previous": 1, "step": 0.5}]
+    snapshot["alarm"] = alarm_section(wear())
+    text = screen_text(render(snapshot), 80, 24)
+    assert "89.137 s alarm_priority     prio 2 level 1.33" in text
+    assert "20.020 s alarm_raised       prio 1 friction" in text
+    wide = screen_text(render(snapshot), 120, 30)
+    assert "alarm_priority     prio 2 level 1.33 step 0.5" in wide

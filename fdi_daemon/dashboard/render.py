@@ -49,6 +49,12 @@ EVENT_STYLES: dict[str, str] = {
     "bad_sample": "yellow",
     "link_lost": "red",
     "link_restored": "green",
+    "alarm_raised": "bold red",
+    "alarm_priority": "bold red",
+    "alarm_acknowledged": "yellow",
+    "alarm_shelved": "magenta",
+    "alarm_unshelved": "magenta",
+    "alarm_returned": "green",
 }
 
 THETA_NAMES = ("theta1", "theta2")
@@ -71,6 +77,10 @@ EVENT_KEY_FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
     "calibrated": (("samples", "samples"),),
     "data_gap": (("missing_samples", "missing"),),
     "bad_sample": (("count", "count"), ("reason", "")),
+    "alarm_raised": (("priority", "prio"), ("classification", "")),
+    "alarm_priority": (("priority", "prio"), ("level", "level"), ("step", "step")),
+    "alarm_acknowledged": (("by", "by"),),
+    "alarm_returned": (("level", "level"),),
 }
 #: legend marks in the θ plot titles: the trace, the signature level, the band edges
 TRACE_MARK, SIGNATURE_MARK, BAND_MARK = "━", "━", "╍"

@@ -78,8 +78,10 @@ def test_trend_layers_mark_the_steps_up_to_the_next_one_and_break_at_rests():
     assert dashed == pytest.approx([BASELINE + 0.25, BASELINE + 0.5])
     assert y_range[0] < BASELINE and y_range[1] > BASELINE + 0.5 > top
     mean = layers[-1]
-    assert mean.t[0] == pytest.approx(-35 / 6) and mean.t[-1] == 0.0  # hours before now
-    assert [math.isnan(v) for v in mean.y] == [v is None for v in wear()]
+    # a step per bucket, from its start to its end, in hours before now
+    assert mean.t[:3] == pytest.approx([-6.0, -35 / 6, -35 / 6]) and mean.t[-1] == 0.0
+    assert [math.isnan(v) for v in mean.y[::2]] == [v is None for v in wear()]
+    assert [v for v in mean.y[::2] if v == v] == [v for v in mean.y[1::2] if v == v]
 
 
 def test_no_trend_yet_and_the_alarm_states():
@@ -138,5 +140,8 @@ def test_alarm_event_rows_show_priority_step_and_level():
     text = screen_text(render(snapshot), 80, 24)
     assert "89.137 s alarm_priority     prio 2 level 1.33" in text
     assert "20.020 s alarm_raised       prio 1 friction" in text
+    snapshot["alarms"][-2]["classification"] = None  # not known yet at the raise
+    text = screen_text(render(snapshot), 80, 24)
+    assert "alarm_raised       prio 1 " in text and "None" not in text
     wide = screen_text(render(snapshot), 120, 30)
     assert "alarm_priority     prio 2 level 1.33 step 0.5" in wide

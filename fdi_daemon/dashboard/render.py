@@ -439,7 +439,7 @@ def alarm_lines(alarms: list[Any], width: int, rows: int) -> list[Text]:
         key_fields = EVENT_KEY_FIELDS.get(kind, ())
         parts: list[tuple[str, str | None]] = []
         for key, label in key_fields:
-            if key in event:
+            if event.get(key) is not None:
                 value = event[key]
                 if key == "statistic" and "threshold" in event:
                     value = f"{fmt(value, '.3g')}/{fmt(event['threshold'], 'g')}"
@@ -555,10 +555,13 @@ def _trend_layers(alarm: dict[str, Any]) -> tuple[list[Series], tuple[float, flo
     bucket_h = number(trend.get("bucket_s")) / 3600
     if not means or not math.isfinite(bucket_h) or bucket_h <= 0:
         return [], None
-    hours = [(i + 1 - len(means)) * bucket_h for i in range(len(means))]
-    mean = Series(style=TREND_MEAN_STYLE, t=hours, y=[number(v) for v in means])
-    high = Series(style=TREND_MAX_STYLE, t=hours[: len(highs)],
-                  y=[number(v) for v in highs[: len(hours)]])
+    n = len(means)
+    # each bucket a step from its start to its end (hours before now), so that one bucket
+    # alone is a short line, not a dot; a bucket without data (NaN) breaks the line
+    hours = [(i + k - n) * bucket_h for i in range(n) for k in (0, 1)]
+    mean = Series(style=TREND_MEAN_STYLE, t=hours, y=[number(v) for v in means for _ in "ab"])
+    high = Series(style=TREND_MAX_STYLE, t=hours,
+                  y=[number(v) for v in (highs + [None] * n)[:n] for _ in "ab"])
     data = data_range([mean, high])
     if data is None:
         return [], None

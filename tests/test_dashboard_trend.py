@@ -145,3 +145,11 @@ def test_alarm_event_rows_show_priority_step_and_level():
     assert "alarm_raised       prio 1 " in text and "None" not in text
     wide = screen_text(render(snapshot), 120, 30)
     assert "alarm_priority     prio 2 level 1.33 step 0.5" in wide
+
+
+def test_compact_view_names_the_alarm():
+    snapshot = make_snapshot("friction_isolated")
+    snapshot["alarm"] = alarm_section(wear())
+    lines = lines_of(screen_text(render(snapshot), 60, 18))
+    assert len(lines) == 18
+    assert any(line.startswith("alarm ALARM P2 unacknowledged") for line in lines)

@@ -706,6 +706,9 @@ def _compact_layout(snapshot: dict[str, Any], notice: str | None, width: int,
                f" p99 {fmt_duration_us(latency.get('p99'))}"
                f" miss {fmt_count(link.get('deadline_misses'))}", None)),
     ]
+    alarm = snapshot.get("alarm")
+    if isinstance(alarm, dict):  # the alarm an operator handles, no room for its trend
+        summary.append(_line(("alarm", "dim")).append_text(alarm_status(alarm)))
     alarm_rows = 2 if height >= 12 else 1
     layout = Layout()
     parts = [Layout(header(snapshot, notice, width), name="header", size=header_size(notice)),

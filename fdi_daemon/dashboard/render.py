@@ -5,7 +5,8 @@
 
 - standard (>= 80 x 24): header; left column with link health, monitor numbers, model and
   provenance; right column with θ1 and θ2 braille plots (band edges and signature level drawn
-  in) above the alarm list;
+  in), the friction trend of the last hours with the alarm's state (when the snapshot has
+  an ``alarm`` section: a daemon), and the alarm list;
 - larger terminals get wider columns, taller plots, more alarm rows, link details and, from
   120 columns and about 40 rows, the θ2-vs-θ1 plane under the model panel;
 - below 80 x 24 a compact view keeps the state, the numbers, small plots and the last alarms.
@@ -48,6 +49,12 @@ EVENT_STYLES: dict[str, str] = {
     "bad_sample": "yellow",
     "link_lost": "red",
     "link_restored": "green",
+    "alarm_raised": "bold red",
+    "alarm_priority": "bold red",
+    "alarm_acknowledged": "yellow",
+    "alarm_shelved": "magenta",
+    "alarm_unshelved": "magenta",
+    "alarm_returned": "green",
 }
 
 THETA_NAMES = ("theta1", "theta2")
@@ -70,9 +77,23 @@ EVENT_KEY_FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
     "calibrated": (("samples", "samples"),),
     "data_gap": (("missing_samples", "missing"),),
     "bad_sample": (("count", "count"), ("reason", "")),
+    "alarm_raised": (("priority", "prio"), ("classification", "")),
+    "alarm_priority": (("priority", "prio"), ("level", "level"), ("step", "step")),
+    "alarm_acknowledged": (("by", "by"),),
+    "alarm_returned": (("level", "level"),),
 }
 #: legend marks in the θ plot titles: the trace, the signature level, the band edges
 TRACE_MARK, SIGNATURE_MARK, BAND_MARK = "━", "━", "╍"
+#: the trend panel: level mean per bucket, its maximum, the baseline, the alarm steps
+TREND_MEAN_STYLE, TREND_MAX_STYLE = TRACE_STYLE, "blue"
+BASELINE_STYLE, STEP_STYLE = "green", "yellow"
+#: alarm state (lifecycle.STATES, or shelved) -> (label, style) in the trend panel's border
+ALARM_LABELS: dict[str, tuple[str, str]] = {
+    "normal": ("no alarm", "green"),
+    "unacknowledged": ("ALARM P{p} unacknowledged", "bold white on red"),
+    "acknowledged": ("alarm P{p} acknowledged", "bold yellow"),
+    "returned_unacknowledged": ("returned, unacknowledged", "bold yellow"),
+}
 
 
 def render(snapshot: dict[str, Any] | None, notice: str | None = None) -> "DashboardView":
@@ -418,7 +439,7 @@ def alarm_lines(alarms: list[Any], width: int, rows: int) -> list[Text]:
         key_fields = EVENT_KEY_FIELDS.get(kind, ())
         parts: list[tuple[str, str | None]] = []
         for key, label in key_fields:
-            if key in event:
+            if event.get(key) is not None:
                 value = event[key]
                 if key == "statistic" and "threshold" in event:
                     value = f"{fmt(value, '.3g')}/{fmt(event['threshold'], 'g')}"
@@ -526,6 +547,74 @@ def time_span_caption(monitor: dict[str, Any]) -> str:
     return f"t {finite[0]:.1f} … {finite[-1]:.1f} s"
 
 
+def _trend_layers(alarm: dict[str, Any]) -> tuple[list[Series], tuple[float, float] | None]:
+    """The trend's max and mean per bucket against hours before now, the baseline and the
+    alarm steps (baseline + step) up to the first one above the data; and the y range."""
+    trend = _section(alarm, "trend")
+    means, highs = _sequence(trend.get("mean")), _sequence(trend.get("max"))
+    bucket_h = number(trend.get("bucket_s")) / 3600
+    if not means or not math.isfinite(bucket_h) or bucket_h <= 0:
+        return [], None
+    n = len(means)
+    # each bucket a step from its start to its end (hours before now), so that one bucket
+    # alone is a short line, not a dot; a bucket without data (NaN) breaks the line
+    hours = [(i + k - n) * bucket_h for i in range(n) for k in (0, 1)]
+    mean = Series(style=TREND_MEAN_STYLE, t=hours, y=[number(v) for v in means for _ in "ab"])
+    high = Series(style=TREND_MAX_STYLE, t=hours,
+                  y=[number(v) for v in (highs + [None] * n)[:n] for _ in "ab"])
+    data = data_range([mean, high])
+    if data is None:
+        return [], None
+    baseline = number(alarm.get("baseline_level"))
+    base = baseline if math.isfinite(baseline) else 0.0
+    layers = [Series(style=BASELINE_STYLE, level=baseline)] if math.isfinite(baseline) else []
+    for step in sorted(number(v) for v in _sequence(alarm.get("steps"))):
+        if math.isfinite(step):
+            layers.append(Series(style=STEP_STYLE, level=base + step, dashed=True))
+            if base + step > data[1]:
+                break  # the next step to cross; higher ones would squash the trace
+    layers += [high, mean]
+    return layers, padded_range(*data_range(layers))
+
+
+def trend_title(alarm: dict[str, Any]) -> Text:
+    """"━ level ━ max ━ base 0.08 ╍ steps +0.25/0.5/1", each part in its colour."""
+    title = Text()
+    title.append(f"{TRACE_MARK} level", style=TREND_MEAN_STYLE)
+    title.append(f" {TRACE_MARK} max", style=TREND_MAX_STYLE)
+    title.append(f" {TRACE_MARK} base {fmt(alarm.get('baseline_level'), '.3g')}",
+                 style=BASELINE_STYLE)
+    steps = "/".join(fmt(v, ".3g") for v in _sequence(alarm.get("steps")))
+    if steps:
+        title.append(f" {BAND_MARK} steps +{steps}", style=STEP_STYLE)
+    return title
+
+
+def alarm_status(alarm: dict[str, Any]) -> Text:
+    """The alarm's state, priority and shelving, for the trend panel's lower border."""
+    until = number(alarm.get("shelved_until"))
+    if alarm.get("state_code") == 4 and math.isfinite(until):
+        return Text(f" shelved until {_clock(until)[:5]} ", style="bold magenta")
+    state = str(alarm.get("state", "normal"))
+    label, style = ALARM_LABELS.get(state, (state, "bold white"))
+    return Text(f" {label.format(p=fmt_count(alarm.get('priority')))} ", style=style)
+
+
+def trend_panel(alarm: dict[str, Any]) -> Panel:
+    """The friction level of the last hours (the snapshot's ``alarm.trend``: mean and max per
+    bucket) against the baseline and the alarm steps; the alarm's state in the border."""
+    layers, y_range = _trend_layers(alarm)
+    trend = _section(alarm, "trend")
+    hours = len(_sequence(trend.get("mean"))) * number(trend.get("bucket_s")) / 3600
+    span = f"-{hours:.3g} h … now " if layers else ""
+    plot = BraillePlot(series=layers, y_range=y_range, x_range=(-hours, 0.0) if layers else None,
+                       empty_text="no trend yet")
+    subtitle = Text(span, style="dim")
+    subtitle.append_text(alarm_status(alarm))
+    return Panel(plot, title=trend_title(alarm), title_align="left", border_style="cyan",
+                 subtitle=subtitle, subtitle_align="right", padding=(0, 0))
+
+
 # ---------------------------------------------------------------- layouts
 
 def _panel(body, title: str | Text, border: str = "blue", subtitle: str | None = None,
@@ -556,7 +645,11 @@ def _standard_layout(snapshot: dict[str, Any], notice: str | None, width: int,
     if width >= 120 and model_rows >= PLANE_MIN_ROWS + 2 + MODEL_ROWS_WITH_PLANE:
         model_rows = min(len(model_lines(model, inner, model_rows)), MODEL_ROWS_WITH_PLANE)
         model_size = model_rows + 2  # ... unless there is room for the θ plane below it
-    alarm_rows = min(max(5, (body_height - 2) // 3), 20, max(len(alarms), 5))
+    alarm = snapshot.get("alarm")
+    trend_size = (5 if body_height < 40 else 8) if isinstance(alarm, dict) else 0
+    least = 4 if trend_size else 5  # the trend takes one event row from the smallest list
+    alarm_rows = min(max(least, (body_height - 2) // 3 - (trend_size > 0)), 20,
+                     max(len(alarms), least))
     layout = Layout()
     layout.split_column(Layout(header(snapshot, notice, width), name="header",
                                size=header_size(notice)),
@@ -586,11 +679,12 @@ def _standard_layout(snapshot: dict[str, Any], notice: str | None, width: int,
             Layout(_plot_panel(monitor, 0, right_width), name="theta1"),
             Layout(_plot_panel(monitor, 1, right_width), name="theta2"),
         )
-    layout["right"].split_column(
-        plots,
+    layout["right"].split_column(plots)
+    if trend_size:
+        layout["right"].add_split(Layout(trend_panel(alarm), name="trend", size=trend_size))
+    layout["right"].add_split(
         Layout(_panel(Group(*alarm_lines(alarms, right_width - 4, alarm_rows)), alarm_title),
-               name="alarms", size=alarm_rows + 2),
-    )
+               name="alarms", size=alarm_rows + 2))
     return layout
 
 
@@ -612,6 +706,9 @@ def _compact_layout(snapshot: dict[str, Any], notice: str | None, width: int,
                f" p99 {fmt_duration_us(latency.get('p99'))}"
                f" miss {fmt_count(link.get('deadline_misses'))}", None)),
     ]
+    alarm = snapshot.get("alarm")
+    if isinstance(alarm, dict):  # the alarm an operator handles, no room for its trend
+        summary.append(_line(("alarm", "dim")).append_text(alarm_status(alarm)))
     alarm_rows = 2 if height >= 12 else 1
     layout = Layout()
     parts = [Layout(header(snapshot, notice, width), name="header", size=header_size(notice)),

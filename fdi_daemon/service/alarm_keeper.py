@@ -12,6 +12,8 @@ loop thread through three calls, all with the wall clock (it survives restarts):
 - ``samples(batch)``: the valve commands for the trend's operating condition.
 
 Each returns what the loop hands to its outputs: lifecycle events, a finished trend row.
+The finished rows also go into `RecentTrend`, the last hours that ``summary()`` (the
+snapshot's ``alarm`` section) carries as ``trend`` for the dashboard.
 Acknowledge and shelve requests come from the status socket and Modbus server threads
 (`request`); the decision is made at once under a lock, the events are handed to the loop
 (`take_pending`) so that every output still leaves from the loop's thread.
@@ -23,10 +25,12 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from fdi_daemon.alarms.lifecycle import STATE_CODES, AlarmLifecycle, AlarmSettings
 from fdi_daemon.io.sample import Sample
+from fdi_daemon.service.recent_trend import RecentTrend
 from fdi_daemon.service.trend import MinuteAggregator
 
 __all__ = ["AlarmKeeper", "baseline_of"]
@@ -57,6 +61,7 @@ class AlarmKeeper:
             self.event_counts = {str(k): int(v) for k, v in
                                  (stored.get("event_counts") or {}).items()}
         self.trend = MinuteAggregator()
+        self.recent = RecentTrend()
         self.last_t: float | None = None
         self.baseline: float | None = None
 
@@ -79,10 +84,15 @@ class AlarmKeeper:
         with self._lock:
             events = self._stamp(self.lifecycle.step(now, excess))
             self._mark_trend(now)
-        return events, self.trend.level(now, level)
+        return events, self._finished(self.trend.level(now, level))
 
     def samples(self, batch: list[Sample]) -> dict[str, Any] | None:
-        return self.trend.samples(self._clock(), [s.v_in for s in batch])
+        return self._finished(self.trend.samples(self._clock(), [s.v_in for s in batch]))
+
+    def recall_trend(self, path: str | Path) -> int:
+        """The last hours of the trend store at ``path`` for the snapshot (after a restart);
+        returns the minute rows read."""
+        return self.recent.load(path, self._clock())
 
     def take_pending(self) -> list[dict[str, Any]]:
         """Events of requests answered since the last call (for the loop to emit)."""
@@ -91,10 +101,12 @@ class AlarmKeeper:
         return pending
 
     def summary(self) -> dict[str, Any]:
+        now = self._clock()
         with self._lock:
-            return {**self.lifecycle.summary(self._clock()), "baseline_level": self.baseline,
+            return {**self.lifecycle.summary(now), "baseline_level": self.baseline,
                     "steps": list(self.lifecycle.settings.steps),
-                    "remote_acknowledge": self.allow_remote}
+                    "remote_acknowledge": self.allow_remote,
+                    "trend": self.recent.summary(now)}
 
     def state(self, event_counts: dict[str, int]) -> dict[str, Any]:
         """What the state file holds (`fdi_daemon.service.state_file`)."""
@@ -143,6 +155,11 @@ class AlarmKeeper:
     def _stamp(self, events: list[dict[str, Any]]) -> list[dict[str, Any]]:
         """Lifecycle events as daemon events: ``t`` is the last sample time (DESIGN.md)."""
         return [{"t": self.last_t, **e} for e in events]
+
+    def _finished(self, row: dict[str, Any] | None) -> dict[str, Any] | None:
+        if row is not None:
+            self.recent.add(row)
+        return row
 
     def _mark_trend(self, now: float) -> None:
         lc = self.lifecycle

@@ -309,12 +309,15 @@ class Daemon:
         path = config.output_path(alarms["state_file"])
         stored = read_state(path, identity) if path is not None else None
         try:
-            return AlarmKeeper(alarms["settings"], identity, stored=stored,
-                               allow_remote=alarms["allow_remote_acknowledge"])
+            keeper = AlarmKeeper(alarms["settings"], identity, stored=stored,
+                                 allow_remote=alarms["allow_remote_acknowledge"])
         except ValueError as exc:
             log.warning("state file %s: %s: refused, starting with a fresh state", path, exc)
             return AlarmKeeper(alarms["settings"], identity,
                                allow_remote=alarms["allow_remote_acknowledge"])
+        if stored is not None and (trend := config.output_path(alarms["trend"])) is not None:
+            keeper.recall_trend(trend)  # the same model: its last hours
+        return keeper
 
     def link_config(self, config: RigConfig) -> dict[str, Any]:
         if config.simulated_device is None:

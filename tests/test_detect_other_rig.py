@@ -70,7 +70,7 @@ VARIANTS = range(8)
 MISSED = {(4, "test_case_1"), (5, "test_case_1")}
 MISSED_WHY = ("light load (0.60 and 0.70 kg), low contact friction and a noisier residual "
               "(σ_ref 0.077 m/s²): the statistic peaks at 24 and 19.5 against h = 30; the "
-              "slow path raises the alarm 2.8 s after the fault, too late to isolate it "
+              "level path raises the alarm 2.8 s after the fault, too late to isolate it "
               "before the 6 s recording ends")
 
 
@@ -108,10 +108,13 @@ def test_friction_is_detected_and_isolated(variant_model, variant, name, fault_s
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_no_other_fault_is_called_friction(variant_model, variant):
     """On some variants a fault leaves no trace under the 1.4 V sine (clipping at 3 m/s² of a
-    signal that peaks below it) and nothing is raised; what is raised is never friction."""
+    signal that peaks below it) and nothing is raised; what is raised is never friction, also
+    not in the minute after the fault (friction evidence that comes after the isolation
+    timeout turns an other_fault into friction)."""
     model, rig = variant_model(variant), rig_variant(variant)
     for name in NON_FRICTION:
-        assert "friction_isolated" not in [k for k, _ in _kinds(model, record(rig, name))]
+        kinds = [k for k, _ in _kinds(model, record(rig, name, duration_s=64.0))]
+        assert "friction_isolated" not in kinds
 
 
 @pytest.mark.parametrize("name", NON_FRICTION)

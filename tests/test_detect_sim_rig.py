@@ -144,20 +144,33 @@ def _kinds(events):
 SINE = {"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0}
 
 
-def test_friction_that_starts_while_the_guard_holds_is_found_by_the_slow_path():
+def test_friction_that_starts_while_the_guard_holds_is_found_by_the_level_path():
     events = _scenario({"name": "guard", "duration_s": 14.0, "excitation": [
         {"kind": "sine", "amplitude_v": 1.0, "frequency_hz": 6.0, "duration_s": 6.0}, SINE],
         "events": [{"t_s": 6.3, "bearing_supply": 0.45}]})
     assert _kinds(events) == ["fault_detected", "friction_isolated"]
-    assert events[1]["path"] == "slow" and 6.3 < events[1]["t"] < 6.3 + 2.0 + 1.5
+    assert events[1]["path"] == "level" and 6.3 < events[1]["t"] < 6.3 + 2.0 + 1.5
 
 
-def test_creeping_friction_is_found_by_the_slow_path():
+def test_creeping_friction_is_found_by_the_level_path():
     events = _scenario({"name": "creep", "duration_s": 90.0, "excitation": [SINE],
                         "drift": {"bearing_supply": {"times_s": [0, 10, 80, 90],
                                                      "values": [1.0, 1.0, 0.3, 0.3]}}})
     assert _kinds(events) == ["fault_detected", "friction_isolated"]
-    assert events[1]["path"] == "slow"
+    assert events[1]["path"] == "level"
+
+
+def test_friction_that_grows_after_the_isolation_timeout_turns_other_fault_into_friction():
+    """Friction ramped in over 1 s (bearing supply 100 -> 65 %) under a 3.3 + 5 + 8 Hz
+    multisine: the alarm comes 1.1 s after the ramp starts, while the Coulomb increase is
+    still below friction_min_level, so the timeout says other_fault; the evidence follows
+    and the episode becomes friction (one episode)."""
+    events = _scenario({"name": "ramp", "duration_s": 12.0, "excitation": [
+        {"kind": "multisine", "amplitudes_v": [0.6, 0.6, 0.6],
+         "frequencies_hz": [3.3, 5.0, 8.0]}],
+        "drift": {"bearing_supply": {"times_s": [0, 5, 6, 12], "values": [1.0, 1.0, 0.65, 0.65]}}})
+    assert _kinds(events) == ["fault_detected", "other_fault", "friction_isolated"]
+    assert 5.0 < events[1]["t"] < 6.5 and events[3]["t"] < 9.0
 
 
 @pytest.mark.slow

@@ -20,10 +20,16 @@ reference ended: an increase of the Coulomb coefficient by ``friction_min_level`
 the calibrated signature), held for ``track_samples`` ticks, is friction once the fault
 has persisted (the frozen-reference test still above the threshold on samples an
 isolation window after the detection: a knock or glitch does not persist); gain (x̂̈) or offset (1) changes without it, or no
-friction evidence within ``isolation_timeout_s``, are another fault. A slow path catches
-friction that creeps in (wear) or starts while the guard holds: the reference's Coulomb
-coefficient above its calibrated value by ``friction_min_level`` for ``slow_persistence_s``
--> fault_detected, isolated against the calibrated value.
+friction evidence within ``isolation_timeout_s``, are another fault.
+
+The level path catches friction that creeps in (wear), that starts while the guard holds,
+or that is there from the start: the friction level θ1 (eq. 17) above its fault-free value
+by more than its margin for ``slow_persistence_s`` -> fault_detected, and the level itself
+is the evidence. The fault-free value is the commissioning baseline of the operating
+condition (``fdi baseline``; margin max(friction_min_level/2, band_k·σ), computed by the
+monitor) or, without one, the median level of the calibration (margin friction_min_level).
+A friction episode is cleared when the level has been back within half its margin for
+``clear_s`` while the rig moves.
 
 Per tick (``step``) and batch (``run``) give the same events and statistics: the
 monitoring path of ``run`` is vectorised with the same arithmetic (bit-equal), and the
@@ -82,8 +88,12 @@ class DetectorTrace:
 class Detector:
     """Decides on every tick from the pipeline's signals; see the module docstring."""
 
-    def __init__(self, settings: DetectorSettings, fs_hz: float, gamma_f: float) -> None:
+    def __init__(self, settings: DetectorSettings, fs_hz: float, gamma_f: float,
+                 baseline: bool = False) -> None:
+        """``baseline``: the monitor passes the level's excess over a commissioning baseline
+        to ``step``/``run`` (else the calibration's level is the fault-free one)."""
         self.settings = settings
+        self.has_baseline = bool(baseline)
         self.fs_hz = float(fs_hz)
         self.gamma_f = float(gamma_f)
         s = settings
@@ -111,9 +121,10 @@ class Detector:
         self.theta1 = self.theta2 = math.nan
         self.state = "calibrating"
         self._episode: _Episode | None = None
-        self._calibration: list[tuple[float, float, float]] = []
-        self.slow_samples = s.samples(s.slow_persistence_s, fs_hz)
-        self.coulomb_base = math.nan  # θ_c of the reference fit during calibration
+        self._calibration: list[tuple[float, float]] = []
+        self.level_samples = s.samples(s.slow_persistence_s, fs_hz)
+        #: the fault-free friction level without a baseline: θ1's median over the calibration
+        self.level_base = math.nan
         self.restart()
 
     # ------------------------------------------------------------------ state
@@ -125,8 +136,7 @@ class Detector:
         self._v_hist = [0.0] * COMMAND_ORDER  # v[k-1], v[k-2], ...
         self._guard_until = 0
         self._above = 0
-        self._slow_above = 0
-        self._base_above = 0
+        self._level_above = 0
         self._hold_until = self.warmup_samples
         if self.state == "calibrating":
             self._calibration = []
@@ -145,8 +155,7 @@ class Detector:
         return {"tick": self._tick, "res": self.residual_test.get_state(),
                 "cmd": self.command_test.get_state(), "v": list(self._v_hist),
                 "guard": self._guard_until, "above": self._above,
-                "slow": self._slow_above, "base": self._base_above,
-                "calibration": list(self._calibration)}
+                "level": self._level_above, "calibration": list(self._calibration)}
 
     def _restore_state(self, st: dict[str, Any]) -> None:
         self._tick = st["tick"]
@@ -155,8 +164,7 @@ class Detector:
         self._v_hist = list(st["v"])
         self._guard_until = st["guard"]
         self._above = st["above"]
-        self._slow_above = st["slow"]
-        self._base_above = st["base"]
+        self._level_above = st["level"]
         self._calibration = list(st["calibration"])
 
     # ------------------------------------------------------------------ per tick
@@ -165,7 +173,8 @@ class Detector:
              ) -> list[dict[str, Any]]:
         """One tick; returns the events it raised (usually none). ``over_baseline``: the
         friction level's excess over the commissioning baseline in units of its margin,
-        (θ1 − median)/max(friction_min_level, k·σ) (NaN: no baseline, or θ not valid)."""
+        (θ1 − median)/max(friction_min_level/2, k·σ) (NaN: θ not valid; ignored without a
+        baseline)."""
         tick = self._tick
         phi = (g1, g2, xhat, 1.0)
         row = packed_row(phi, r)
@@ -177,38 +186,45 @@ class Detector:
             self._guard_until = tick + self.hold_samples
         self._tick = tick + 1
         self.theta1, self.theta2 = theta1, theta2
-        return self._decide(tick, t, phi, row, r, theta1, theta2, over_baseline)
+        over = self.level_over(theta1, over_baseline)
+        return self._decide(tick, t, phi, row, r, theta1, theta2, over)
+
+    def level_over(self, theta1, over_baseline):
+        """The friction level's excess over its fault-free value in units of its margin
+        (floats or arrays): the monitor's ``over_baseline`` with a commissioning baseline,
+        else (θ1 − the calibration's median level)/friction_min_level (NaN before the
+        calibration, and at rest)."""
+        if self.has_baseline:
+            return over_baseline
+        return (theta1 - self.level_base) / self.settings.friction_min_level
+
+    @property
+    def level_path(self) -> str:
+        """What the level path compares with (event field ``path``, ``friction_evidence``)."""
+        return "baseline" if self.has_baseline else "level"
 
     def _decide(self, tick, t, phi, row, r, theta1, theta2, over) -> list[dict[str, Any]]:
         if self._episode is not None:
             return self._episode.step(self, tick, t, phi, row, r, over)
         if tick < self._hold_until:
-            self._above = self._slow_above = self._base_above = 0
+            self._above = self._level_above = 0
             return []
-        # against the commissioning baseline: from the first valid window, calibrated or not
-        self._base_above = self._base_above + 1 if over > 1.0 else 0
-        if self._base_above >= self.slow_samples:
-            self._above = self._slow_above = self._base_above = 0
-            self._episode = _Episode(self, tick, slow=True, baseline=True)
+        # the level path: from the first valid window against a baseline, else once calibrated
+        self._level_above = self._level_above + 1 if over > 1.0 else 0
+        if self._level_above >= self.level_samples:
+            self._above = self._level_above = 0
+            self._episode = _Episode(self, tick, level=True)
             self.state = "fault_detected"
-            return [self._event(t, "fault_detected", theta1, theta2, path="baseline")]
+            return [self._event(t, "fault_detected", theta1, theta2, path=self.level_path)]
         if self.state == "calibrating":
             return self._calibrate(t, theta1, theta2)
         self._above = self._above + 1 if self._alarm_condition(tick, theta1, theta2) else 0
-        self._slow_above = self._slow_above + 1 if self._slow_condition() else 0
-        fast = self._above >= self.settings.persistence_samples
-        if fast or self._slow_above >= self.slow_samples:
-            self._above = self._slow_above = 0
-            self._episode = _Episode(self, tick, slow=not fast)
+        if self._above >= self.settings.persistence_samples:
+            self._above = self._level_above = 0
+            self._episode = _Episode(self, tick)
             self.state = "fault_detected"
-            return [self._event(t, "fault_detected", theta1, theta2,
-                                path="fast" if fast else "slow")]
+            return [self._event(t, "fault_detected", theta1, theta2, path="fast")]
         return []
-
-    def _slow_condition(self) -> bool:
-        test = self.residual_test
-        return (self.settings.method == "sequential" and test.ok
-                and test.theta[0] - self.coulomb_base >= self.settings.friction_min_level)
 
     def _alarm_condition(self, tick, theta1, theta2) -> bool:
         if self.settings.method == "band":
@@ -217,13 +233,11 @@ class Detector:
                 and self.residual_test.statistic > self.threshold)
 
     def _calibrate(self, t, theta1, theta2) -> list[dict[str, Any]]:
-        test = self.residual_test
-        self._calibration.append((theta1, theta2, test.theta[0] if test.ok else math.nan))
+        self._calibration.append((theta1, theta2))
         if len(self._calibration) < self.calibration_samples:
             return []
         cal = np.array(self._calibration, dtype=float)
-        valid = cal[np.all(np.isfinite(cal[:, :2]), axis=1), :2]
-        coulomb = cal[np.isfinite(cal[:, 2]), 2]
+        valid = cal[np.all(np.isfinite(cal), axis=1)]
         if valid.shape[0] < max(2, self.calibration_samples // 4):
             # the rig was mostly at rest: keep calibrating on the newest samples
             self._calibration = self._calibration[-(self.calibration_samples - 1):]
@@ -233,7 +247,7 @@ class Detector:
         k = self.settings.band_k
         self.band = {"theta1": [float(mean[0] - k * std[0]), float(mean[0] + k * std[0])],
                      "theta2": [float(mean[1] - k * std[1]), float(mean[1] + k * std[1])]}
-        self.coulomb_base = float(np.median(coulomb)) if coulomb.size else math.nan
+        self.level_base = float(np.median(valid[:, 0]))
         self._calibration = []
         self.state = "monitoring"
         return [self._event(t, "calibrated", theta1, theta2, band=self.band,
@@ -308,7 +322,7 @@ class Detector:
         """The per-tick quantities of ``step`` for arrays (advances the tests)."""
         n = len(r)
         ticks = self._tick + np.arange(n)
-        stat, ok, theta_ref = self.residual_test.run(np.column_stack([g1, g2, xhat, np.ones(n)]),
+        stat, ok, _ = self.residual_test.run(np.column_stack([g1, g2, xhat, np.ones(n)]),
                                                      r)
         hist = np.concatenate([self._v_hist[::-1], v_in])  # oldest first
         m = COMMAND_ORDER
@@ -320,71 +334,64 @@ class Detector:
         until = np.maximum(np.maximum.accumulate(until), self._guard_until)
         self._guard_until = int(until[-1])
         self._tick += n
-        return {"ticks": ticks, "stat": stat, "ok": ok, "guard_until": until,
-                "coulomb": theta_ref[0]}
+        return {"ticks": ticks, "stat": stat, "ok": ok, "guard_until": until}
 
-    def _quiet_condition(self, arrays, theta1, theta2) -> tuple[np.ndarray, np.ndarray]:
-        """Per tick: the fast alarm condition and the slow-path condition."""
+    def _quiet_condition(self, arrays, theta1, theta2) -> np.ndarray:
+        """Per tick: the fast alarm condition."""
         ticks = arrays["ticks"]
-        active = ticks >= self._hold_until
         if self.settings.method == "band":
             fast = _outside_band(theta1, theta2, self.band)
-            slow = np.zeros(ticks.size, dtype=bool)
         else:
             fast = arrays["ok"] & (ticks >= arrays["guard_until"]) & (
                 arrays["stat"] > self.threshold)
-            with np.errstate(invalid="ignore"):
-                slow = arrays["ok"] & (arrays["coulomb"] - self.coulomb_base
-                                       >= self.settings.friction_min_level)
-        return fast & active, slow & active
+        return fast & (ticks >= self._hold_until)
 
-    def _baseline_runs(self, arrays, over) -> np.ndarray:
+    def _level_runs(self, arrays, theta1, over_baseline) -> np.ndarray:
+        """Per tick: how long the level has been above its fault-free value's margin."""
         with np.errstate(invalid="ignore"):
-            above = (over > 1.0) & (arrays["ticks"] >= self._hold_until)
-        return _run_lengths(above, self._base_above)
+            above = (self.level_over(theta1, over_baseline) > 1.0) & (
+                arrays["ticks"] >= self._hold_until)
+        return _run_lengths(above, self._level_above)
 
     def _first_event(self, arrays, theta1, theta2, over) -> int | None:
         """Index of the first tick that raises an event, or None."""
-        base_hits = np.flatnonzero(self._baseline_runs(arrays, over) >= self.slow_samples)
-        first_base = int(base_hits[0]) if base_hits.size else None
+        level_hits = np.flatnonzero(self._level_runs(arrays, theta1, over)
+                                    >= self.level_samples)
+        first_level = int(level_hits[0]) if level_hits.size else None
         if self.state == "calibrating":
             active = np.flatnonzero(arrays["ticks"] >= self._hold_until)
             need = self.calibration_samples - len(self._calibration)
-            done = int(active[need - 1]) if active.size >= need else None
-            return min((i for i in (done, first_base) if i is not None), default=None)
-        fast, slow = self._quiet_condition(arrays, theta1, theta2)
-        hits = np.flatnonzero(
-            (_run_lengths(fast, self._above) >= self.settings.persistence_samples)
-            | (_run_lengths(slow, self._slow_above) >= self.slow_samples))
-        first = int(hits[0]) if hits.size else None
-        return min((i for i in (first, first_base) if i is not None), default=None)
+            first = int(active[need - 1]) if active.size >= need else None
+        else:
+            hits = np.flatnonzero(_run_lengths(self._quiet_condition(arrays, theta1, theta2),
+                                               self._above)
+                                  >= self.settings.persistence_samples)
+            first = int(hits[0]) if hits.size else None
+        return min((i for i in (first, first_level) if i is not None), default=None)
 
     def _commit_quiet(self, arrays, theta1, theta2, over) -> None:
-        runs = self._baseline_runs(arrays, over)
+        runs = self._level_runs(arrays, theta1, over)
         if runs.size:
-            self._base_above = int(runs[-1])
+            self._level_above = int(runs[-1])
         if self.state == "calibrating":
             sel = np.flatnonzero(arrays["ticks"] >= self._hold_until)
-            coulomb = np.where(arrays["ok"], arrays["coulomb"], np.nan)
-            self._calibration.extend(zip(theta1[sel].tolist(), theta2[sel].tolist(),
-                                         coulomb[sel].tolist()))
+            self._calibration.extend(zip(theta1[sel].tolist(), theta2[sel].tolist()))
             return
-        fast, slow = self._quiet_condition(arrays, theta1, theta2)
+        fast = self._quiet_condition(arrays, theta1, theta2)
         if fast.size:
             self._above = int(_run_lengths(fast, self._above)[-1])
-            self._slow_above = int(_run_lengths(slow, self._slow_above)[-1])
 
 
 class _Episode:
     """One alarm episode: from fault_detected until cleared (always run per tick)."""
 
-    def __init__(self, det: Detector, tick: int, slow: bool = False,
-                 baseline: bool = False) -> None:
+    def __init__(self, det: Detector, tick: int, level: bool = False) -> None:
+        """``level``: raised by the level path (the level is the evidence), else by the
+        innovation test (fast path)."""
         test = det.residual_test
         self.theta_ref = list(test.theta)
-        # the Coulomb coefficient friction is measured from: just before the change (fast
-        # path), or at calibration (slow path: the reference already holds the friction)
-        self.coulomb_base = det.coulomb_base if slow else self.theta_ref[0]
+        # the Coulomb coefficient of the innovation test's fits just before the change
+        self.coulomb_base = self.theta_ref[0]
         self.sigma2_ref = test.sigma2
         self.post = SlidingSums(det.window_samples, _WIDTH)
         for row in test.recent_rows:  # data since the reference window ended, newest included
@@ -411,12 +418,9 @@ class _Episode:
         # friction persists, a glitch does not: the fault must still be there (the frozen
         # test above h) on a test window made only of samples more than one isolation
         # window after the detection, long after the samples that raised the alarm.
-        # The slow path's alarm is persistence itself (slow_persistence_s of the reference)
-        # and its frozen reference already holds the fault.
-        self.persisted = slow
-        self.slow = slow
-        # raised against the commissioning baseline: the level itself is the evidence
-        self.baseline = baseline
+        # The level path's alarm is persistence itself (slow_persistence_s of the level).
+        self.persisted = level
+        self.level = level
 
     def restart(self, det: Detector) -> None:
         """After a data gap: the windows restart, the episode goes on."""
@@ -472,10 +476,7 @@ class _Episode:
     def _friction_kind(self, det: Detector) -> str | None:
         """Given a rise of the Coulomb coefficient: is it dry friction? ``"harmonics"``: g1
         explains the innovation beyond any linear change of the plant; ``"load_stopped"``:
-        the load has stopped (friction holds it); ``"slow"``: the slow path's alarm (its
-        reference already holds the fault, there is no innovation to test)."""
-        if self.slow:
-            return "slow"
+        the load has stopped (friction holds it)."""
         if self.coulomb_beyond_linear(det) >= det.settings.friction_min_level:
             return "harmonics"
         return "load_stopped" if self.load_stopped(det) else None
@@ -510,31 +511,28 @@ class _Episode:
             theta, _, ok = solve_packed(self.post.sliding, N_REGRESSORS)
             if ok:
                 self.level_change = theta[0] - self.coulomb_base
-                if self.level_change >= s.friction_min_level:
+                if self.level_change >= s.friction_min_level or over > 1.0:
                     kind = self._friction_kind(det)
-        if self.baseline:
-            kind = "baseline" if over > 1.0 else None
-        if det.state == "fault_detected":
+        if self.level:
+            kind = det.level_path if over > 1.0 else None
+        if det.state in ("fault_detected", "other_fault"):
+            # friction evidence that comes after the timeout (a fault that grows) turns an
+            # other_fault into friction; the reverse never happens
             self.track = self.track + 1 if kind else 0
             if self.track >= s.track_samples and math.isnan(self.evidence):
-                # against the baseline: the level's excess over it (units of its margin)
-                self.evidence = over if self.baseline else self.level_change
+                # on the level path: the level's excess over its fault-free value (margins)
+                self.evidence = over if self.level else self.level_change
                 self.evidence_kind = kind
             if not math.isnan(self.evidence) and self.persisted:
                 self.level_change = self.evidence
                 return self._to(det, "friction_isolated", t, theta1, theta2)
-            if self.ticks >= det.timeout_samples:
+            if det.state == "fault_detected" and self.ticks >= det.timeout_samples:
                 return self._to(det, "other_fault", t, theta1, theta2)
-        if det.state == "friction_isolated" and self.baseline:
-            # gone when the level is back within half the margin of the fault-free one
-            normal = over < 0.5
-        elif det.state == "friction_isolated":
-            # gone when the moving reference (which follows the operating point) no longer
-            # holds the friction
-            test = det.residual_test
-            normal = (self.ticks >= det.window_samples + det.lag_samples and test.ok
-                      and test.theta[0] - self.coulomb_base < 0.5 * s.friction_min_level
-                      and _moves_freely(test.reference_sums))
+        if det.state == "friction_isolated":
+            # gone when the level is back within half its margin of the fault-free value,
+            # and the load moves freely (a load that friction holds part of the time shows
+            # little of it in θ, whose regressors describe sliding)
+            normal = over < 0.5 and _moves_freely(det.residual_test.reference_sums)
         else:
             normal = frozen_stat <= det.threshold
         # at rest nothing shows a fault, nor its absence: no clearing
@@ -571,7 +569,8 @@ class _Episode:
     def _clear(self, det, t, theta1, theta2):
         # an episode raised against the baseline: the calibration (if any) saw the friction
         # as normal, so calibrate again on the fault-free rig
-        det.state = "calibrating" if self.baseline or det.band is None else "monitoring"
+        det.state = ("calibrating" if (self.level and det.has_baseline) or det.band is None
+                     else "monitoring")
         det._calibration = []
         det._episode = None
         det._above = 0

@@ -87,9 +87,6 @@ class Monitor:
                               "model's gamma_f is not identified (null): use method sequential "
                               "or calibrate the signature again (docs/identification.md)")
         self.gamma_f = float("nan") if gamma_f is None else float(gamma_f)
-        self.detector = Detector(self.settings, self.fs_hz, self.gamma_f)
-        self.pipeline = Pipeline(model, self.detector.window_samples,
-                                 min_velocity_rms_mps=self.settings.min_velocity_rms_mps)
         self.baseline = None
         self.baseline_note = ("the model has no commissioning baseline: friction present "
                               "when monitoring starts is not reported (run `fdi baseline`)")
@@ -102,6 +99,10 @@ class Monitor:
                                       self.settings.band_k * self.baseline.sigma)
         else:
             log.info(self.baseline_note)
+        self.detector = Detector(self.settings, self.fs_hz, self.gamma_f,
+                                 baseline=self.baseline is not None)
+        self.pipeline = Pipeline(model, self.detector.window_samples,
+                                 min_velocity_rms_mps=self.settings.min_velocity_rms_mps)
         self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))
         self._history: deque = deque(maxlen=HISTORY_POINTS)
         self._samples = 0
@@ -230,7 +231,7 @@ class Monitor:
 
     def over_baseline(self, theta1, v_rms):
         """(θ1 − baseline median)/margin of the bin of the window's velocity RMS; margin =
-        max(friction_min_level, band_k·σ). Above 1: friction beyond the fault-free level."""
+        max(friction_min_level/2, band_k·σ). Above 1: friction beyond the fault-free level."""
         idx = self.baseline.bin_index(v_rms)
         return (theta1 - self.baseline.median[idx]) / self._margin[idx]
 

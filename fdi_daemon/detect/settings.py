@@ -68,16 +68,17 @@ class DetectorSettings:
     """Increase of the Coulomb coefficient (units of the calibrated signature) that counts
     as friction."""
     slow_persistence_s: float = 2.0
-    """Slow path: the reference fit's Coulomb coefficient at least friction_min_level above
-    its calibrated value for this long is a fault (friction that creeps in, or that starts
-    while the guard holds)."""
+    """Level path: the friction level θ1 above its fault-free value (the commissioning
+    baseline, else the calibration's median) by more than its margin for this long is a fault
+    (friction that creeps in, starts while the guard holds, or is there from the start)."""
     track_tolerance: float = 0.15
     """band method: |θ - (1, γ_f)| within this fraction of the signature counts as tracking."""
     track_samples: int = 8
     """Consecutive ticks of friction evidence (sequential: the Coulomb increase above
     friction_min_level; band: θ tracking the signature) before friction is isolated."""
     clear_s: float = 1.0
-    """Back to normal for this long before ``cleared``."""
+    """Back to normal for this long, while the rig moves, before ``cleared`` (friction: the
+    level back within half its margin of the fault-free value)."""
 
     @classmethod
     def from_mapping(cls, mapping: Mapping[str, Any] | None,

@@ -8,6 +8,7 @@ from conftest_detect import MODEL, SCENARIOS, first_event
 from fdi_daemon.cli import main
 from fdi_daemon.detect.baseline import Baseline, fit_baseline
 from fdi_daemon.detect.monitor import Monitor
+from fdi_daemon.detect.settings import DetectorSettings
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.model_file import load_model
 from fdi_daemon.io.recordings import write_recording
@@ -147,16 +148,18 @@ def test_a_broken_baseline_is_one_clear_error(tmp_path, capsys):
 
 def test_friction_present_at_start_and_removed_is_cleared(baseline_model):
     """Raised against the baseline, cleared on the level: bearing supply 45 % from 0 s,
-    restored at 10 s: one episode, cleared after the window has left the friction."""
+    restored at 10 s: one episode, cleared once the level has been back for
+    friction_clear_s."""
+    hold = DetectorSettings().friction_clear_s
     rec = simulate(scenario_from_dict({
-        "name": "friction_at_start_removed", "duration_s": 20.0, "seed": 0,
+        "name": "friction_at_start_removed", "duration_s": 14.0 + hold, "seed": 0,
         "centring_gain_v_per_m": 30.0, "excitation": SINE,
         "events": [{"t_s": 0.0, "bearing_supply": 0.45}, {"t_s": 10.0, "bearing_supply": 1.0}]}))
     events, _ = Monitor(baseline_model).run(rec)
     kinds = [e["kind"] for e in events]
     assert kinds.count("fault_detected") == 1 and "friction_isolated" in kinds
     cleared = first_event(events, "cleared")
-    assert cleared is not None and 10.0 < cleared["t"] < 13.0
+    assert cleared is not None and 10.0 + hold < cleared["t"] < 13.0 + hold
     assert kinds[-1] in ("cleared", "calibrated")  # calibrates once the rig is fault-free
 
 

@@ -9,6 +9,7 @@ import pytest
 
 from conftest_detect import MODEL, SCENARIOS, first_event, scenario_recording, sim_rig_model
 from fdi_daemon.detect.monitor import Monitor
+from fdi_daemon.detect.settings import DetectorSettings
 
 #: (scenario, fault time in the scenario (s), detection target (s), isolation target (s))
 TEST_CASES = [("test_case_1", 3.05, 0.015, 1.5), ("test_case_2", 2.9, 0.035, 0.7)]
@@ -185,11 +186,14 @@ def test_persistent_friction_under_changing_operation_is_one_episode():
 @pytest.mark.parametrize("fault,kind", [({"bearing_supply": 0.0}, "friction_isolated"),
                                         ({"fault": "valve_gain", "value": 0.6}, "other_fault")])
 def test_cleared_when_the_fault_goes_away(fault, kind):
+    """Cleared once the fault has been gone for friction_clear_s (friction) or clear_s."""
+    defaults = DetectorSettings()
+    hold = defaults.friction_clear_s if kind == "friction_isolated" else defaults.clear_s
     off = {"bearing_supply": 1.0} if "bearing_supply" in fault else {**fault, "value": 1.0}
-    events = _scenario({"name": "onoff", "duration_s": 14.0, "excitation": [SINE],
+    events = _scenario({"name": "onoff", "duration_s": 8.0 + hold + 6.0, "excitation": [SINE],
                         "events": [{"t_s": 4.0, **fault}, {"t_s": 8.0, **off}]})
     assert _kinds(events) == ["fault_detected", kind, "cleared"]
-    assert 8.0 < events[-1]["t"] < 8.0 + 3.5
+    assert 8.0 + hold < events[-1]["t"] < 8.0 + hold + 3.5
 
 
 @pytest.mark.parametrize("fault,kind", [({"bearing_supply": 0.35}, "friction_isolated"),

@@ -29,7 +29,7 @@ is the evidence. The fault-free value is the commissioning baseline of the opera
 condition (``fdi baseline``; margin max(friction_min_level/2, band_k·σ), computed by the
 monitor) or, without one, the median level of the calibration (margin friction_min_level).
 A friction episode is cleared when the level has been back within half its margin for
-``clear_s`` while the rig moves.
+``friction_clear_s`` while the rig moves.
 
 Per tick (``step``) and batch (``run``) give the same events and statistics: the
 monitoring path of ``run`` is vectorised with the same arithmetic (bit-equal), and the
@@ -108,6 +108,7 @@ class Detector:
         self.iso_samples = s.samples(s.isolation_window_s, fs_hz)
         self.timeout_samples = max(self.iso_samples, s.samples(s.isolation_timeout_s, fs_hz))
         self.clear_samples = s.samples(s.clear_s, fs_hz)
+        self.friction_clear_samples = s.samples(s.friction_clear_s, fs_hz)
         # the residual test (φ = g1, g2, x̂̈, 1) and the command test (AR(4) of v_in)
         self.residual_test = InnovationTest(N_REGRESSORS, self.window_samples, self.lag_samples,
                                             self.test_samples, s.reference_every_samples,
@@ -533,11 +534,13 @@ class _Episode:
             # and the load moves freely (a load that friction holds part of the time shows
             # little of it in θ, whose regressors describe sliding)
             normal = over < 0.5 and _moves_freely(det.residual_test.reference_sums)
+            needed = det.friction_clear_samples
         else:
             normal = frozen_stat <= det.threshold
+            needed = det.clear_samples
         # at rest nothing shows a fault, nor its absence: no clearing
         self.quiet = self.quiet + 1 if normal and moving else 0
-        if self.quiet >= det.clear_samples:
+        if self.quiet >= needed:
             return self._clear(det, t, theta1, theta2)
         return []
 

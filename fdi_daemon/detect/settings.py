@@ -77,8 +77,13 @@ class DetectorSettings:
     """Consecutive ticks of friction evidence (sequential: the Coulomb increase above
     friction_min_level; band: θ tracking the signature) before friction is isolated."""
     clear_s: float = 1.0
-    """Back to normal for this long, while the rig moves, before ``cleared`` (friction: the
-    level back within half its margin of the fault-free value)."""
+    """A fault other than friction: back to normal (the innovations against the frozen
+    reference) for this long, while the rig moves, before ``cleared``."""
+    friction_clear_s: float = 10.0
+    """Friction: the level back within half its margin of its fault-free value, the load
+    moving freely, for this long while the rig moves, before ``cleared``. Friction goes away
+    by maintenance, not within a second; a stretch of operation at which θ under-reads it
+    (docs/detector.md §4a) must not end the episode."""
 
     @classmethod
     def from_mapping(cls, mapping: Mapping[str, Any] | None,
@@ -106,7 +111,7 @@ class DetectorSettings:
             values[name] = value
         settings = cls(**values)
         for name in ("window_s", "test_window_s", "threshold", "isolation_window_s",
-                     "clear_s", "band_k", "guard_threshold"):
+                     "clear_s", "friction_clear_s", "band_k", "guard_threshold"):
             if getattr(settings, name) <= 0:
                 raise ConfigError(f"{source}.{name} must be > 0")
         return settings

@@ -532,8 +532,11 @@ class _Episode:
         if det.state == "friction_isolated":
             # gone when the level is back within half its margin of the fault-free value,
             # and the load moves freely (a load that friction holds part of the time shows
-            # little of it in θ, whose regressors describe sliding)
-            normal = over < 0.5 and _moves_freely(det.residual_test.reference_sums)
+            # little of it in θ, whose regressors describe sliding), and what raised the
+            # episode is gone: the residual test's innovation against the frozen pre-fault
+            # reference (a level episode's reference may hold the fault: the level alone)
+            normal = (over < 0.5 and (self.level or frozen_stat <= det.threshold)
+                      and _moves_freely(det.residual_test.reference_sums))
             needed = det.friction_clear_samples
         else:
             normal = frozen_stat <= det.threshold

@@ -169,7 +169,7 @@ def test_replay_decides_as_the_daemons_alarm_keeper_against_a_baseline(rig):
     from fdi_daemon.io.recordings import read_recording
     from fdi_daemon.io.sample import Sample
     from fdi_daemon.service.alarm_keeper import AlarmKeeper
-    from fdi_daemon.service.loop import ALARM_INPUTS
+    from fdi_daemon.alarms.lifecycle import DETECTOR_INPUTS
 
     root, model, quiet, creeping = rig
     based = root / "model_baseline.yaml"
@@ -187,7 +187,7 @@ def test_replay_decides_as_the_daemons_alarm_keeper_against_a_baseline(rig):
         clock[0] = float(rec.t[k])
         for event in monitor.step(Sample(k, float(rec.t[k]), float(rec.columns["v_in"][k]),
                                          float(rec.columns["accel"][k]), float("nan"))):
-            if event["kind"] in ALARM_INPUTS:
+            if event["kind"] in DETECTOR_INPUTS:
                 daemon += keeper.detector_event(event)
         if k % stride == 0:
             snapshot = {"t": clock[0], "monitor": monitor.snapshot()}

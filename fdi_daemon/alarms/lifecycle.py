@@ -57,7 +57,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 __all__ = ["AlarmSettings", "AlarmLifecycle", "LIFECYCLE_KINDS", "STATES", "STATE_CODES",
-           "DETECTOR_FAULT_KINDS"]
+           "DETECTOR_FAULT_KINDS", "DETECTOR_INPUTS"]
 
 STATES = ("normal", "unacknowledged", "acknowledged", "returned_unacknowledged")
 #: register codes of the alarm state (4 = shelved, whatever the state underneath)
@@ -66,6 +66,8 @@ STATE_CODES = {"normal": 0, "unacknowledged": 1, "acknowledged": 2,
 LIFECYCLE_KINDS = ("alarm_raised", "alarm_priority", "alarm_acknowledged", "alarm_shelved",
                    "alarm_unshelved", "alarm_returned")
 DETECTOR_FAULT_KINDS = ("fault_detected", "friction_isolated", "other_fault")
+#: the detector events that drive the lifecycle
+DETECTOR_INPUTS = frozenset(DETECTOR_FAULT_KINDS + ("cleared",))
 STATE_VERSION = 1
 #: readings further apart than this (s) are not moving time for the return to normal
 READING_GAP_S = 60.0

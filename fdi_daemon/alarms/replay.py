@@ -25,8 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from fdi_daemon.alarms.lifecycle import AlarmLifecycle, AlarmSettings
-from fdi_daemon.service.loop import ALARM_INPUTS
+from fdi_daemon.alarms.lifecycle import DETECTOR_INPUTS, AlarmLifecycle, AlarmSettings
 
 __all__ = ["STATUS_PERIOD_S", "status_stride", "level_readings", "replay_alarms",
            "alarm_events", "merge_events"]
@@ -56,7 +55,7 @@ def _inputs(events: list[dict[str, Any]], times: np.ndarray, levels: np.ndarray
             ) -> Iterator[tuple[float, float | None, Mapping[str, Any] | None]]:
     """(time, level, event) in time order; at a tie the detector event first."""
     detector = sorted((float(e["t"]), 0, k, None, e) for k, e in enumerate(events)
-                      if e["kind"] in ALARM_INPUTS)  # what the daemon's loop hands on
+                      if e["kind"] in DETECTOR_INPUTS)  # what the daemon's loop hands on
     readings = ((float(t), 1, k, float(v), None) for k, (t, v) in enumerate(zip(times, levels)))
     for now, _, _, level, event in heapq.merge(detector, readings, key=lambda x: x[:3]):
         yield now, level, event

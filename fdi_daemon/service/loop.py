@@ -51,6 +51,7 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from fdi_daemon.alarms.lifecycle import DETECTOR_FAULT_KINDS, DETECTOR_INPUTS
 from fdi_daemon.io.sample import Sample
 
 log = logging.getLogger("fdi.loop")
@@ -59,9 +60,6 @@ log = logging.getLogger("fdi.loop")
 RESTART_STEP_SAMPLES = 256
 #: a deadline miss is logged at most this often (s); the counters count every one
 MISS_LOG_PERIOD_S = 10.0
-ALARM_STATES = ("fault_detected", "friction_isolated", "other_fault")
-#: monitor events that drive the alarm lifecycle
-ALARM_INPUTS = frozenset(ALARM_STATES + ("cleared",))
 
 
 class LatencyHistogram:
@@ -298,7 +296,7 @@ class ServiceLoop:
         self.event_counts[kind] += 1
         self.recent_events.append(event)
         self.outputs.event(event)
-        if self.alarms is not None and kind in ALARM_INPUTS:
+        if self.alarms is not None and kind in DETECTOR_INPUTS:
             self._emit_alarm_events(self.alarms.detector_event(event))
 
     def _emit_alarm_events(self, events: list[dict]) -> None:
@@ -392,6 +390,6 @@ class ServiceLoop:
     def status_text(snap: dict[str, Any]) -> str:
         """The systemd STATUS= line: state, link, alarm count (changes rarely)."""
         link = snap["link"]
-        alarms = sum(snap["counters"].get(k, 0) for k in ALARM_STATES)
+        alarms = sum(snap["counters"].get(k, 0) for k in DETECTOR_FAULT_KINDS)
         up = "up" if link["connected"] else "DOWN"
         return f"{snap['state']}; link {link['kind']} {up}; {alarms} alarm(s)"

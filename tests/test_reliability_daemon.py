@@ -116,3 +116,27 @@ def test_realtime_modbus_tcp_30_s_loses_nothing(tmp_path):
 @pytest.mark.soak
 def test_realtime_modbus_tcp_10_min_without_deadline_miss(tmp_path):
     realtime_run(tmp_path, 600.0, judge_deadlines=True)
+
+
+def test_the_daemons_signal_handlers_hold_until_its_shutdown_is_done(tmp_path, monkeypatch):
+    """A second SIGTERM while the outputs close (a slow disk, a broker far away) is the
+    daemon's, not Python's default that ends the process half-way through its shutdown."""
+    from fdi_daemon.io.recordings import write_recording
+    from fdi_daemon.service.daemon import Daemon
+    from hil_sim.scenarios import load_scenario, simulate
+    from conftest_detect import SCENARIOS
+
+    rec = write_recording(tmp_path / "rec.csv", simulate(
+        load_scenario(SCENARIOS / "test_case_2.yaml"), duration_s=1.0))
+    config = write_config(tmp_path / "rig.yaml", {"kind": "replay", "path": str(rec),
+                                                  "realtime": False}, tmp_path / "state",
+                          recorder=False, status_socket=False)
+    daemon = Daemon(config, echo=lambda line: None)
+    during = []
+    shutdown = daemon.shutdown
+    monkeypatch.setattr(daemon, "shutdown",
+                        lambda: (during.append(signal.getsignal(signal.SIGTERM)), shutdown()))
+    before = signal.getsignal(signal.SIGTERM)
+    assert daemon.run(duration_s=5.0) == 0
+    assert during == [daemon._on_stop]
+    assert signal.getsignal(signal.SIGTERM) == before

@@ -359,8 +359,10 @@ class Daemon:
                 break
         finally:
             self.notifier.stopping("stopping")
-            self._restore_signals(previous)
-            self.shutdown()
+            try:
+                self.shutdown()  # a second SIGTERM meanwhile must not kill it half-way
+            finally:
+                self._restore_signals(previous)
         return 0
 
     def announce(self) -> None:

@@ -12,9 +12,9 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
 
 ``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
 of v_in (`core.kernels.itest_tick`), the operating-point guard, the friction level's
-excess over its fault-free value, and the quiet path's counters (level path, fast path,
-calibration buffer). It returns a code; anything but ``QUIET`` is left to Python
-(`Detector.decide`): an event, the end of the calibration, a running alarm episode.
+excess over its fault-free value, the quiet path's counters (level path, fast path,
+calibration buffer) and a running alarm episode (`detect.episode_kernel`). It returns a
+code; anything but ``QUIET`` is an event that Python formats (`Detector.decide`).
 
 ``monitor_run`` loops ``monitor_tick`` over arrays and stops after a tick that needs
 Python, so ``Monitor.step`` (one call per sample) and ``Monitor.run`` are bit-equal.
@@ -26,12 +26,15 @@ import math
 
 from fdi_daemon.core.compiled import jit
 from fdi_daemon.core.kernels import iir_step, itest_tick, sums_push
+from fdi_daemon.detect import episode_kernel as E
 
 __all__ = ["chain_tick", "chain_run", "detector_tick", "monitor_tick", "monitor_run",
-           "QUIET", "EPISODE", "LEVEL_ALARM", "CALIBRATED", "FAST_ALARM"]
+           "QUIET", "LEVEL_ALARM", "CALIBRATED", "FAST_ALARM", "ISOLATED", "OTHER_FAULT",
+           "CLEARED"]
 
-#: codes of a tick
-QUIET, EPISODE, LEVEL_ALARM, CALIBRATED, FAST_ALARM = range(5)
+#: codes of a tick: nothing to tell, or the event Python formats (the calibration's end is
+#: computed there too)
+QUIET, LEVEL_ALARM, CALIBRATED, FAST_ALARM, ISOLATED, OTHER_FAULT, CLEARED = range(7)
 
 # --- chain ints (offsets from the chain's int base)
 C_METHOD, C_EXTERNAL, C_N, C_WIDTH, C_ORDER = 0, 1, 2, 3, 4  # C_ORDER .. +5: 5 filters
@@ -48,13 +51,13 @@ SUMS_WIDTH = 7  # S11, S12, S22, S1y, S2y, Syy, Σv̂²
 # --- detector ints
 (D_METHOD, D_HAS_BAND, D_HAS_BASELINE, D_STATE, D_TICK, D_GUARD_UNTIL, D_ABOVE,
  D_LEVEL_ABOVE, D_HOLD_UNTIL, D_HOLD, D_LEVEL_SAMPLES, D_PERSISTENCE, D_CAL_COUNT,
- D_CAL_SAMPLES, D_EPISODE, D_BINS, D_RES, D_CMD, D_CHAIN, D_FLOATS, D_CODE) = range(21)
-DET_INTS = 21
+ D_CAL_SAMPLES, D_EPISODE, D_BINS, D_RES, D_CMD, D_CHAIN, D_FLOATS, D_CODE, D_EPI) = range(22)
+DET_INTS = 22
 # --- detector floats
 (E_THRESHOLD, E_GUARD_THRESHOLD, E_LO1, E_HI1, E_LO2, E_HI2, E_LEVEL_BASE, E_FRICTION_MIN,
  E_THETA1, E_THETA2, E_OVER, E_VHIST) = range(12)  # E_VHIST .. +4
 E_CAL = 16  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
-STATE_CALIBRATING = 1
+STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER = range(1, 6)
 
 
 @jit
@@ -192,7 +195,7 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
         over = (theta1 - f[fo + E_LEVEL_BASE]) / f[fo + E_FRICTION_MIN]
     f[fo + E_OVER] = over
     if ii[io + D_EPISODE]:
-        return EPISODE
+        return _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over)
     if tick < ii[io + D_HOLD_UNTIL]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
@@ -201,6 +204,7 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
     if ii[io + D_LEVEL_ABOVE] >= ii[io + D_LEVEL_SAMPLES]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
+        _start(f, ii, io, res, 1)
         return LEVEL_ALARM
     if ii[io + D_STATE] == STATE_CALIBRATING:
         c = ii[io + D_CAL_COUNT]
@@ -219,8 +223,48 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
     if ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
+        _start(f, ii, io, res, 0)
         return FAST_ALARM
     return QUIET
+
+
+@jit
+def _start(f, ii, io, res, level):  # pragma: no cover - jit
+    """fault_detected: an episode starts (level: raised by the level path)."""
+    E.episode_start(f, ii, ii[io + D_EPI], res, level)
+    ii[io + D_EPISODE] = 1
+    ii[io + D_STATE] = STATE_DETECTED
+
+
+@jit
+def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
+             ):  # pragma: no cover - jit
+    """A tick of the running episode, and its transition applied to the detector."""
+    ep = ii[io + D_EPI]
+    band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
+    ref_sums = ii[res + 18] + (ii[res + 1] + 2) * ii[res + 6]
+    change = E.episode_tick(f, ii, ep, tick, ii[io + D_STATE], r, g1, g2, xhat, theta1,
+                            theta2, over, ii[res + 16], ref_sums, band,
+                            f[fo + E_THETA1:fo + E_THETA2 + 1])
+    if change == E.NO_CHANGE:
+        return QUIET
+    if change == E.TO_ISOLATED:
+        ii[io + D_STATE] = STATE_ISOLATED
+        return ISOLATED
+    if change == E.TO_OTHER:
+        ii[io + D_STATE] = STATE_OTHER
+        return OTHER_FAULT
+    # cleared: an episode raised against the baseline saw the friction calibrated as normal,
+    # so calibrate again; the moving reference still holds fault data: hold the guard
+    if (ii[ep + E.P_LEVEL] and ii[io + D_HAS_BASELINE]) or not ii[io + D_HAS_BAND]:
+        ii[io + D_STATE] = STATE_CALIBRATING
+    else:
+        ii[io + D_STATE] = STATE_MONITORING
+    ii[io + D_CAL_COUNT] = 0
+    ii[io + D_EPISODE] = 0
+    ii[io + D_ABOVE] = 0
+    ii[io + D_GUARD_UNTIL] = max(ii[io + D_GUARD_UNTIL], ii[io + D_TICK] + ii[io + D_HOLD])
+    return CLEARED
 
 
 @jit

@@ -122,6 +122,18 @@ class Monitor:
         self._bad_t = math.nan
         self._bad_reason = ""
 
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) every kernel ``step`` and ``run`` call, on a
+        copy of the state: the daemon calls it before it serves, so no tick pays for it."""
+        f, ii = self.arena.f.copy(), self.arena.i.copy()
+        K.monitor_tick(f, ii, self._io, 0.0, 0.0, math.nan, 0.0)
+        one = np.zeros(1)
+        K.monitor_run(f, ii, self._io, one, one, one, one, 0, one.copy(),
+                      np.zeros(1, dtype=np.int8), *(one.copy() for _ in range(4)))
+        from fdi_daemon.detect.episode_kernel import episode_restart
+
+        episode_restart(f, ii, self.detector.epi)
+
     # ------------------------------------------------------------------ per tick
     def step(self, sample: Sample) -> list[dict[str, Any]]:
         """One link tick; returns the events it raised (one compiled call, `monitor_tick`)."""
@@ -139,9 +151,9 @@ class Monitor:
             self._last_seq = seq
             self._v_in = v_in
             self._last_t = t
-            code = K.monitor_tick(self.arena.f, self.arena.i, self._io, v_in, accel,
-                                  math.nan, 0.0)
-            events = self.detector.decide(code, t, pl) if code else []
+            code = K.monitor_tick(self.arena.f, self.arena.i, self._io, float(v_in),
+                                  float(accel), math.nan, 0.0)
+            events = self.detector.decide(code, t) if code else []
             if self._samples % self._history_every == 0:
                 self._history.append((t, self.detector.theta1, self.detector.theta2))
             self._samples += 1
@@ -178,7 +190,7 @@ class Monitor:
         code = K.monitor_tick(self.arena.f, self.arena.i, self._io, float(v_in), float(accel),
                               float(sample.position), xext)
         if code:
-            events.extend(self.detector.decide(code, t, pl))
+            events.extend(self.detector.decide(code, t))
         if self._samples % self._history_every == 0:
             self._history.append((t, self.detector.theta1, self.detector.theta2))
         self._samples += 1
@@ -363,7 +375,7 @@ class Monitor:
             code = int(ii[io + K.D_CODE])
             if code:
                 k = pos - 1
-                events.extend(det.decide(code, float(t[k]), pl))
+                events.extend(det.decide(code, float(t[k])))
                 state[k] = STATES.index(det.state)
                 theta1[k], theta2[k] = det.theta1, det.theta2
         ticks = self._samples + np.arange(n)

@@ -73,7 +73,7 @@ class InnovationTest:
         ph = fo
         row = ph + p + 1
         fifo = row + w
-        ref = fifo + lag * w
+        ref = fifo + lag * (p + 1)
         tst = ref + sums_floats(n, w)
         th = tst + sums_floats(m, 1)
         scr = th + p
@@ -110,22 +110,6 @@ class InnovationTest:
     def ok(self) -> bool:
         return bool(self.arena.i[self.io + 8])
 
-    @property
-    def reference_sums(self) -> list[float]:
-        """The packed sums of the reference window (ending ``lag`` samples ago)."""
-        o = self._o(18) + (self.window_samples + 2) * self._width
-        return self.arena.f[o:o + self._width].tolist()
-
-    @property
-    def recent_rows(self) -> list[tuple[float, ...]]:
-        """The packed rows not yet in the reference window (the last ``lag`` ticks)."""
-        lag, w = self.lag_samples, self._width
-        if lag == 0:
-            return []
-        head, count, fifo = self._o(9), self._o(10), self._o(17)
-        f = self.arena.f
-        return [tuple(f[fifo + ((head + k) % lag) * w:][:w].tolist()) for k in range(count)]
-
     # ------------------------------------------------------------------ per tick
     def step(self, phi: Sequence[float], y: float, row: tuple[float, ...] | None = None
              ) -> float:
@@ -135,7 +119,7 @@ class InnovationTest:
         f = self.arena.f
         f[ph:ph + self.p] = phi
         f[ph + self.p] = y
-        return float(itest_tick(f, self.arena.i, self.io))
+        return float(itest_tick(f, self.arena.i, self.io, False))
 
     # ------------------------------------------------------------------ batch
     def run(self, phi: np.ndarray, y: np.ndarray
@@ -161,7 +145,7 @@ def _itest_run(f, ii, io, phi, y, stat, ok, theta):  # pragma: no cover - jit
         for q in range(p):
             f[ph + q] = phi[k, q]
         f[ph + p] = y[k]
-        stat[k] = itest_tick(f, ii, io)
+        stat[k] = itest_tick(f, ii, io, False)
         ok[k] = ii[io + 8] != 0
         for q in range(p):
             theta[k, q] = f[th + q]

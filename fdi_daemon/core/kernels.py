@@ -10,7 +10,8 @@ reference implementation, so compiled and reference results agree:
 - ``solve_packed``: least squares from packed window sums by LDLᵀ
   (`core.normal_equations.solve_packed`, the float path);
 - ``itest_tick``: one tick of the innovation test (`core.innovation_test`): lagged
-  reference fit, standardised innovation, windowed mean of its square.
+  reference fit, standardised innovation, windowed mean of its square; the FIFO of the lag
+  holds (φ, y), and the packed row is formed while it is added (`push_products`).
 
 Offsets are absolute indices into the float array ``f`` and the int array ``ii``.
 """
@@ -19,8 +20,8 @@ from __future__ import annotations
 
 from fdi_daemon.core.compiled import jit
 
-__all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed", "itest_tick",
-           "ITEST_INTS", "itest_floats"]
+__all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed", "push_products",
+           "packed_row_into", "itest_tick", "ITEST_INTS", "itest_floats"]
 
 
 @jit(inline=True)
@@ -113,23 +114,85 @@ def solve_packed(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
     return sse, ok
 
 
-#: ints of an innovation test block (see `itest_layout`)
+#: ints of an innovation test block (see `InnovationTest`)
 ITEST_INTS = 23
 
 
 def itest_floats(p: int, n: int, lag: int, m: int) -> int:
-    """Floats of an innovation test block."""
+    """Floats of an innovation test block: φ and y, the packed row, the FIFO of (φ, y) of
+    the last ``lag`` ticks, the reference and test sums, θ, scratch, scalars."""
     w = p * (p + 1) // 2 + p + 1
-    return (p + 1) + w + lag * w + sums_floats(n, w) + sums_floats(m, 1) + p \
+    return (p + 1) + w + lag * (p + 1) + sums_floats(n, w) + sums_floats(m, 1) + p \
         + (2 * p * p + p) + 4
 
 
+@jit(inline=True)
+def _column(f, fresh, prev, sl, rp, k, value, end, need):  # pragma: no cover - jit
+    """One column of `sums_push` (the window sums only when ``need``: the reader's tick)."""
+    c = f[fresh + k] + value
+    if end:
+        f[rp + k] = c
+        f[prev + k] = c
+        f[fresh + k] = 0.0
+        if need:
+            f[sl + k] = c
+    else:
+        if need:
+            f[sl + k] = f[prev + k] + (c - f[rp + k])
+        f[rp + k] = c
+        f[fresh + k] = c
+
+
 @jit
-def itest_tick(f, ii, io):  # pragma: no cover - jit
+def push_products(f, ii, ro, n, ip, src, p, need):  # pragma: no cover - jit
+    """`sums_push` of the packed row of (φ, y) = f[src:src+p+1], formed column by column
+    (the products of `innovation_test.packed_row`); the window sums are written only when
+    ``need`` (a block's other sums are exact whatever the ticks that read them)."""
+    w = p * (p + 1) // 2 + p + 1
+    pos = ii[ip]
+    fresh = ro + n * w
+    prev = fresh + w
+    sl = prev + w
+    rp = ro + pos * w
+    if ii[ip + 1] < n:
+        ii[ip + 1] += 1
+    end = pos + 1 == n
+    y = f[src + p]
+    k = 0
+    for a in range(p):
+        for b in range(a, p):
+            _column(f, fresh, prev, sl, rp, k, f[src + a] * f[src + b], end, need)
+            k += 1
+    for a in range(p):
+        _column(f, fresh, prev, sl, rp, k, f[src + a] * y, end, need)
+        k += 1
+    _column(f, fresh, prev, sl, rp, k, y * y, end, need)
+    ii[ip] = 0 if end else pos + 1
+
+
+@jit
+def packed_row_into(f, src, p, dst):  # pragma: no cover - jit
+    """The packed row of (φ, y) = f[src:src+p+1] into f[dst:..]."""
+    y = f[src + p]
+    c = dst
+    for a in range(p):
+        for b in range(a, p):
+            f[c] = f[src + a] * f[src + b]
+            c += 1
+    for a in range(p):
+        f[c] = f[src + a] * y
+        c += 1
+    f[c] = y * y
+
+
+@jit
+def itest_tick(f, ii, io, need):  # pragma: no cover - jit
     """One tick of the innovation test whose ints start at ``io``; φ and y in its phi slots.
 
     Reference fit on the window ending ``lag`` ticks ago (re-solved when tick % every ==
-    phase), σ² = SSE/(N − p) floored, z² = (y − φᵀθ)²/σ², T = mean of z² over M ticks."""
+    phase), σ² = SSE/(N − p) floored, z² = (y − φᵀθ)²/σ², T = mean of z² over M ticks.
+    ``need``: keep the reference window sums current on this tick (for a reader other than
+    the solve)."""
     p = ii[io]
     n = ii[io + 1]
     lag = ii[io + 2]
@@ -138,7 +201,6 @@ def itest_tick(f, ii, io):  # pragma: no cover - jit
     phase = ii[io + 5]
     w = ii[io + 6]
     ph = ii[io + 15]
-    row = ii[io + 16]
     fifo = ii[io + 17]
     ref = ii[io + 18]
     tst = ii[io + 19]
@@ -146,33 +208,25 @@ def itest_tick(f, ii, io):  # pragma: no cover - jit
     scr = ii[io + 21]
     sc = ii[io + 22]
     y = f[ph + p]
-    c = row
-    for a in range(p):
-        for b in range(a, p):
-            f[c] = f[ph + a] * f[ph + b]
-            c += 1
-    for a in range(p):
-        f[c] = f[ph + a] * y
-        c += 1
-    f[c] = y * y
+    tick = ii[io + 7]
+    solve = tick % every == phase
+    need = need or solve
+    q = p + 1
     if lag == 0:
-        sums_push(f, ii, ref, n, w, io + 11, row)
+        push_products(f, ii, ref, n, io + 11, ph, p, need)
     else:
         ln = ii[io + 10]
         head = ii[io + 9]
         if ln == lag:
-            slot = fifo + head * w
-            sums_push(f, ii, ref, n, w, io + 11, slot)
-            for k in range(w):
-                f[slot + k] = f[row + k]
-            ii[io + 9] = (head + 1) % lag
+            slot = fifo + head * q
+            push_products(f, ii, ref, n, io + 11, slot, p, need)
+            ii[io + 9] = head + 1 if head + 1 < lag else 0
         else:
-            slot = fifo + ((head + ln) % lag) * w
-            for k in range(w):
-                f[slot + k] = f[row + k]
+            slot = fifo + (head + ln if head + ln < lag else head + ln - lag) * q
             ii[io + 10] = ln + 1
-    tick = ii[io + 7]
-    if tick % every == phase:
+        for k in range(q):
+            f[slot + k] = f[ph + k]
+    if solve:
         if ii[io + 12] == n:
             sse, ok = solve_packed(f, ref + (n + 2) * w, p, 1e-9, scr, th)
             s2 = sse / (n - p)

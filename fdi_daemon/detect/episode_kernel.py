@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.core.kernels import solve_packed, sums_floats, sums_push
+from fdi_daemon.core.kernels import push_products, solve_packed, sums_floats, sums_push
 
 __all__ = ["episode_start", "episode_restart", "episode_tick", "EPISODE_INTS",
            "episode_floats", "NO_CHANGE", "TO_ISOLATED", "TO_OTHER", "TO_CLEARED",
@@ -117,8 +117,8 @@ def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
         fifo = ii[res + 17]
         post = ii[eo + P_O_POST]
         n = ii[eo + P_N]
-        for k in range(ii[res + 10]):
-            sums_push(f, ii, post, n, W, eo + P_POST, fifo + ((head + k) % lag) * W)
+        for k in range(ii[res + 10]):  # (φ, y) of the ticks since the reference ended
+            push_products(f, ii, post, n, eo + P_POST, fifo + ((head + k) % lag) * 5, 4, True)
     ii[eo + P_TICKS] = 0
     ii[eo + P_HOLD_UNTIL] = 0
     ii[eo + P_PERSISTED] = level

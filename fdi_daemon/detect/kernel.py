@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.core.kernels import iir_step, itest_tick, sums_push
+from fdi_daemon.core.kernels import iir_step, itest_tick, packed_row_into, sums_push
 from fdi_daemon.detect import episode_kernel as E
 
 __all__ = ["chain_tick", "chain_run", "detector_tick", "monitor_tick", "monitor_run",
@@ -173,13 +173,13 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
     f[ph + 2] = xhat
     f[ph + 3] = 1.0
     f[ph + 4] = r
-    stat = itest_tick(f, ii, res)
+    stat = itest_tick(f, ii, res, ii[io + D_EPISODE] != 0)
     hv = fo + E_VHIST
     ph = ii[cmd + 15]
     for q in range(4):
         f[ph + q] = f[hv + q]
     f[ph + 4] = v_in
-    guard_stat = itest_tick(f, ii, cmd)
+    guard_stat = itest_tick(f, ii, cmd, False)
     for q in range(3, 0, -1):
         f[hv + q] = f[hv + q - 1]
     f[hv] = v_in
@@ -243,6 +243,7 @@ def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
     ep = ii[io + D_EPI]
     band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
     ref_sums = ii[res + 18] + (ii[res + 1] + 2) * ii[res + 6]
+    packed_row_into(f, ii[res + 15], 4, ii[res + 16])  # this tick's row of the residual fit
     change = E.episode_tick(f, ii, ep, tick, ii[io + D_STATE], r, g1, g2, xhat, theta1,
                             theta2, over, ii[res + 16], ref_sums, band,
                             f[fo + E_THETA1:fo + E_THETA2 + 1])

@@ -378,11 +378,11 @@ class Monitor:
                 events.extend(det.decide(code, float(t[k])))
                 state[k] = STATES.index(det.state)
                 theta1[k], theta2[k] = det.theta1, det.theta2
-        ticks = self._samples + np.arange(n)
-        hist = np.flatnonzero(ticks % self._history_every == 0)
+        every = self._history_every
+        hist = np.arange((-self._samples) % every, n, every)
         for k in hist[-HISTORY_POINTS:]:
             self._history.append((float(t[k]), float(theta1[k]), float(theta2[k])))
-        keep = np.flatnonzero(ticks % trace_every == 0)
+        keep = np.arange((-self._samples) % trace_every, n, trace_every)
         for name, values in (("t", t), ("accel", accel), ("residual", residual),
                              ("theta1", theta1), ("theta2", theta2),
                              ("statistic", stat), ("state", state), ("v_rms", v_rms)):

@@ -74,6 +74,12 @@ def sums_push(f, ii, ro, n, w, ip, src):  # pragma: no cover - jit
 def solve_packed(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
     """θ (into f[to:to+p]), SSE and ok from the packed sums f[so:..] of p regressors;
     scratch f[scr:scr + 2p² + p]. The float path of `core.normal_equations.solve_packed`."""
+    return _solve(f, so, p, min_pivot, scr, to)
+
+
+@jit(inline=True)
+def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
+    """`solve_packed`, inlined where p is a constant (the loops then unroll)."""
     s = scr
     low = scr + p * p
     d = low + p * p
@@ -143,7 +149,7 @@ def _column(f, fresh, prev, sl, rp, k, value, end, need):  # pragma: no cover - 
         f[fresh + k] = c
 
 
-@jit
+@jit(inline=True)
 def push_products(f, ii, ro, n, ip, src, p, need):  # pragma: no cover - jit
     """`sums_push` of the packed row of (φ, y) = f[src:src+p+1], formed column by column
     (the products of `innovation_test.packed_row`); the window sums are written only when
@@ -192,8 +198,16 @@ def itest_tick(f, ii, io, need):  # pragma: no cover - jit
     Reference fit on the window ending ``lag`` ticks ago (re-solved when tick % every ==
     phase), σ² = SSE/(N − p) floored, z² = (y − φᵀθ)²/σ², T = mean of z² over M ticks.
     ``need``: keep the reference window sums current on this tick (for a reader other than
-    the solve)."""
+    the solve). The monitor's tests have four regressors: that case is compiled with p
+    constant (the same operations, unrolled)."""
     p = ii[io]
+    if p == 4:
+        return _itest_body(f, ii, io, need, 4)
+    return _itest_body(f, ii, io, need, p)
+
+
+@jit(inline=True)
+def _itest_body(f, ii, io, need, p):  # pragma: no cover - jit
     n = ii[io + 1]
     lag = ii[io + 2]
     m = ii[io + 3]
@@ -228,7 +242,7 @@ def itest_tick(f, ii, io, need):  # pragma: no cover - jit
             f[slot + k] = f[ph + k]
     if solve:
         if ii[io + 12] == n:
-            sse, ok = solve_packed(f, ref + (n + 2) * w, p, 1e-9, scr, th)
+            sse, ok = _solve(f, ref + (n + 2) * w, p, 1e-9, scr, th)
             s2 = sse / (n - p)
             f[sc + 1] = s2 if s2 > f[sc] else f[sc]
             ii[io + 8] = 1 if ok else 0

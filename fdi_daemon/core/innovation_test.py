@@ -24,28 +24,17 @@ from fdi_daemon.core.compiled import Arena, jit
 from fdi_daemon.core.kernels import ITEST_INTS, itest_floats, itest_tick, sums_floats
 from fdi_daemon.core.normal_equations import packed_width
 
-__all__ = ["InnovationTest", "packed_row", "innovation"]
+__all__ = ["InnovationTest", "packed_row"]
 
 
 def packed_row(phi: Sequence[float], y: float) -> tuple[float, ...]:
-    """One packed product row (order of `packed_products`)."""
+    """One packed product row (order of `packed_products`; the kernel forms the same
+    products, `core.kernels.push_products`)."""
     p = len(phi)
-    if p == 4:  # the monitor's case, spelled out (it runs twice per tick)
-        a, b, c, d = phi
-        return (a * a, a * b, a * c, a * d, b * b, b * c, b * d, c * c, c * d, d * d,
-                a * y, b * y, c * y, d * y, y * y)
     row = [phi[i] * phi[j] for i in range(p) for j in range(i, p)]
     row.extend(phi[i] * y for i in range(p))
     row.append(y * y)
     return tuple(row)
-
-
-def innovation(y, phi, theta):
-    """e = y - φᵀθ for floats (phi: sequence of floats) or arrays (phi: sequence of columns)."""
-    acc = theta[0] * phi[0]
-    for i in range(1, len(theta)):
-        acc = acc + theta[i] * phi[i]
-    return y - acc
 
 
 class InnovationTest:

@@ -205,20 +205,6 @@ class Detector:
         return self.residual_test.statistic
 
     @property
-    def over(self) -> float:
-        """The newest tick's level excess (`level_over`)."""
-        return float(self.arena.f[self.fo + K.E_OVER])
-
-    def level_over(self, theta1, over_baseline):
-        """The friction level's excess over its fault-free value in units of its margin
-        (floats or arrays): the monitor's ``over_baseline`` with a commissioning baseline,
-        else (θ1 − the calibration's median level)/friction_min_level (NaN before the
-        calibration, and at rest)."""
-        if self.has_baseline:
-            return over_baseline
-        return (theta1 - self.level_base) / self.settings.friction_min_level
-
-    @property
     def level_path(self) -> str:
         """What the level path compares with (event field ``path``, ``friction_evidence``)."""
         return "baseline" if self.has_baseline else "level"

@@ -14,7 +14,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from fdi_daemon.core.compiled import jit
 
 __all__ = ["ReferenceChain"]
 
@@ -22,7 +23,7 @@ __all__ = ["ReferenceChain"]
 PLANT, VELOCITY, GE_SIGN, GE_VELOCITY = range(4)
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _iir(b, a, z, x):
     """One sample through row ``b``/``a`` (a[0] = 1) with state ``z`` (transposed DF-II)."""
     n = z.shape[0]
@@ -33,7 +34,7 @@ def _iir(b, a, z, x):
     return y
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _accumulate(sums, q1, q2, qy, weight):
     """Add (weight 1) or remove (weight -1) one sample's products to the six sums."""
     sums[0] += weight * q1 * q1
@@ -44,7 +45,7 @@ def _accumulate(sums, q1, q2, qy, weight):
     sums[5] += weight * qy * qy
 
 
-@njit(cache=True)
+@jit
 def _tick(b, a, z, ring, sums, idx, v_in, accel, out):
     """One sample of the chain; θ in out[0], out[1] (NaN until the window is full)."""
     xhat = _iir(b[PLANT], a[PLANT], z[PLANT], v_in)
@@ -78,7 +79,7 @@ def _tick(b, a, z, ring, sums, idx, v_in, accel, out):
         out[1] = (sums[0] * sums[4] - sums[1] * sums[3]) / det
 
 
-@njit(cache=True)
+@jit
 def _run(b, a, z, ring, sums, idx, v_in, accel, theta1, theta2):
     out = np.empty(2)
     for k in range(v_in.shape[0]):

@@ -8,55 +8,44 @@ over the last M samples:
 
     T = (1/M) Σ_M z²            (≈ 1 while the reference describes the data)
 
-``step`` (one tick, floats) and ``run`` (arrays) use the same arithmetic in the same order and
-give bit-equal statistics.
+The state lives in a `core.compiled.Arena` (its own, or the monitor's) and every tick is the
+compiled `core.kernels.itest_tick`: ``step`` (one tick) and ``run`` (arrays) are the same
+kernel and give bit-equal statistics.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
 
-from fdi_daemon.core.normal_equations import packed_products, packed_width, solve_packed
-from fdi_daemon.core.sliding_sums import SlidingSums
+from fdi_daemon.core.compiled import Arena, jit
+from fdi_daemon.core.kernels import ITEST_INTS, itest_floats, itest_tick, sums_floats
+from fdi_daemon.core.normal_equations import packed_width
 
-__all__ = ["InnovationTest", "packed_row", "innovation"]
+__all__ = ["InnovationTest", "packed_row"]
 
 
 def packed_row(phi: Sequence[float], y: float) -> tuple[float, ...]:
-    """One packed product row (order of `packed_products`)."""
+    """One packed product row (order of `packed_products`; the kernel forms the same
+    products, `core.kernels.push_products`)."""
     p = len(phi)
-    if p == 4:  # the monitor's case, spelled out (it runs twice per tick)
-        a, b, c, d = phi
-        return (a * a, a * b, a * c, a * d, b * b, b * c, b * d, c * c, c * d, d * d,
-                a * y, b * y, c * y, d * y, y * y)
     row = [phi[i] * phi[j] for i in range(p) for j in range(i, p)]
     row.extend(phi[i] * y for i in range(p))
     row.append(y * y)
     return tuple(row)
 
 
-def innovation(y, phi, theta):
-    """e = y - φᵀθ for floats (phi: sequence of floats) or arrays (phi: sequence of columns)."""
-    acc = theta[0] * phi[0]
-    for i in range(1, len(theta)):
-        acc = acc + theta[i] * phi[i]
-    return y - acc
-
-
 class InnovationTest:
     """Lagged reference fit + windowed mean of squared standardised innovations."""
 
     __slots__ = ("p", "window_samples", "lag_samples", "test_samples", "every", "phase",
-                 "min_sigma2",
-                 "_dof", "_width", "_fifo", "_ref", "_test", "_tick", "theta", "sigma2", "ok",
-                 "statistic")
+                 "min_sigma2", "arena", "fo", "io", "_width")
 
     def __init__(self, p: int, window_samples: int, lag_samples: int, test_samples: int,
-                 every: int = 1, min_sigma: float = 0.0, phase: int = 0) -> None:
+                 every: int = 1, min_sigma: float = 0.0, phase: int = 0,
+                 arena: Arena | None = None) -> None:
         if window_samples <= p:
             raise ValueError("window_samples must exceed the number of regressors")
         self.p = int(p)
@@ -66,137 +55,86 @@ class InnovationTest:
         self.every = int(every)
         self.phase = int(phase) % self.every
         self.min_sigma2 = float(min_sigma) ** 2
-        self._dof = self.window_samples - self.p
-        self._width = packed_width(self.p)
-        self._ref = SlidingSums(self.window_samples, self._width)
-        self._test = SlidingSums(self.test_samples, 1)
+        self._width = w = packed_width(self.p)
+        p, n, lag, m = self.p, self.window_samples, self.lag_samples, self.test_samples
+        self.arena = arena if arena is not None else Arena()
+        self.fo, self.io = fo, io = self.arena.alloc(itest_floats(p, n, lag, m), ITEST_INTS)
+        ph = fo
+        row = ph + p + 1
+        fifo = row + w
+        ref = fifo + lag * (p + 1)
+        tst = ref + sums_floats(n, w)
+        th = tst + sums_floats(m, 1)
+        scr = th + p
+        sc = scr + 2 * p * p + p
+        self.arena.i[io:io + ITEST_INTS] = (p, n, lag, m, self.every, self.phase, w,
+                                            0, 0, 0, 0, 0, 0, 0, 0,
+                                            ph, row, fifo, ref, tst, th, scr, sc)
         self.reset()
 
+    def _o(self, k: int) -> int:
+        return int(self.arena.i[self.io + k])
+
     def reset(self) -> None:
-        self._fifo: deque = deque()
-        self._ref.reset()
-        self._test.reset()
-        self._tick = 0
-        self.theta = [0.0] * self.p
-        self.sigma2 = math.inf
-        self.ok = False
-        self.statistic = math.nan
+        f, ii, io = self.arena.f, self.arena.i, self.io
+        f[self.fo:self._o(22) + 4] = 0.0
+        ii[io + 7:io + 15] = 0
+        sc = self._o(22)
+        f[sc:sc + 4] = (self.min_sigma2, math.inf, math.nan, 0.0)
 
     @property
-    def reference_sums(self) -> list[float]:
-        """The packed sums of the reference window (ending ``lag`` samples ago)."""
-        return list(self._ref.sliding)
+    def theta(self) -> list[float]:
+        th = self._o(20)
+        return self.arena.f[th:th + self.p].tolist()
 
     @property
-    def recent_rows(self) -> list[tuple[float, ...]]:
-        """The packed rows not yet in the reference window (the last ``lag`` ticks)."""
-        return list(self._fifo)
+    def sigma2(self) -> float:
+        return float(self.arena.f[self._o(22) + 1])
 
-    def get_state(self) -> dict:
-        return {"fifo": list(self._fifo), "ref": self._ref.get_state(),
-                "test": self._test.get_state(), "tick": self._tick, "theta": list(self.theta),
-                "sigma2": self.sigma2, "ok": self.ok, "statistic": self.statistic}
+    @property
+    def statistic(self) -> float:
+        return float(self.arena.f[self._o(22) + 2])
 
-    def set_state(self, st: dict) -> None:
-        self._fifo = deque(st["fifo"])
-        self._ref.set_state(st["ref"])
-        self._test.set_state(st["test"])
-        self._tick = st["tick"]
-        self.theta = list(st["theta"])
-        self.sigma2 = st["sigma2"]
-        self.ok = st["ok"]
-        self.statistic = st["statistic"]
+    @property
+    def ok(self) -> bool:
+        return bool(self.arena.i[self.io + 8])
 
     # ------------------------------------------------------------------ per tick
     def step(self, phi: Sequence[float], y: float, row: tuple[float, ...] | None = None
              ) -> float:
-        """One tick; returns the statistic T. ``row``: `packed_row(phi, y)` if already made."""
-        if row is None:
-            row = packed_row(phi, y)
-        fifo = self._fifo
-        fifo.append(row)
-        if len(fifo) > self.lag_samples:
-            sums = self._ref.push(fifo.popleft())
-        else:
-            sums = self._ref.sliding
-        if self._tick % self.every == self.phase:
-            if self._ref.count == self.window_samples:
-                theta, sse, ok = solve_packed(sums, self.p)
-                s2 = sse / self._dof
-                self.theta = theta
-                self.sigma2 = s2 if s2 > self.min_sigma2 else self.min_sigma2
-                self.ok = bool(ok)
-            else:
-                self.ok = False
-        self._tick += 1
-        if self.ok:
-            e = innovation(y, phi, self.theta)
-            z2 = e * e / self.sigma2
-        else:
-            z2 = 0.0
-        self.statistic = self._test.push((z2,))[0] / self.test_samples
-        return self.statistic
+        """One tick; returns the statistic T (``row`` is accepted for compatibility and
+        not needed: the kernel forms the packed row)."""
+        ph = self._o(15)
+        f = self.arena.f
+        f[ph:ph + self.p] = phi
+        f[ph + self.p] = y
+        return float(itest_tick(f, self.arena.i, self.io, False))
 
     # ------------------------------------------------------------------ batch
     def run(self, phi: np.ndarray, y: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
         """Batch ``step``: statistic, reference ok and the reference θ (one array per
         regressor) after every row of phi (n, p)."""
-        n = len(y)
-        p, W = self.p, self._width
-        ticks = self._tick + np.arange(n)
-        rows = packed_products(phi, y)
-        pending = np.array(list(self._fifo), dtype=float).reshape(-1, W)
-        queue = np.concatenate([pending, rows])
-        n_push = max(0, queue.shape[0] - self.lag_samples)
-        start_sums = list(self._ref.sliding)
-        start_count = self._ref.count
-        pushed, counts = self._ref.run(queue[:n_push])
-        self._fifo = deque(tuple(x) for x in queue[n_push:].tolist())
-        offset = n - n_push  # the first `offset` ticks push nothing (the lag is filling)
-        solve_at = np.flatnonzero(ticks % self.every == self.phase)
-        if solve_at.size:
-            j = solve_at - offset
-            has = j >= 0
-            if has.all():  # the usual case: every solve tick has pushed
-                sel = pushed[j]
-                full = counts[j] == self.window_samples
-            else:
-                sel = np.empty((solve_at.size, W))
-                sel[~has] = start_sums
-                sel[has] = pushed[j[has]]
-                full = np.full(solve_at.size, start_count == self.window_samples)
-                full[has] = counts[j[has]] == self.window_samples
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                th, sse, sok = solve_packed(sel.T, p)
-                s2 = sse / self._dof
-            s2 = np.where(s2 > self.min_sigma2, s2, self.min_sigma2)
-            sok = np.asarray(sok) & full
-            # per tick: the latest solve (ok), and the latest solve on a full window (θ, σ²;
-            # a solve on a window that is not full only clears ok, as in step)
-            at = np.full(n, -1)
-            at[solve_at] = np.arange(solve_at.size)
-            at = np.maximum.accumulate(at)
-            src = np.maximum.accumulate(np.where(full, np.arange(solve_at.size), -1))
-            value_src = np.where(at >= 0, src[np.maximum(at, 0)], -1)
-            have = value_src >= 0
-            pick = np.maximum(value_src, 0)
-            theta = [np.where(have, np.asarray(th[q])[pick], self.theta[q]) for q in range(p)]
-            sigma2 = np.where(have, s2[pick], self.sigma2)
-            ok = np.where(at >= 0, sok[np.maximum(at, 0)], self.ok)
-            if have[-1]:
-                self.theta = [float(theta[q][-1]) for q in range(p)]
-                self.sigma2 = float(sigma2[-1])
-            self.ok = bool(ok[-1])
-        else:
-            theta = [np.full(n, self.theta[q]) for q in range(p)]
-            sigma2 = np.full(n, self.sigma2)
-            ok = np.full(n, self.ok)
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            e = innovation(y, [phi[:, i] for i in range(p)], theta)
-            z2 = np.where(ok, e * e / sigma2, 0.0)
-        stat = self._test.run(z2[:, None])[0][:, 0] / self.test_samples
-        self._tick += n
-        if n:
-            self.statistic = float(stat[-1])
-        return stat, ok, theta
+        phi = np.ascontiguousarray(phi, dtype=float).reshape(-1, self.p)
+        y = np.ascontiguousarray(y, dtype=float)
+        n = y.size
+        stat = np.empty(n)
+        ok = np.empty(n, dtype=np.bool_)
+        theta = np.empty((n, self.p))
+        _itest_run(self.arena.f, self.arena.i, self.io, phi, y, stat, ok, theta)
+        return stat, ok, [theta[:, q].copy() for q in range(self.p)]
+
+
+@jit
+def _itest_run(f, ii, io, phi, y, stat, ok, theta):  # pragma: no cover - jit
+    p = ii[io]
+    ph = ii[io + 15]
+    th = ii[io + 20]
+    for k in range(y.shape[0]):
+        for q in range(p):
+            f[ph + q] = phi[k, q]
+        f[ph + p] = y[k]
+        stat[k] = itest_tick(f, ii, io, False)
+        ok[k] = ii[io + 8] != 0
+        for q in range(p):
+            theta[k, q] = f[th + q]

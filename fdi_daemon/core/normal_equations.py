@@ -14,7 +14,7 @@ deficient or nearly so: the rig at rest, collinear regressors).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from fdi_daemon.core.compiled import jit
 
 __all__ = ["packed_width", "packed_products", "solve_packed"]
 
@@ -33,7 +33,7 @@ def packed_products(phi: np.ndarray, y: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True, nogil=True)
+@jit
 def _products_kernel(phi, y, out):  # pragma: no cover - jit
     n, p = phi.shape
     for k in range(n):

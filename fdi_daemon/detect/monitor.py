@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from fdi_daemon.core.compiled import Arena
+from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.baseline import Baseline
 from fdi_daemon.detect.detector import STATES, Detector
 from fdi_daemon.detect.events import make_event
@@ -99,10 +101,17 @@ class Monitor:
                                       self.settings.band_k * self.baseline.sigma)
         else:
             log.info(self.baseline_note)
+        self.arena = Arena()
+        bins = (None if self.baseline is None else
+                (self.baseline.edges_mps, self.baseline.median, self._margin))
         self.detector = Detector(self.settings, self.fs_hz, self.gamma_f,
-                                 baseline=self.baseline is not None)
+                                 baseline=self.baseline is not None, arena=self.arena,
+                                 baseline_bins=bins)
         self.pipeline = Pipeline(model, self.detector.window_samples,
-                                 min_velocity_rms_mps=self.settings.min_velocity_rms_mps)
+                                 min_velocity_rms_mps=self.settings.min_velocity_rms_mps,
+                                 arena=self.arena)
+        self.arena.i[self.detector.io + K.D_CHAIN] = self.pipeline.io
+        self._io = self.detector.io
         self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))
         self._history: deque = deque(maxlen=HISTORY_POINTS)
         self._samples = 0
@@ -113,46 +122,75 @@ class Monitor:
         self._bad_t = math.nan
         self._bad_reason = ""
 
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) every kernel ``step`` and ``run`` call, on a
+        copy of the state: the daemon calls it before it serves, so no tick pays for it."""
+        f, ii = self.arena.f.copy(), self.arena.i.copy()
+        K.monitor_tick(f, ii, self._io, 0.0, 0.0, math.nan, 0.0)
+        one = np.zeros(1)
+        K.monitor_run(f, ii, self._io, one, one, one, one, 0, one.copy(),
+                      np.zeros(1, dtype=np.int8), *(one.copy() for _ in range(4)))
+        from fdi_daemon.detect.episode_kernel import episode_restart
+
+        episode_restart(f, ii, self.detector.epi)
+
     # ------------------------------------------------------------------ per tick
     def step(self, sample: Sample) -> list[dict[str, Any]]:
-        """One link tick; returns the events it raised."""
-        events: list[dict[str, Any]] = []
+        """One link tick; returns the events it raised (one compiled call, `monitor_tick`)."""
         seq = int(sample.seq)
-        if self._last_seq is not None:
-            if seq <= self._last_seq:
-                reason = "duplicate" if seq == self._last_seq else "backwards"
-                return self._bad(sample.t, reason, events)
-            if seq > self._last_seq + 1:
-                events.extend(self._flush_bad())
-                events.append(self._gap(sample.t, seq - self._last_seq - 1))
-        self._last_seq = seq
+        last = self._last_seq
         v_in = sample.v_in
-        accel: float | None = sample.accel
+        accel = sample.accel
+        t = sample.t
+        pl = self.pipeline
+        if (last is not None and seq == last + 1 and not self._bad_run
+                and math.isfinite(v_in) and math.isfinite(accel) and math.isfinite(t)
+                and self.accel_limit_mps2 is None and not pl.needs_position
+                and not pl.external_plant):
+            # the usual tick: nothing to check further, nothing to replace
+            self._last_seq = seq
+            self._v_in = v_in
+            self._last_t = t
+            code = K.monitor_tick(self.arena.f, self.arena.i, self._io, float(v_in),
+                                  float(accel), math.nan, 0.0)
+            events = self.detector.decide(code, t) if code else []
+            if self._samples % self._history_every == 0:
+                self._history.append((t, self.detector.theta1, self.detector.theta2))
+            self._samples += 1
+            return events
+        events: list[dict[str, Any]] = []
+        if last is not None:
+            if seq <= last:
+                reason = "duplicate" if seq == last else "backwards"
+                return self._bad(t, reason, events)
+            if seq > last + 1:
+                events.extend(self._flush_bad())
+                events.append(self._gap(t, seq - last - 1))
+        self._last_seq = seq
         reason = ""
         if not math.isfinite(v_in):
             v_in = self._v_in
             reason = "v_in not finite"
         if not math.isfinite(accel):
-            accel = None
+            accel = math.nan
             reason = reason or "accel not finite"
         elif self.accel_limit_mps2 is not None and abs(accel) >= self.accel_limit_mps2:
-            accel = None
+            accel = math.nan
             reason = reason or "accel saturated"
-        if self.pipeline.needs_position and not math.isfinite(sample.position):
+        if pl.needs_position and not math.isfinite(sample.position):
             reason = reason or "position not finite"  # the velocity holds the last position
-        t = sample.t if math.isfinite(sample.t) else self._last_t + 1.0 / self.fs_hz
+        t = t if math.isfinite(t) else self._last_t + 1.0 / self.fs_hz
         if reason:
             self._bad(t, reason, events)
         elif self._bad_run:
             events.extend(self._flush_bad())
         self._v_in = v_in
         self._last_t = t
-        pl = self.pipeline
-        pl.step(v_in, accel, sample.position)
-        over = (float(self.over_baseline(pl.theta1, pl.v_rms)) if self.baseline is not None
-                else math.nan)
-        events.extend(self.detector.step(t, v_in, pl.xhat, pl.residual, pl.g1, pl.g2,
-                                         pl.theta1, pl.theta2, over))
+        xext = pl.plant.step(v_in) if pl.external_plant else 0.0
+        code = K.monitor_tick(self.arena.f, self.arena.i, self._io, float(v_in), float(accel),
+                              float(sample.position), xext)
+        if code:
+            events.extend(self.detector.decide(code, t))
         if self._samples % self._history_every == 0:
             self._history.append((t, self.detector.theta1, self.detector.theta2))
         self._samples += 1
@@ -317,24 +355,37 @@ class Monitor:
 
     def _run_good(self, t, v_in, accel, position, parts, trace_every
                   ) -> list[dict[str, Any]]:
+        """Good samples with consecutive seq: `monitor_run` over the arrays, handing the
+        ticks that need Python (events, episodes) to `Detector.decide` as ``step`` does."""
         pl = self.pipeline
-        batch = pl.run(v_in, accel, position=position)
-        sol_t1, sol_t2 = pl.thetas(batch)
-        over = (self.over_baseline(sol_t1, batch.v_rms) if self.baseline is not None
-                else None)
-        events, det_trace = self.detector.run(t, v_in, batch.xhat, batch.residual, batch.g1,
-                                              batch.g2, sol_t1, sol_t2, over)
-        theta1, theta2 = det_trace.theta1, det_trace.theta2
+        det = self.detector
         n = len(t)
-        ticks = self._samples + np.arange(n)
-        hist = np.flatnonzero(ticks % self._history_every == 0)
+        v_in = np.ascontiguousarray(v_in, dtype=float)
+        accel = np.ascontiguousarray(accel, dtype=float)
+        position = np.ascontiguousarray(position, dtype=float)
+        xext = pl.external_xhat(v_in)
+        stat, theta1, theta2, residual, v_rms = (np.empty(n) for _ in range(5))
+        state = np.empty(n, dtype=np.int8)
+        f, ii, io = self.arena.f, self.arena.i, self._io
+        events: list[dict[str, Any]] = []
+        pos = 0
+        while pos < n:
+            pos = K.monitor_run(f, ii, io, v_in, accel, position, xext, pos, stat, state,
+                                theta1, theta2, residual, v_rms)
+            code = int(ii[io + K.D_CODE])
+            if code:
+                k = pos - 1
+                events.extend(det.decide(code, float(t[k])))
+                state[k] = STATES.index(det.state)
+                theta1[k], theta2[k] = det.theta1, det.theta2
+        every = self._history_every
+        hist = np.arange((-self._samples) % every, n, every)
         for k in hist[-HISTORY_POINTS:]:
             self._history.append((float(t[k]), float(theta1[k]), float(theta2[k])))
-        keep = np.flatnonzero(ticks % trace_every == 0)
-        for name, values in (("t", t), ("accel", accel), ("residual", batch.residual),
+        keep = np.arange((-self._samples) % trace_every, n, trace_every)
+        for name, values in (("t", t), ("accel", accel), ("residual", residual),
                              ("theta1", theta1), ("theta2", theta2),
-                             ("statistic", det_trace.statistic), ("state", det_trace.state),
-                             ("v_rms", batch.v_rms)):
+                             ("statistic", stat), ("state", state), ("v_rms", v_rms)):
             parts[name].append(np.asarray(values)[keep])
         self._samples += n
         self._v_in = float(v_in[-1])
@@ -359,8 +410,7 @@ class Monitor:
     # ------------------------------------------------------------------ status
     def snapshot(self) -> dict[str, Any]:
         """The ``monitor`` part of the status snapshot (TEAM.md schema)."""
-        pl = self.pipeline
-        wls = pl.wls
+        wls = self.pipeline.wls
         det = self.detector
         syy = wls.sums[5]
         count = wls.count

@@ -13,8 +13,10 @@ Per tick::
 θ is reported as NaN while the rig is at rest: the RMS of v̂ over the window below
 ``min_velocity_rms_mps`` (at rest g1 is the filtered sign of noise, and the fit means nothing).
 
-``step`` uses every block's ``step``; ``run`` uses every block's ``run`` on whole arrays.
-Both leave the blocks in the same state, so a replay can switch between them.
+The blocks (`core.iir.IIRFilter`, the velocity estimators) give the coefficients; the
+state lives in an `Arena` and every tick is the compiled `detect.kernel.chain_tick`:
+``step`` is one call per sample, ``run`` one call over arrays, bit-equal, and a replay can
+switch between them.
 """
 
 from __future__ import annotations
@@ -24,10 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fdi_daemon.core.compiled import Arena
 from fdi_daemon.core.iir import IIRFilter
-from fdi_daemon.core.sliding_sums import SlidingSums
+from fdi_daemon.core.kernels import sums_floats
 from fdi_daemon.core.velocity_observer import velocity_from_settings
-from fdi_daemon.core.window_ls import MIN_RCOND, WindowLS, solve_sums
+from fdi_daemon.core.window_ls import MIN_RCOND, solve_sums
+from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.settings import velocity_settings
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.model_file import FdiModel
@@ -50,16 +54,54 @@ class PipelineBatch:
     v_rms: np.ndarray  # the window's velocity RMS (m/s): the operating condition
 
 
+class WindowView:
+    """Eq. (17) of the newest window, as the kernel left it (θ, SSE, ok, sums, count)."""
+
+    __slots__ = ("_pl", "window_samples", "min_rcond", "min_mean_square")
+
+    def __init__(self, pipeline: "Pipeline", window_samples: int, min_rcond: float) -> None:
+        self._pl = pipeline
+        self.window_samples = window_samples
+        self.min_rcond = min_rcond
+        self.min_mean_square = (0.0, 0.0)
+
+    @property
+    def theta1(self) -> float:
+        return self._pl._out(K.O_WT1)
+
+    @property
+    def theta2(self) -> float:
+        return self._pl._out(K.O_WT2)
+
+    @property
+    def ok(self) -> bool:
+        return bool(self._pl._out(K.O_WOK))
+
+    @property
+    def sse(self) -> float:
+        return self._pl._out(K.O_WSSE)
+
+    @property
+    def count(self) -> int:
+        return int(self._pl.arena.i[self._pl.io + K.C_COUNT])
+
+    @property
+    def sums(self) -> tuple[float, ...]:
+        """Current (S11, S12, S22, S1y, S2y, Syy)."""
+        pl = self._pl
+        so = int(pl.arena.i[pl.io + K.C_SUMS]) + (self.window_samples + 2) * K.SUMS_WIDTH
+        return tuple(pl.arena.f[so:so + 6].tolist())
+
+
 class Pipeline:
     """Ĝ, residual, velocity, G_e regressors and the window least squares of one rig."""
 
     __slots__ = ("plant", "velocity", "model_velocity", "needs_position", "ge_sign",
-                 "ge_velocity", "wls", "speed",
-                 "min_v2_sum", "window_samples",
-                 "xhat", "residual", "v", "g1", "g2", "moving", "v_rms", "theta1", "theta2")
+                 "ge_velocity", "wls", "window_samples", "external_plant", "arena", "fo",
+                 "io", "_zo", "_zn", "_out_o")
 
     def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = MIN_RCOND,
-                 min_velocity_rms_mps: float = 0.0) -> None:
+                 min_velocity_rms_mps: float = 0.0, arena: Arena | None = None) -> None:
         ff = model.fault_filter
         if ff is None:
             raise ConfigError("the model has no fault_filter (G_e, γ_f): run `fdi signature` "
@@ -76,26 +118,95 @@ class Pipeline:
             self.plant = nominal_plant(model)
         else:
             self.plant = IIRFilter(model.plant_b, model.plant_a)
+        self.external_plant = not isinstance(self.plant, IIRFilter)
         b_e = np.concatenate([np.zeros(int(ff.nk)), np.asarray(ff.b, dtype=float)])
         self.ge_sign = IIRFilter(b_e, ff.f)
         self.ge_velocity = IIRFilter(b_e, ff.f)
-        self.wls = WindowLS(window_samples, min_rcond=min_rcond)
-        self.speed = SlidingSums(window_samples, 1)  # Σ v̂² over the window
-        self.min_v2_sum = float(min_velocity_rms_mps) ** 2 * window_samples
-        self.window_samples = window_samples
-        self._clear()
+        self.window_samples = n = int(window_samples)
+        self.wls = WindowView(self, n, float(min_rcond))
+        vel = self.velocity
+        if self.model_velocity:
+            vel_a, vel_b, method = vel.model_path, vel.residual_path, 1
+        elif self.needs_position:
+            vel_a, vel_b, method = vel.position_path, vel.accel_path, 2
+        else:
+            vel_a, vel_b, method = vel, None, 0
+        plant = None if self.external_plant else self.plant
+        filters = [plant, vel_a, vel_b, self.ge_sign, self.ge_velocity]
+        width = max(f.b.size for f in filters if f is not None)
+        self.arena = arena if arena is not None else Arena()
+        n_float = 5 * (3 * width - 1) + sums_floats(n, K.SUMS_WIDTH) + K.SUMS_WIDTH + K.CHAIN_OUT
+        self.fo, self.io = fo, io = self.arena.alloc(n_float, K.CHAIN_INTS)
+        b_o, a_o = fo, fo + 5 * width
+        self._zo = z_o = a_o + 5 * width
+        sums_o = z_o + 5 * (width - 1)
+        row_o = sums_o + sums_floats(n, K.SUMS_WIDTH)
+        self._out_o = out_o = row_o + K.SUMS_WIDTH
+        self._zn = sums_o - z_o
+        f, ii = self.arena.f, self.arena.i
+        orders = []
+        for r, filt in enumerate(filters):
+            if filt is None:
+                orders.append(0)
+                continue
+            f[b_o + r * width:b_o + r * width + filt.b.size] = filt.b
+            f[a_o + r * width:a_o + r * width + filt.a.size] = filt.a
+            orders.append(filt.b.size - 1)
+        ii[io:io + K.CHAIN_INTS] = (method, int(self.external_plant), n, width, *orders,
+                                    0, 0, b_o, a_o, z_o, sums_o, row_o, out_o)
+        f[out_o + K.O_MIN_V2] = float(min_velocity_rms_mps) ** 2 * n
+        f[out_o + K.O_MIN_RCOND] = float(min_rcond)
+        self.reset()
 
-    def _clear(self) -> None:
-        self.xhat = self.residual = self.v = self.g1 = self.g2 = self.v_rms = 0.0
-        self.moving = False
-        self.theta1 = self.theta2 = float("nan")
+    def _out(self, k: int) -> float:
+        return float(self.arena.f[self._out_o + k])
+
+    @property
+    def xhat(self) -> float:
+        return self._out(K.O_XHAT)
+
+    @property
+    def residual(self) -> float:
+        return self._out(K.O_R)
+
+    @property
+    def v(self) -> float:
+        return self._out(K.O_V)
+
+    @property
+    def g1(self) -> float:
+        return self._out(K.O_G1)
+
+    @property
+    def g2(self) -> float:
+        return self._out(K.O_G2)
+
+    @property
+    def theta1(self) -> float:
+        return self._out(K.O_T1)
+
+    @property
+    def theta2(self) -> float:
+        return self._out(K.O_T2)
+
+    @property
+    def moving(self) -> bool:
+        return bool(self._out(K.O_MOVING))
+
+    @property
+    def v_rms(self) -> float:
+        return self._out(K.O_VRMS)
 
     def reset(self) -> None:
         """Zero every state (after a data gap)."""
-        for block in (self.plant, self.velocity, self.ge_sign, self.ge_velocity, self.wls,
-                      self.speed):
-            block.reset()
-        self._clear()
+        f, ii, io = self.arena.f, self.arena.i, self.io
+        f[self._zo:self._out_o + K.O_LAST_POS + 1] = 0.0  # filters, sums, row, signals
+        ii[io + K.C_POS] = ii[io + K.C_COUNT] = 0
+        out = self._out_o
+        f[out + K.O_T1] = f[out + K.O_T2] = f[out + K.O_WT1] = f[out + K.O_WT2] = math.nan
+        f[out + K.O_WSSE] = f[out + K.O_LAST_POS] = math.nan
+        if self.external_plant:
+            self.plant.reset()
 
     def step(self, v_in: float, accel: float | None, position: float = math.nan) -> None:
         """Advance one tick; results in the attributes and in ``wls`` (θ, sums, ok).
@@ -104,25 +215,15 @@ class Pipeline:
         velocity estimator integrates the model's acceleration instead of a bad value.
         ``position`` (m) is read only by the position observer (NaN: hold the last one).
         """
-        xhat = self.plant.step(v_in)
-        if accel is None:
-            accel = xhat
-        r = accel - xhat
-        if self.model_velocity:
-            v = self.velocity.step(accel, xhat)
-        elif self.needs_position:
-            v = self.velocity.step(accel, position)
-        else:
-            v = self.velocity.step(accel)
-        s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
-        g1 = self.ge_sign.step(s)
-        g2 = self.ge_velocity.step(v)
-        t1, t2 = self.wls.step(g1, g2, r)
-        v2_sum = self.speed.push((v * v,))[0]
-        self.moving = moving = v2_sum >= self.min_v2_sum
-        self.v_rms = math.sqrt(max(v2_sum, 0.0) / self.window_samples)
-        self.theta1, self.theta2 = (t1, t2) if moving else (float("nan"), float("nan"))
-        self.xhat, self.residual, self.v, self.g1, self.g2 = xhat, r, v, g1, g2
+        xext = self.plant.step(v_in) if self.external_plant else 0.0
+        K.chain_tick(self.arena.f, self.arena.i, self.io, float(v_in),
+                     math.nan if accel is None else float(accel), float(position), xext)
+
+    def external_xhat(self, v_in: np.ndarray) -> np.ndarray:
+        """x̂̈ of a plant the kernel does not hold (effects), else zeros (not read)."""
+        if self.external_plant:
+            return np.ascontiguousarray(self.plant.run(v_in), dtype=float)
+        return np.zeros(v_in.size)
 
     def run(self, v_in: np.ndarray, accel: np.ndarray, bad_accel: np.ndarray | None = None,
             position: np.ndarray | None = None) -> PipelineBatch:
@@ -130,33 +231,21 @@ class Pipeline:
 
         ``bad_accel``: a mask of samples to replace by x̂̈ (``step(v, None)``); ``position``:
         the position column (None: not carried, all NaN)."""
-        v_in = np.asarray(v_in, dtype=float)
-        accel = np.asarray(accel, dtype=float)
-        xhat = self.plant.run(v_in)
+        v_in = np.ascontiguousarray(v_in, dtype=float)
+        accel = np.ascontiguousarray(accel, dtype=float)
         if bad_accel is not None and bad_accel.any():
-            accel = np.where(bad_accel, xhat, accel)
-        r = accel - xhat
-        if self.model_velocity:
-            v = self.velocity.run(accel, xhat)
-        elif self.needs_position:
-            v = self.velocity.run(accel, np.full(accel.shape, np.nan) if position is None
-                                  else np.asarray(position, dtype=float))
-        else:
-            v = self.velocity.run(accel)
-        g1 = self.ge_sign.run(np.sign(v))
-        g2 = self.ge_velocity.run(v)
-        sums, counts = self.wls.run_sums(g1, g2, r)
-        v2_sum = self.speed.run((v * v)[:, None])[0][:, 0]
-        moving = v2_sum >= self.min_v2_sum
-        v_rms = np.sqrt(np.maximum(v2_sum, 0.0) / self.window_samples)
-        if v.size:
-            self.xhat, self.residual, self.v = float(xhat[-1]), float(r[-1]), float(v[-1])
-            self.g1, self.g2 = float(g1[-1]), float(g2[-1])
-            self.moving = bool(moving[-1])
-            self.v_rms = float(v_rms[-1])
-            wls = self.wls
-            self.theta1, self.theta2 = ((wls.theta1, wls.theta2) if self.moving
-                                        else (float("nan"), float("nan")))
+            accel = np.where(bad_accel, np.nan, accel)
+        n = v_in.size
+        position = (np.full(n, np.nan) if position is None
+                    else np.ascontiguousarray(position, dtype=float))
+        out = [np.empty(n) for _ in range(5)]
+        sums = np.empty((n, 6))
+        counts = np.empty(n, dtype=np.int64)
+        moving = np.empty(n, dtype=np.bool_)
+        v_rms = np.empty(n)
+        K.chain_run(self.arena.f, self.arena.i, self.io, v_in, accel, position,
+                    self.external_xhat(v_in), *out, sums, counts, moving, v_rms)
+        xhat, r, v, g1, g2 = out
         return PipelineBatch(xhat=xhat, residual=r, velocity=v, g1=g1, g2=g2, sums=sums,
                              counts=counts, moving=moving, v_rms=v_rms)
 

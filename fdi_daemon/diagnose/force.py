@@ -37,9 +37,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from scipy import signal
 from scipy.optimize import least_squares as least_squares_nl
+
+from fdi_daemon.core.compiled import jit
 
 #: effects that are forces on the moving mass
 FORCE_EFFECTS = ("coulomb_friction", "viscous_friction", "stribeck_friction",
@@ -68,7 +69,7 @@ def kinds(name: str, param: float | None) -> list[tuple[int, float]]:
     raise ValueError(f"{name} is not a force effect")
 
 
-@njit(cache=True)
+@jit
 def _df2t(b, a, s, x):
     out = b[0] * x + s[0]
     n = s.size
@@ -78,7 +79,7 @@ def _df2t(b, a, s, x):
     return out
 
 
-@njit(cache=True)
+@jit
 def _states(chain_n, vb0, s1, s2, prev, fs, y):
     """(v, x) the state chain would give for output y this sample (no state change)."""
     if chain_n == 0:
@@ -89,7 +90,7 @@ def _states(chain_n, vb0, s1, s2, prev, fs, y):
     return (y - prev[0]) * fs, y
 
 
-@njit(cache=True)
+@jit
 def _phi_k(kind, par, v, x):
     if kind == 0:
         return 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
@@ -109,7 +110,7 @@ def _phi_k(kind, par, v, x):
 _PASSES = 4
 
 
-@njit(cache=True)
+@jit
 def _slope(chain_n, vb0, fs):
     """dv/dy of the state chain this sample (`_states` is affine in y)."""
     if chain_n == 0:
@@ -119,7 +120,7 @@ def _slope(chain_n, vb0, fs):
     return fs
 
 
-@njit(cache=True)
+@jit
 def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs,
             phi_out, v_out):
     n = a.size - 1

@@ -260,11 +260,14 @@ class Daemon:
 
     # ------------------------------------------------------------------ building
     def prepare(self, config: RigConfig) -> tuple[FdiModel, Any, dict[str, Any]]:
-        """Model, monitor and link settings of a config: checks, nothing opened yet."""
+        """Model, monitor and link settings of a config: checks, nothing opened yet. The
+        monitor's kernels are compiled (or loaded from the cache) here, before serving."""
         model = model_with_overrides(config)
         from fdi_daemon.detect.monitor import Monitor
 
-        return model, Monitor(model), self.link_config(config)
+        monitor = Monitor(model)
+        monitor.warm_up()
+        return model, monitor, self.link_config(config)
 
     def assemble(self, config: RigConfig, model: FdiModel, monitor: Any,
                  link_config: dict[str, Any]) -> tuple[ServiceLoop, Sinks, Any]:

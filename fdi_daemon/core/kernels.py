@@ -1,0 +1,263 @@
+"""Compiled per-sample building blocks on flat state arrays (`core.compiled.Arena`).
+
+Each helper does the arithmetic of one streaming block, in the order of the block's
+reference implementation, so compiled and reference results agree:
+
+- ``iir_step``: a B/A filter in transposed direct form II (the recursion of
+  ``scipy.signal.lfilter``; Ĝ of eq. 1, G_e of eq. 15, the velocity filters);
+- ``sums_push``: window sums of the last N rows, cut in blocks of N rows (exact at the end
+  of every block, no drift; the window sums of eqs. 16–17);
+- ``solve_packed``: least squares from packed window sums by LDLᵀ
+  (`core.normal_equations.solve_packed`, the float path);
+- ``itest_tick``: one tick of the innovation test (`core.innovation_test`): lagged
+  reference fit, standardised innovation, windowed mean of its square; the FIFO of the lag
+  holds (φ, y), and the packed row is formed while it is added (`push_products`).
+
+Offsets are absolute indices into the float array ``f`` and the int array ``ii``.
+"""
+
+from __future__ import annotations
+
+from fdi_daemon.core.compiled import jit
+
+__all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed", "push_products",
+           "packed_row_into", "itest_tick", "ITEST_INTS", "itest_floats"]
+
+
+@jit(inline=True)
+def iir_step(f, bo, ao, zo, n, x):  # pragma: no cover - jit
+    """One sample through b = f[bo:bo+n+1], a = f[ao:..] (a0 = 1), state f[zo:zo+n]."""
+    if n == 0:
+        return f[bo] * x
+    y = f[bo] * x + f[zo]
+    for i in range(n - 1):
+        f[zo + i] = f[zo + i + 1] + f[bo + i + 1] * x - f[ao + i + 1] * y
+    f[zo + n - 1] = f[bo + n] * x - f[ao + n] * y
+    return y
+
+
+def sums_floats(n: int, w: int) -> int:
+    """Floats of a sums block: ring (n rows), fresh, previous total, sliding (w each)."""
+    return (n + 3) * w
+
+
+@jit(inline=True)
+def sums_push(f, ii, ro, n, w, ip, src):  # pragma: no cover - jit
+    """Push row f[src:src+w] into the sums block at ``ro`` (pos, count in ii[ip], ii[ip+1]);
+    the window sums are then at ro + (n + 2)·w (`core.sliding_sums`)."""
+    pos = ii[ip]
+    fresh = ro + n * w
+    prev = fresh + w
+    sl = prev + w
+    rp = ro + pos * w
+    if ii[ip + 1] < n:
+        ii[ip + 1] += 1
+    if pos + 1 == n:  # end of the block: exact
+        for k in range(w):
+            c = f[fresh + k] + f[src + k]
+            f[rp + k] = c
+            f[sl + k] = c
+            f[prev + k] = c
+            f[fresh + k] = 0.0
+        ii[ip] = 0
+    else:
+        for k in range(w):
+            c = f[fresh + k] + f[src + k]
+            before = f[rp + k]
+            f[rp + k] = c
+            f[sl + k] = f[prev + k] + (c - before)
+            f[fresh + k] = c
+        ii[ip] = pos + 1
+
+
+@jit
+def solve_packed(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
+    """θ (into f[to:to+p]), SSE and ok from the packed sums f[so:..] of p regressors;
+    scratch f[scr:scr + 2p² + p]. The float path of `core.normal_equations.solve_packed`."""
+    return _solve(f, so, p, min_pivot, scr, to)
+
+
+@jit(inline=True)
+def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
+    """`solve_packed`, inlined where p is a constant (the loops then unroll)."""
+    s = scr
+    low = scr + p * p
+    d = low + p * p
+    k = so
+    for i in range(p):
+        for j in range(i, p):
+            f[s + i * p + j] = f[k]
+            k += 1
+    sy = k
+    syy = f[k + p]
+    ok = True
+    for j in range(p):
+        acc = f[s + j * p + j]
+        for m in range(j):
+            acc = acc - f[low + j * p + m] * f[low + j * p + m] * f[d + m]
+        f[d + j] = acc
+        ok = ok & (acc > min_pivot * f[s + j * p + j])
+        for i in range(j + 1, p):
+            acc = f[s + j * p + i]
+            for m in range(j):
+                acc = acc - f[low + i * p + m] * f[low + j * p + m] * f[d + m]
+            f[low + i * p + j] = acc / f[d + j] if f[d + j] != 0.0 else acc * 0.0
+    # forward L z = s_y (z kept in θ's slots), then θ backward
+    for i in range(p):
+        acc = f[sy + i]
+        for m in range(i):
+            acc = acc - f[low + i * p + m] * f[to + m]
+        f[to + i] = acc
+    for i in range(p - 1, -1, -1):
+        zi = f[to + i]
+        acc = zi / f[d + i] if f[d + i] != 0.0 else zi * 0.0
+        for m in range(i + 1, p):
+            acc = acc - f[low + m * p + i] * f[to + m]
+        f[to + i] = acc
+    sse = syy
+    for i in range(p):
+        sse = sse - f[to + i] * f[sy + i]
+    return sse, ok
+
+
+#: ints of an innovation test block (see `InnovationTest`)
+ITEST_INTS = 23
+
+
+def itest_floats(p: int, n: int, lag: int, m: int) -> int:
+    """Floats of an innovation test block: φ and y, the packed row, the FIFO of (φ, y) of
+    the last ``lag`` ticks, the reference and test sums, θ, scratch, scalars."""
+    w = p * (p + 1) // 2 + p + 1
+    return (p + 1) + w + lag * (p + 1) + sums_floats(n, w) + sums_floats(m, 1) + p \
+        + (2 * p * p + p) + 4
+
+
+@jit(inline=True)
+def _column(f, fresh, prev, sl, rp, k, value, end, need):  # pragma: no cover - jit
+    """One column of `sums_push` (the window sums only when ``need``: the reader's tick)."""
+    c = f[fresh + k] + value
+    if end:
+        f[rp + k] = c
+        f[prev + k] = c
+        f[fresh + k] = 0.0
+        if need:
+            f[sl + k] = c
+    else:
+        if need:
+            f[sl + k] = f[prev + k] + (c - f[rp + k])
+        f[rp + k] = c
+        f[fresh + k] = c
+
+
+@jit(inline=True)
+def push_products(f, ii, ro, n, ip, src, p, need):  # pragma: no cover - jit
+    """`sums_push` of the packed row of (φ, y) = f[src:src+p+1], formed column by column
+    (the products of `innovation_test.packed_row`); the window sums are written only when
+    ``need`` (a block's other sums are exact whatever the ticks that read them)."""
+    w = p * (p + 1) // 2 + p + 1
+    pos = ii[ip]
+    fresh = ro + n * w
+    prev = fresh + w
+    sl = prev + w
+    rp = ro + pos * w
+    if ii[ip + 1] < n:
+        ii[ip + 1] += 1
+    end = pos + 1 == n
+    y = f[src + p]
+    k = 0
+    for a in range(p):
+        for b in range(a, p):
+            _column(f, fresh, prev, sl, rp, k, f[src + a] * f[src + b], end, need)
+            k += 1
+    for a in range(p):
+        _column(f, fresh, prev, sl, rp, k, f[src + a] * y, end, need)
+        k += 1
+    _column(f, fresh, prev, sl, rp, k, y * y, end, need)
+    ii[ip] = 0 if end else pos + 1
+
+
+@jit
+def packed_row_into(f, src, p, dst):  # pragma: no cover - jit
+    """The packed row of (φ, y) = f[src:src+p+1] into f[dst:..]."""
+    y = f[src + p]
+    c = dst
+    for a in range(p):
+        for b in range(a, p):
+            f[c] = f[src + a] * f[src + b]
+            c += 1
+    for a in range(p):
+        f[c] = f[src + a] * y
+        c += 1
+    f[c] = y * y
+
+
+@jit
+def itest_tick(f, ii, io, need):  # pragma: no cover - jit
+    """One tick of the innovation test whose ints start at ``io``; φ and y in its phi slots.
+
+    Reference fit on the window ending ``lag`` ticks ago (re-solved when tick % every ==
+    phase), σ² = SSE/(N − p) floored, z² = (y − φᵀθ)²/σ², T = mean of z² over M ticks.
+    ``need``: keep the reference window sums current on this tick (for a reader other than
+    the solve). The monitor's tests have four regressors: that case is compiled with p
+    constant (the same operations, unrolled)."""
+    p = ii[io]
+    if p == 4:
+        return _itest_body(f, ii, io, need, 4)
+    return _itest_body(f, ii, io, need, p)
+
+
+@jit(inline=True)
+def _itest_body(f, ii, io, need, p):  # pragma: no cover - jit
+    n = ii[io + 1]
+    lag = ii[io + 2]
+    m = ii[io + 3]
+    every = ii[io + 4]
+    phase = ii[io + 5]
+    w = ii[io + 6]
+    ph = ii[io + 15]
+    fifo = ii[io + 17]
+    ref = ii[io + 18]
+    tst = ii[io + 19]
+    th = ii[io + 20]
+    scr = ii[io + 21]
+    sc = ii[io + 22]
+    y = f[ph + p]
+    tick = ii[io + 7]
+    solve = tick % every == phase
+    need = need or solve
+    q = p + 1
+    if lag == 0:
+        push_products(f, ii, ref, n, io + 11, ph, p, need)
+    else:
+        ln = ii[io + 10]
+        head = ii[io + 9]
+        if ln == lag:
+            slot = fifo + head * q
+            push_products(f, ii, ref, n, io + 11, slot, p, need)
+            ii[io + 9] = head + 1 if head + 1 < lag else 0
+        else:
+            slot = fifo + (head + ln if head + ln < lag else head + ln - lag) * q
+            ii[io + 10] = ln + 1
+        for k in range(q):
+            f[slot + k] = f[ph + k]
+    if solve:
+        if ii[io + 12] == n:
+            sse, ok = _solve(f, ref + (n + 2) * w, p, 1e-9, scr, th)
+            s2 = sse / (n - p)
+            f[sc + 1] = s2 if s2 > f[sc] else f[sc]
+            ii[io + 8] = 1 if ok else 0
+        else:
+            ii[io + 8] = 0
+    ii[io + 7] = tick + 1
+    if ii[io + 8]:
+        acc = f[th] * f[ph]
+        for a in range(1, p):
+            acc = acc + f[th + a] * f[ph + a]
+        e = y - acc
+        f[sc + 3] = e * e / f[sc + 1]
+    else:
+        f[sc + 3] = 0.0
+    sums_push(f, ii, tst, m, 1, io + 13, sc + 3)
+    stat = f[tst + (m + 2)] / m
+    f[sc + 2] = stat
+    return stat

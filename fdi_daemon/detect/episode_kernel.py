@@ -1,0 +1,316 @@
+"""An alarm episode's per-tick arithmetic and decisions, compiled (`Detector`'s episode).
+
+From ``fault_detected`` until ``cleared`` the detector keeps, on top of the quiet path
+(docs/detector.md §3, "Isolation"):
+
+- the *post* window: the packed rows of the residual fit (φ = g1, g2, x̂̈, 1; y = r) since
+  the reference window ended, and the *settled* window from one isolation window after the
+  detection on: θ of eqs. (16)–(17) on them (g1, g2 only) is the θ reported;
+- the refit of φ on the post window: the Coulomb coefficient's change since the reference
+  (friction evidence when it exceeds ``friction_min_level``), checked by the innovation
+  e = r − φᵀθ_ref regressed on (g1, x̂̈(k), x̂̈(k−1), 1) (what g1 explains beyond any linear
+  change of the plant) or by a stopped load (energies of ẍ, Δẍ and x̂̈ over the test window);
+- the frozen-reference test T = mean over M of e²/σ²_ref (persistence, clearing).
+
+``episode_tick`` returns the transition of the tick (none, isolated, other fault, cleared)
+and applies it to the detector's state; Python only formats the event. The cost of a tick
+does not depend on whether an episode runs: it stays inside the same kernel.
+"""
+
+from __future__ import annotations
+
+import math
+
+from fdi_daemon.core.compiled import jit
+from fdi_daemon.core.kernels import push_products, solve_packed, sums_floats, sums_push
+
+__all__ = ["episode_start", "episode_restart", "episode_tick", "EPISODE_INTS",
+           "episode_floats", "NO_CHANGE", "TO_ISOLATED", "TO_OTHER", "TO_CLEARED",
+           "KIND_NONE", "KIND_HARMONICS", "KIND_LOAD_STOPPED", "KIND_LEVEL"]
+
+NO_CHANGE, TO_ISOLATED, TO_OTHER, TO_CLEARED = range(4)
+KIND_NONE, KIND_HARMONICS, KIND_LOAD_STOPPED, KIND_LEVEL = range(4)
+
+W = 15  # packed width of 4 regressors
+#: the load has stopped: Σẍ² at most this fraction of Σx̂̈² ...
+STOPPED_ENERGY_FRACTION = 0.04
+#: ... and the accelerometer is alive (Σ(Δẍ)² above this fraction of Σx̂̈²)
+FLAT_ENERGY_FRACTION = 1e-6
+MIN_RCOND = 1e-6
+
+# ints
+(P_TICKS, P_QUIET, P_TRACK, P_HOLD_UNTIL, P_PERSISTED, P_LEVEL, P_KIND, P_N, P_M, P_ISO,
+ P_TIMEOUT, P_CLEAR, P_FRICTION_CLEAR, P_TRACK_SAMPLES, P_BAND, P_POST, P_SETTLED,
+ P_BEYOND, P_FROZEN, P_MOTION, P_O_POST, P_O_SETTLED, P_O_BEYOND, P_O_FROZEN, P_O_MOTION,
+ P_O_SCAL, P_O_ROW, P_O_SCR, P_O_TH, P_O_G, P_WARMUP) = (
+    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 17, 19, 21, 23, 25, 26, 27, 28,
+    29, 30, 31, 32, 33, 34, 35)
+EPISODE_INTS = 36
+# floats at P_O_SCAL
+(S_THETA_REF, S_COULOMB_BASE, S_SIGMA2_REF, S_XHAT_PAST, S_ACCEL_PAST, S_LEVEL_CHANGE,
+ S_EVIDENCE, S_FMIN, S_THRESHOLD, S_TOL1, S_TOL2, S_GAMMA_F, S_Z, S_MOTION) = (
+    0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16)
+SCAL_FLOATS = 19
+
+
+def episode_floats(n: int, m: int) -> int:
+    """Floats of an episode block (windows of n and m samples)."""
+    return (3 * sums_floats(n, W) + sums_floats(m, 1) + sums_floats(m, 3) + SCAL_FLOATS + W
+            + (2 * 16 + 4) + 4 + 6)
+
+
+def episode_layout(fo: int, n: int, m: int) -> tuple[int, ...]:
+    """Float offsets (post, settled, beyond, frozen, motion, scal, row, scr, th, g)."""
+    post = fo
+    settled = post + sums_floats(n, W)
+    beyond = settled + sums_floats(n, W)
+    frozen = beyond + sums_floats(n, W)
+    motion = frozen + sums_floats(m, 1)
+    scal = motion + sums_floats(m, 3)
+    row = scal + SCAL_FLOATS
+    scr = row + W
+    th = scr + 2 * 16 + 4
+    g = th + 4
+    return post, settled, beyond, frozen, motion, scal, row, scr, th, g
+
+
+@jit
+def _reset_sums(f, ii, ro, n, w, ip):  # pragma: no cover - jit
+    for k in range(ro, ro + (n + 3) * w):
+        f[k] = 0.0
+    ii[ip] = 0
+    ii[ip + 1] = 0
+
+
+@jit
+def episode_restart(f, ii, eo):  # pragma: no cover - jit
+    """After a data gap: the windows restart, the episode goes on."""
+    n = ii[eo + P_N]
+    m = ii[eo + P_M]
+    _reset_sums(f, ii, ii[eo + P_O_POST], n, W, eo + P_POST)
+    _reset_sums(f, ii, ii[eo + P_O_SETTLED], n, W, eo + P_SETTLED)
+    _reset_sums(f, ii, ii[eo + P_O_BEYOND], n, W, eo + P_BEYOND)
+    _reset_sums(f, ii, ii[eo + P_O_FROZEN], m, 1, eo + P_FROZEN)
+    _reset_sums(f, ii, ii[eo + P_O_MOTION], m, 3, eo + P_MOTION)
+    sc = ii[eo + P_O_SCAL]
+    f[sc + S_XHAT_PAST] = math.nan
+    f[sc + S_ACCEL_PAST] = math.nan
+    ii[eo + P_QUIET] = 0
+    ii[eo + P_TRACK] = 0
+    ii[eo + P_HOLD_UNTIL] = ii[eo + P_WARMUP]
+
+
+@jit
+def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
+    """A new episode against the residual test ``res`` (its ints' base) as it is now: θ_ref
+    and σ²_ref frozen, the post window filled with the rows since the reference ended."""
+    episode_restart(f, ii, eo)
+    sc = ii[eo + P_O_SCAL]
+    th = ii[res + 20]
+    for q in range(4):
+        f[sc + S_THETA_REF + q] = f[th + q]
+    f[sc + S_COULOMB_BASE] = f[th]
+    f[sc + S_SIGMA2_REF] = f[ii[res + 22] + 1]
+    lag = ii[res + 2]
+    if lag > 0:
+        head = ii[res + 9]
+        fifo = ii[res + 17]
+        post = ii[eo + P_O_POST]
+        n = ii[eo + P_N]
+        for k in range(ii[res + 10]):  # (φ, y) of the ticks since the reference ended
+            push_products(f, ii, post, n, eo + P_POST, fifo + ((head + k) % lag) * 5, 4, True)
+    ii[eo + P_TICKS] = 0
+    ii[eo + P_HOLD_UNTIL] = 0
+    ii[eo + P_PERSISTED] = level
+    ii[eo + P_LEVEL] = level
+    ii[eo + P_KIND] = KIND_NONE
+    f[sc + S_LEVEL_CHANGE] = math.nan
+    f[sc + S_EVIDENCE] = math.nan
+
+
+@jit
+def _window_theta(f, ii, eo, ro, ip):  # pragma: no cover - jit
+    """θ (g1, g2 only) of a window's packed sums into th[0:2]; ok."""
+    n = ii[eo + P_N]
+    if ii[ip + 1] < ii[eo + P_ISO]:
+        return False
+    s = ro + (n + 2) * W
+    g = ii[eo + P_O_G]
+    f[g] = f[s]
+    f[g + 1] = f[s + 1]
+    f[g + 2] = f[s + 4]
+    f[g + 3] = f[s + 10]
+    f[g + 4] = f[s + 11]
+    f[g + 5] = f[s + 14]
+    _, ok = solve_packed(f, g, 2, MIN_RCOND, ii[eo + P_O_SCR], ii[eo + P_O_TH])
+    return ok
+
+
+@jit
+def _friction_kind(f, ii, eo, fmin):  # pragma: no cover - jit
+    """Given a rise of the Coulomb coefficient: harmonics (g1 explains the innovation
+    beyond a linear change of the plant), a stopped load, or nothing."""
+    n = ii[eo + P_N]
+    m = ii[eo + P_M]
+    if ii[eo + P_BEYOND + 1] >= ii[eo + P_ISO]:
+        s = ii[eo + P_O_BEYOND] + (n + 2) * W
+        th = ii[eo + P_O_TH]
+        _, ok = solve_packed(f, s, 4, 1e-9, ii[eo + P_O_SCR], th)
+        if ok and f[th] >= fmin:
+            return KIND_HARMONICS
+    if ii[eo + P_MOTION + 1] < m:
+        return KIND_NONE
+    s = ii[eo + P_O_MOTION] + (m + 2) * 3
+    s_step = f[s]
+    s_accel = f[s + 1]
+    s_xhat = f[s + 2]
+    if (s_xhat > 0.0 and s_accel <= STOPPED_ENERGY_FRACTION * s_xhat
+            and s_step > FLAT_ENERGY_FRACTION * s_xhat):
+        return KIND_LOAD_STOPPED
+    return KIND_NONE
+
+
+@jit
+def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, row,
+                 ref_sums, band, out):  # pragma: no cover - jit
+    """One episode tick; θ as reported in out[0], out[1]; returns the transition.
+
+    ``state``: 3 fault_detected, 4 friction_isolated, 5 other_fault (`detector.STATES`);
+    ``row``: the residual fit's packed row of this tick; ``ref_sums``: the offset of the
+    residual test's reference window sums; ``band``: the offset of the calibrated band
+    (lo1, hi1, lo2, hi2), −1 without one; θ: the pipeline's window θ (NaN at rest)."""
+    n = ii[eo + P_N]
+    m = ii[eo + P_M]
+    iso = ii[eo + P_ISO]
+    sc = ii[eo + P_O_SCAL]
+    moving = math.isfinite(theta1)
+    ticks = ii[eo + P_TICKS] + 1
+    ii[eo + P_TICKS] = ticks
+    sums_push(f, ii, ii[eo + P_O_POST], n, W, eo + P_POST, row)
+    tr = sc + S_THETA_REF
+    acc = f[tr] * g1
+    acc = acc + f[tr + 1] * g2
+    acc = acc + f[tr + 2] * xhat
+    acc = acc + f[tr + 3] * 1.0
+    e = r - acc
+    if ticks > iso:
+        sums_push(f, ii, ii[eo + P_O_SETTLED], n, W, eo + P_SETTLED, row)
+        xp = f[sc + S_XHAT_PAST]
+        if not math.isnan(xp):
+            b = ii[eo + P_O_ROW]
+            f[b] = g1 * g1
+            f[b + 1] = g1 * xhat
+            f[b + 2] = g1 * xp
+            f[b + 3] = g1 * 1.0
+            f[b + 4] = xhat * xhat
+            f[b + 5] = xhat * xp
+            f[b + 6] = xhat * 1.0
+            f[b + 7] = xp * xp
+            f[b + 8] = xp * 1.0
+            f[b + 9] = 1.0 * 1.0
+            f[b + 10] = g1 * e
+            f[b + 11] = xhat * e
+            f[b + 12] = xp * e
+            f[b + 13] = 1.0 * e
+            f[b + 14] = e * e
+            sums_push(f, ii, ii[eo + P_O_BEYOND], n, W, eo + P_BEYOND, b)
+    f[sc + S_XHAT_PAST] = xhat
+    accel = r + xhat
+    ap = f[sc + S_ACCEL_PAST]
+    if not math.isnan(ap):
+        step = accel - ap
+        mo = sc + S_MOTION
+        f[mo] = step * step
+        f[mo + 1] = accel * accel
+        f[mo + 2] = xhat * xhat
+        sums_push(f, ii, ii[eo + P_O_MOTION], m, 3, eo + P_MOTION, mo)
+    f[sc + S_ACCEL_PAST] = accel
+    # θ as reported: the settled window, else the post window, else the sliding window
+    out[0] = theta1
+    out[1] = theta2
+    if moving:
+        th = ii[eo + P_O_TH]
+        if _window_theta(f, ii, eo, ii[eo + P_O_SETTLED], eo + P_SETTLED):
+            out[0] = f[th]
+            out[1] = f[th + 1]
+        elif _window_theta(f, ii, eo, ii[eo + P_O_POST], eo + P_POST):
+            out[0] = f[th]
+            out[1] = f[th + 1]
+    rep1 = out[0]
+    rep2 = out[1]
+    f[sc + S_Z] = e * e / f[sc + S_SIGMA2_REF]
+    fz = ii[eo + P_O_FROZEN]
+    sums_push(f, ii, fz, m, 1, eo + P_FROZEN, sc + S_Z)
+    frozen_stat = f[fz + (m + 2)] / m
+    if tick < ii[eo + P_HOLD_UNTIL]:
+        return NO_CHANGE
+    threshold = f[sc + S_THRESHOLD]
+    if ticks > iso + m and frozen_stat > threshold:
+        ii[eo + P_PERSISTED] = 1
+    if ii[eo + P_BAND]:
+        return _band_decision(f, ii, eo, state, ticks, rep1, rep2, band)
+    fmin = f[sc + S_FMIN]
+    kind = KIND_NONE
+    if ii[eo + P_POST + 1] >= iso:
+        th = ii[eo + P_O_TH]
+        _, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR],
+                             th)
+        if ok:
+            f[sc + S_LEVEL_CHANGE] = f[th] - f[sc + S_COULOMB_BASE]
+            if f[sc + S_LEVEL_CHANGE] >= fmin or over > 1.0:
+                kind = _friction_kind(f, ii, eo, fmin)
+    if ii[eo + P_LEVEL]:
+        kind = KIND_LEVEL if over > 1.0 else KIND_NONE
+    if state == 3 or state == 5:
+        ii[eo + P_TRACK] = ii[eo + P_TRACK] + 1 if kind != KIND_NONE else 0
+        if ii[eo + P_TRACK] >= ii[eo + P_TRACK_SAMPLES] and math.isnan(f[sc + S_EVIDENCE]):
+            f[sc + S_EVIDENCE] = over if ii[eo + P_LEVEL] else f[sc + S_LEVEL_CHANGE]
+            ii[eo + P_KIND] = kind
+        if not math.isnan(f[sc + S_EVIDENCE]) and ii[eo + P_PERSISTED]:
+            f[sc + S_LEVEL_CHANGE] = f[sc + S_EVIDENCE]
+            ii[eo + P_QUIET] = 0
+            return TO_ISOLATED
+        if state == 3 and ticks >= ii[eo + P_TIMEOUT]:
+            ii[eo + P_QUIET] = 0
+            return TO_OTHER
+    if state == 4:
+        s_xx = f[ref_sums + 7]
+        s_xr = f[ref_sums + 12]
+        s_rr = f[ref_sums + 14]
+        # the level back within half its margin, the load moving freely (Σẍ² >= Σx̂̈²/2 over
+        # the reference window) and what raised the episode gone: an episode the residual
+        # test raised also needs its innovations against the frozen pre-fault reference
+        # back below h (a level episode's reference may hold the fault: the level alone)
+        normal = (over < 0.5 and (ii[eo + P_LEVEL] != 0 or frozen_stat <= threshold)
+                  and (s_xx > 0.0 and s_rr + 2.0 * s_xr + s_xx >= 0.5 * s_xx))
+        needed = ii[eo + P_FRICTION_CLEAR]
+    else:
+        normal = frozen_stat <= threshold
+        needed = ii[eo + P_CLEAR]
+    ii[eo + P_QUIET] = ii[eo + P_QUIET] + 1 if normal and moving else 0
+    if ii[eo + P_QUIET] >= needed:
+        return TO_CLEARED
+    return NO_CHANGE
+
+
+@jit
+def _band_decision(f, ii, eo, state, ticks, theta1, theta2, band):  # pragma: no cover - jit
+    """The paper's band method: track the signature (1, γ_f), clear inside the band."""
+    sc = ii[eo + P_O_SCAL]
+    if state == 3:
+        tracking = (abs(theta1 - 1.0) <= f[sc + S_TOL1]
+                    and abs(theta2 - f[sc + S_GAMMA_F]) <= f[sc + S_TOL2])
+        ii[eo + P_TRACK] = ii[eo + P_TRACK] + 1 if tracking else 0
+        if ii[eo + P_TRACK] >= ii[eo + P_TRACK_SAMPLES]:
+            ii[eo + P_QUIET] = 0
+            return TO_ISOLATED
+        if ticks >= ii[eo + P_TIMEOUT]:
+            ii[eo + P_QUIET] = 0
+            return TO_OTHER
+    inside = math.isfinite(theta1) and not (band >= 0 and (
+        theta1 < f[band] or theta1 > f[band + 1] or theta2 < f[band + 2]
+        or theta2 > f[band + 3]))
+    ii[eo + P_QUIET] = ii[eo + P_QUIET] + 1 if inside else 0
+    if ii[eo + P_QUIET] >= ii[eo + P_CLEAR]:
+        return TO_CLEARED
+    return NO_CHANGE

@@ -1,0 +1,320 @@
+"""The monitor's tick as one compiled kernel: the signal chain, the detector's arithmetic
+and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state in a
+`core.compiled.Arena` and call these).
+
+``chain_tick`` (the paper's chain, §IV-C)::
+
+    x̂̈ = Ĝ(q) v_in                      eq. (1)  (or given: a plant with `fdi diagnose` effects)
+    r  = ẍ − x̂̈                          eq. (3)  (a bad ẍ, NaN, is replaced by x̂̈)
+    v̂  = V(q) ẍ | L(q) x̂̈ + V(q) r | P(q) x + A(q) ẍ    the three velocity methods
+    g1 = G_e(q)[sign v̂], g2 = G_e(q)[v̂]  eq. (15)
+    θ  = argmin Σ_N (r − θ1 g1 − θ2 g2)²  eqs. (16)–(17): six window sums + Σ v̂²
+
+``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
+of v_in (`core.kernels.itest_tick`), the operating-point guard, the friction level's
+excess over its fault-free value, the quiet path's counters (level path, fast path,
+calibration buffer) and a running alarm episode (`detect.episode_kernel`). It returns a
+code; anything but ``QUIET`` is an event that Python formats (`Detector.decide`).
+
+``monitor_run`` loops ``monitor_tick`` over arrays and stops after a tick that needs
+Python, so ``Monitor.step`` (one call per sample) and ``Monitor.run`` are bit-equal.
+"""
+
+from __future__ import annotations
+
+import math
+
+from fdi_daemon.core.compiled import jit
+from fdi_daemon.core.kernels import iir_step, itest_tick, packed_row_into, sums_push
+from fdi_daemon.detect import episode_kernel as E
+
+__all__ = ["chain_tick", "chain_run", "detector_tick", "monitor_tick", "monitor_run",
+           "QUIET", "LEVEL_ALARM", "CALIBRATED", "FAST_ALARM", "ISOLATED", "OTHER_FAULT",
+           "CLEARED"]
+
+#: codes of a tick: nothing to tell, or the event Python formats (the calibration's end is
+#: computed there too)
+QUIET, LEVEL_ALARM, CALIBRATED, FAST_ALARM, ISOLATED, OTHER_FAULT, CLEARED = range(7)
+
+# --- chain ints (offsets from the chain's int base)
+C_METHOD, C_EXTERNAL, C_N, C_WIDTH, C_ORDER = 0, 1, 2, 3, 4  # C_ORDER .. +5: 5 filters
+C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = 9, 10, 11, 12, 13, 14, 15, 16
+CHAIN_INTS = 17
+# filters
+F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL = range(5)
+# --- chain floats at C_OUT
+(O_XHAT, O_R, O_V, O_G1, O_G2, O_T1, O_T2, O_WT1, O_WT2, O_WOK, O_WSSE, O_VRMS, O_MOVING,
+ O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11, O_MIN_S22) = range(18)
+CHAIN_OUT = 18
+SUMS_WIDTH = 7  # S11, S12, S22, S1y, S2y, Syy, Σv̂²
+
+# --- detector ints
+(D_METHOD, D_HAS_BAND, D_HAS_BASELINE, D_STATE, D_TICK, D_GUARD_UNTIL, D_ABOVE,
+ D_LEVEL_ABOVE, D_HOLD_UNTIL, D_HOLD, D_LEVEL_SAMPLES, D_PERSISTENCE, D_CAL_COUNT,
+ D_CAL_SAMPLES, D_EPISODE, D_BINS, D_RES, D_CMD, D_CHAIN, D_FLOATS, D_CODE, D_EPI) = range(22)
+DET_INTS = 22
+# --- detector floats
+(E_THRESHOLD, E_GUARD_THRESHOLD, E_LO1, E_HI1, E_LO2, E_HI2, E_LEVEL_BASE, E_FRICTION_MIN,
+ E_THETA1, E_THETA2, E_OVER, E_VHIST) = range(12)  # E_VHIST .. +4
+E_CAL = 16  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
+STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER = range(1, 6)
+
+
+@jit
+def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
+    """One tick of the signal chain (see the module docstring); results at its C_OUT."""
+    L = ii[io + C_WIDTH]
+    bo = ii[io + C_B]
+    ao = ii[io + C_A]
+    zo = ii[io + C_Z]
+    out = ii[io + C_OUT]
+    od = io + C_ORDER
+    if ii[io + C_EXTERNAL]:
+        xhat = xext
+    else:
+        xhat = iir_step(f, bo, ao, zo, ii[od], v_in)
+    if accel != accel:
+        accel = xhat
+    r = accel - xhat
+    method = ii[io + C_METHOD]
+    if method == 0:
+        v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], accel)
+    elif method == 1:
+        v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], xhat) \
+            + iir_step(f, bo + 2 * L, ao + 2 * L, zo + 2 * (L - 1), ii[od + 2], accel - xhat)
+    else:
+        if math.isfinite(position):
+            f[out + O_LAST_POS] = position
+        elif math.isfinite(f[out + O_LAST_POS]):
+            position = f[out + O_LAST_POS]
+        else:
+            position = 0.0
+        v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], position) \
+            + iir_step(f, bo + 2 * L, ao + 2 * L, zo + 2 * (L - 1), ii[od + 2], accel)
+    s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+    g1 = iir_step(f, bo + 3 * L, ao + 3 * L, zo + 3 * (L - 1), ii[od + 3], s)
+    g2 = iir_step(f, bo + 4 * L, ao + 4 * L, zo + 4 * (L - 1), ii[od + 4], v)
+    row = ii[io + C_ROW]
+    f[row] = g1 * g1
+    f[row + 1] = g1 * g2
+    f[row + 2] = g2 * g2
+    f[row + 3] = g1 * r
+    f[row + 4] = g2 * r
+    f[row + 5] = r * r
+    f[row + 6] = v * v
+    n = ii[io + C_N]
+    so = ii[io + C_SUMS]
+    sums_push(f, ii, so, n, SUMS_WIDTH, io + C_POS, row)
+    sl = so + (n + 2) * SUMS_WIDTH
+    s11 = f[sl]
+    s12 = f[sl + 1]
+    s22 = f[sl + 2]
+    s1y = f[sl + 3]
+    s2y = f[sl + 4]
+    syy = f[sl + 5]
+    det = s11 * s22 - s12 * s12
+    if (ii[io + C_COUNT] == n and s11 > f[out + O_MIN_S11] and s22 > f[out + O_MIN_S22]
+            and det > f[out + O_MIN_RCOND] * (s11 * s22)):
+        t1 = (s22 * s1y - s12 * s2y) / det
+        t2 = (s11 * s2y - s12 * s1y) / det
+        sse = syy - t1 * s1y - t2 * s2y
+        f[out + O_WOK] = 1.0
+        f[out + O_WSSE] = sse if sse > 0.0 else 0.0
+    else:
+        t1 = t2 = math.nan
+        f[out + O_WOK] = 0.0
+        f[out + O_WSSE] = math.nan
+    f[out + O_WT1] = t1
+    f[out + O_WT2] = t2
+    v2 = f[sl + 6]
+    moving = v2 >= f[out + O_MIN_V2]
+    f[out + O_MOVING] = 1.0 if moving else 0.0
+    f[out + O_VRMS] = math.sqrt((0.0 if v2 < 0.0 else v2) / n)
+    f[out + O_T1] = t1 if moving else math.nan
+    f[out + O_T2] = t2 if moving else math.nan
+    f[out + O_XHAT] = xhat
+    f[out + O_R] = r
+    f[out + O_V] = v
+    f[out + O_G1] = g1
+    f[out + O_G2] = g2
+
+
+@jit
+def chain_run(f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums, counts,
+              moving, v_rms):  # pragma: no cover - jit
+    """``chain_tick`` over arrays, every tick's signals and window sums kept."""
+    out = ii[io + C_OUT]
+    n = ii[io + C_N]
+    sl = ii[io + C_SUMS] + (n + 2) * SUMS_WIDTH
+    for k in range(v_in.shape[0]):
+        chain_tick(f, ii, io, v_in[k], accel[k], position[k], xext[k])
+        xhat[k] = f[out + O_XHAT]
+        r[k] = f[out + O_R]
+        vel[k] = f[out + O_V]
+        g1[k] = f[out + O_G1]
+        g2[k] = f[out + O_G2]
+        for j in range(6):
+            sums[k, j] = f[sl + j]
+        counts[k] = ii[io + C_COUNT]
+        moving[k] = f[out + O_MOVING] != 0.0
+        v_rms[k] = f[out + O_VRMS]
+
+
+@jit
+def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baseline
+                  ):  # pragma: no cover - jit
+    """The detector's per-tick arithmetic and quiet decisions; returns the tick's code."""
+    fo = ii[io + D_FLOATS]
+    res = ii[io + D_RES]
+    cmd = ii[io + D_CMD]
+    ph = ii[res + 15]
+    f[ph] = g1
+    f[ph + 1] = g2
+    f[ph + 2] = xhat
+    f[ph + 3] = 1.0
+    f[ph + 4] = r
+    stat = itest_tick(f, ii, res, ii[io + D_EPISODE] != 0)
+    hv = fo + E_VHIST
+    ph = ii[cmd + 15]
+    for q in range(4):
+        f[ph + q] = f[hv + q]
+    f[ph + 4] = v_in
+    guard_stat = itest_tick(f, ii, cmd, False)
+    for q in range(3, 0, -1):
+        f[hv + q] = f[hv + q - 1]
+    f[hv] = v_in
+    tick = ii[io + D_TICK]
+    if guard_stat > f[fo + E_GUARD_THRESHOLD]:
+        ii[io + D_GUARD_UNTIL] = tick + ii[io + D_HOLD]
+    ii[io + D_TICK] = tick + 1
+    f[fo + E_THETA1] = theta1
+    f[fo + E_THETA2] = theta2
+    if ii[io + D_HAS_BASELINE]:
+        over = over_baseline
+    else:
+        over = (theta1 - f[fo + E_LEVEL_BASE]) / f[fo + E_FRICTION_MIN]
+    f[fo + E_OVER] = over
+    if ii[io + D_EPISODE]:
+        return _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over)
+    if tick < ii[io + D_HOLD_UNTIL]:
+        ii[io + D_ABOVE] = 0
+        ii[io + D_LEVEL_ABOVE] = 0
+        return QUIET
+    ii[io + D_LEVEL_ABOVE] = ii[io + D_LEVEL_ABOVE] + 1 if over > 1.0 else 0
+    if ii[io + D_LEVEL_ABOVE] >= ii[io + D_LEVEL_SAMPLES]:
+        ii[io + D_ABOVE] = 0
+        ii[io + D_LEVEL_ABOVE] = 0
+        _start(f, ii, io, res, 1)
+        return LEVEL_ALARM
+    if ii[io + D_STATE] == STATE_CALIBRATING:
+        c = ii[io + D_CAL_COUNT]
+        f[fo + E_CAL + 2 * c] = theta1
+        f[fo + E_CAL + 2 * c + 1] = theta2
+        ii[io + D_CAL_COUNT] = c + 1
+        return CALIBRATED if c + 1 >= ii[io + D_CAL_SAMPLES] else QUIET
+    if ii[io + D_METHOD] == 1:
+        alarm = ii[io + D_HAS_BAND] != 0 and (
+            theta1 < f[fo + E_LO1] or theta1 > f[fo + E_HI1]
+            or theta2 < f[fo + E_LO2] or theta2 > f[fo + E_HI2])
+    else:
+        alarm = (ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL]
+                 and stat > f[fo + E_THRESHOLD])
+    ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if alarm else 0
+    if ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE]:
+        ii[io + D_ABOVE] = 0
+        ii[io + D_LEVEL_ABOVE] = 0
+        _start(f, ii, io, res, 0)
+        return FAST_ALARM
+    return QUIET
+
+
+@jit
+def _start(f, ii, io, res, level):  # pragma: no cover - jit
+    """fault_detected: an episode starts (level: raised by the level path)."""
+    E.episode_start(f, ii, ii[io + D_EPI], res, level)
+    ii[io + D_EPISODE] = 1
+    ii[io + D_STATE] = STATE_DETECTED
+
+
+@jit
+def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
+             ):  # pragma: no cover - jit
+    """A tick of the running episode, and its transition applied to the detector."""
+    ep = ii[io + D_EPI]
+    band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
+    ref_sums = ii[res + 18] + (ii[res + 1] + 2) * ii[res + 6]
+    packed_row_into(f, ii[res + 15], 4, ii[res + 16])  # this tick's row of the residual fit
+    change = E.episode_tick(f, ii, ep, tick, ii[io + D_STATE], r, g1, g2, xhat, theta1,
+                            theta2, over, ii[res + 16], ref_sums, band,
+                            f[fo + E_THETA1:fo + E_THETA2 + 1])
+    if change == E.NO_CHANGE:
+        return QUIET
+    if change == E.TO_ISOLATED:
+        ii[io + D_STATE] = STATE_ISOLATED
+        return ISOLATED
+    if change == E.TO_OTHER:
+        ii[io + D_STATE] = STATE_OTHER
+        return OTHER_FAULT
+    # cleared: an episode raised against the baseline saw the friction calibrated as normal,
+    # so calibrate again; the moving reference still holds fault data: hold the guard
+    if (ii[ep + E.P_LEVEL] and ii[io + D_HAS_BASELINE]) or not ii[io + D_HAS_BAND]:
+        ii[io + D_STATE] = STATE_CALIBRATING
+    else:
+        ii[io + D_STATE] = STATE_MONITORING
+    ii[io + D_CAL_COUNT] = 0
+    ii[io + D_EPISODE] = 0
+    ii[io + D_ABOVE] = 0
+    ii[io + D_GUARD_UNTIL] = max(ii[io + D_GUARD_UNTIL], ii[io + D_TICK] + ii[io + D_HOLD])
+    return CLEARED
+
+
+@jit
+def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
+    """``chain_tick`` then ``detector_tick`` (with the level's excess over the baseline of
+    the window's operating condition); returns the tick's code (also in ii[io + D_CODE])."""
+    chain = ii[io + D_CHAIN]
+    chain_tick(f, ii, chain, v_in, accel, position, xext)
+    out = ii[chain + C_OUT]
+    theta1 = f[out + O_T1]
+    over = math.nan
+    nb = ii[io + D_BINS]
+    if ii[io + D_HAS_BASELINE]:
+        fo = ii[io + D_FLOATS]
+        edges = fo + E_CAL + 2 * ii[io + D_CAL_SAMPLES]
+        v_rms = f[out + O_VRMS]
+        if v_rms != v_rms:
+            b = nb - 1
+        else:
+            b = -1
+            for k in range(nb + 1):
+                if f[edges + k] <= v_rms:
+                    b = k
+            b = min(max(b, 0), nb - 1)
+        over = (theta1 - f[edges + nb + 1 + b]) / f[edges + 2 * nb + 1 + b]
+    code = detector_tick(f, ii, io, v_in, f[out + O_XHAT], f[out + O_R], f[out + O_G1],
+                         f[out + O_G2], theta1, f[out + O_T2], over)
+    ii[io + D_CODE] = code
+    return code
+
+
+@jit
+def monitor_run(f, ii, io, v_in, accel, position, xext, start, stat, state, theta1, theta2,
+                residual, v_rms):  # pragma: no cover - jit
+    """``monitor_tick`` from index ``start`` on, traces kept; returns the index after the
+    first tick whose code is not QUIET (its code in ii[io + D_CODE]), or the length."""
+    chain = ii[io + D_CHAIN]
+    out = ii[chain + C_OUT]
+    fo = ii[io + D_FLOATS]
+    res = ii[io + D_RES]
+    for k in range(start, v_in.shape[0]):
+        code = monitor_tick(f, ii, io, v_in[k], accel[k], position[k], xext[k])
+        stat[k] = f[ii[res + 22] + 2]
+        state[k] = ii[io + D_STATE]
+        theta1[k] = f[fo + E_THETA1]
+        theta2[k] = f[fo + E_THETA2]
+        residual[k] = f[out + O_R]
+        v_rms[k] = f[out + O_VRMS]
+        if code != QUIET:
+            return k + 1
+    ii[io + D_CODE] = QUIET
+    return v_in.shape[0]

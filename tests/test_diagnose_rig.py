@@ -41,17 +41,13 @@ def test_rig_fault_is_named_and_gap_halves(fault, value, right, excitation):
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-@pytest.mark.xfail(strict=True, reason="names input_saturation: the valve's own nonlinearity "
-                   "(flapper travel, nozzle curtain area) is not in the linear model "
-                   "(docs/diagnose.md §9)")
 def test_rig_without_fault_names_nothing_or_its_seal_friction():
     result = _diagnose(None, 0.0, **STRONG)
     assert set(result.named) <= SEAL
 
 
-@pytest.mark.xfail(strict=True, reason="the refit absorbs the gain drop ('unexplained'): a "
-                   "pure gain leaves the valve's nonlinearity, above the noise floor; "
-                   "input_saturation is named instead (docs/diagnose.md §9)")
 def test_rig_valve_gain_fault_is_named():
     result = _diagnose("valve_gain", 0.7, **STRONG)
     assert result.named[:1] == ["gain_fault"]
+    assert result.selection.named[0].physical["gain_ratio"] == pytest.approx(0.7, abs=0.05)
+    assert result.gap_after <= 0.5 * result.gap_before

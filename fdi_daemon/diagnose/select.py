@@ -119,10 +119,41 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
             p = float(stats.f.sf(f_stat, k, dof))
         else:
             p = 1.0
+    input_share(refitted + [eff])
     plausible = all(e.physical.get("plausible", True) for e in refitted + [eff])
     return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, float(score), p,
                      bool(p < ALPHA and score < 0.0 and plausible
                           and sse1 <= (1.0 - MIN_REDUCTION) * sse_reference), prediction)
+
+
+#: input maps whose φ = N(u) − u must enter with the gain of the input itself
+INPUT_MAPS = ("input_saturation", "dead_zone", "backlash")
+#: the share of the full map a fitted input map may have (as a dead time's shift share)
+SHARE_RANGE = (0.5, 1.5)
+
+
+def input_share(effects: list[FittedEffect]) -> None:
+    """A saturation, dead zone or backlash is the input map N itself: the plant sees
+    (1 + r) N(u) = (1 + r) u + (1 + r) [N(u) − u], r the numerator refit's gain
+    (``linear_refit``, 0 without it). The fitted coefficient c of φ = N(u) − u (referred to
+    the input, `effects.physical_report`) is the map's share s = c / (1 + r): 1 for the
+    effect, 0 for none. A share far from 1 is another map: s < 0 turns a saturation into
+    an input gain that *rises* with amplitude and a dead zone into one that falls; 0 < s ≪ 1
+    is a gain that changes a little with amplitude, not an input that stops (saturation),
+    moves nothing (dead zone) or has play (backlash). The effect being added (the last of
+    ``effects``) is plausible only within SHARE_RANGE, the tolerance of a dead time's shift
+    share; a map named in an earlier round keeps its name when a later effect takes over
+    part of it (its share is reported, in ``physical``, for every map)."""
+    r = next((e.physical.get("input_gain", 0.0) for e in effects
+              if e.name == "linear_refit"), 0.0)
+    new = effects[-1]
+    for e in effects:
+        if e.name in INPUT_MAPS and "input_gain" in e.physical and 1.0 + r > 0.0:
+            share = e.physical["input_gain"] / (1.0 + r)
+            e.physical["map_share"] = share
+            if e is new:
+                e.physical["plausible"] = bool(e.physical.get("plausible", True)
+                                               and SHARE_RANGE[0] <= share <= SHARE_RANGE[1])
 
 
 def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffect:
@@ -182,9 +213,12 @@ class Selection:
 
 #: what a significant numerator refit may be: a pure gain change or a pure shift
 LINEAR_EXPLANATIONS = ("gain_fault", "dead_time")
+#: share of the refit's improvement a gain or a shift must account for to be what the refit
+#: is (more than half: the refit's main content)
+MATCH_SHARE = 0.5
 
 
-def linear_round(ctx: Context, floor_sse: float | None = None
+def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | None = None
                  ) -> tuple[list[FittedEffect], np.ndarray, dict]:
     """The refit never swallows an effect silently.
 
@@ -193,9 +227,16 @@ def linear_round(ctx: Context, floor_sse: float | None = None
     (``dead_time``, ŷ₀(t − τ)) are tried: the best one that the refit does not beat
     (nested F-test at ALPHA) and that leaves no more than the noise floor (floor_sse; a
     dead zone or a saturation also looks like a lower gain, but leaves its nonlinear part)
-    is named with its value and replaces the refit. Otherwise the refit stays in the base
-    and is reported (``linear_check``: ``unexplained``, or the explanations tried, with
+    is named with its value and replaces the refit. Otherwise the refit stays in the base and
+    is reported (``linear_check``: ``unexplained``, or the explanations tried, with
     their values).
+
+    An explanation that is accepted like a candidate and accounts for more than
+    MATCH_SHARE of what the refit removes (``refit_share``) is the refit's main content
+    even when the refit beats it (the rest: the nominal model's own imperfection, or a
+    nonlinearity of the plant the linear model lacks); it is reported as ``matching``, and
+    `select_effects` names it (``explain``: named here, in the refit's place) when no
+    effect of the library is named on top of the refit.
     """
     test = ctx.split.test
     e0 = ctx.target[test]
@@ -207,30 +248,41 @@ def linear_round(ctx: Context, floor_sse: float | None = None
            "explanations": []}
     if not refit.accepted:
         return [refit.effect], refit.prediction, out
-    simple = []
+    simple, matching = [], []
+    removed = sse0 - refit.sse_test
     for name in LINEAR_EXPLANATIONS:
         try:
             c = evaluate(name, ctx, [], None, sse0, n_eff)
         except NotApplicable:
             continue
         p_refit = nested_p_value(refit, c, n_eff)
+        share = (sse0 - c.sse_test) / removed if removed > 0 else 0.0
         out["explanations"].append({"effect": name, "sse_ratio": c.sse_test / sse0,
                                     "p_value": c.p_value, "refit_beats_it_p": p_refit,
+                                    "refit_share": share,
                                     "params": dict(c.effect.physical)})
+        if name == explain:
+            simple = [c]
+            break
         if (c.accepted and p_refit >= ALPHA
                 and (floor_sse is None or c.sse_test <= floor_sse)):
             simple.append(c)
+        elif c.accepted and share > MATCH_SHARE:
+            matching.append(c)
     if simple:
         best = min(simple, key=lambda c: c.sse_test)
         out["named"] = best.name
         return [best.effect], best.prediction, out
-    out["unexplained"] = not any(x["p_value"] < ALPHA and x["refit_beats_it_p"] >= ALPHA
-                                 for x in out["explanations"])
+    if matching:
+        out["matching"] = min(matching, key=lambda c: c.sse_test).name
+    out["unexplained"] = not matching and not any(
+        x["p_value"] < ALPHA and x["refit_beats_it_p"] >= ALPHA for x in out["explanations"])
     return [refit.effect], refit.prediction, out
 
 
 def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
-                   refit_linear: bool = False, floor_sse: float | None = None) -> Selection:
+                   refit_linear: bool = False, floor_sse: float | None = None,
+                   explain: str | None = None) -> Selection:
     """Rounds of candidate search; see the module docstring.
 
     refit_linear: the nominal model's numerator is refitted jointly with every candidate
@@ -241,6 +293,13 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     not a missing effect: it is dropped when nothing is named. floor_sse: the held-out SSE
     at the noise floor (`floor`); once the remaining error is there, no further effect is
     looked for.
+
+    When the refit check found a gain or a shift that matches the refit without replacing
+    it (``matching``) and no effect of the library is named on top of the refit, the rounds
+    are run again with it named in the refit's place (``explain``). When an effect is named,
+    the refit's apparent gain may be that effect's own best linear approximation (a static
+    map's Bussgang gain, a friction's describing function), so it is not named a gain
+    fault: the refit stays in the base and ``matching`` is reported.
     """
     chosen: list[FittedEffect] = []
     base_cols = None
@@ -250,7 +309,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         balance, _ = fit_effect("force_balance", ctx)
         chosen = [balance]
     elif refit_linear:
-        chosen, prediction, linear = linear_round(ctx, floor_sse)
+        chosen, prediction, linear = linear_round(ctx, floor_sse, explain)
     if chosen:
         base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
                                              ctx.regressors(SPECS[e.name], e.param))
@@ -286,6 +345,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 for e in chosen]
         base_cols = np.column_stack(cols)
         prediction = best.prediction
+    if linear.get("matching") and not any(e.name not in BASE_TERMS for e in chosen):
+        return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
+                              explain=linear["matching"])
     if not any(e.name not in BASE_TERMS for e in chosen):
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)

@@ -348,7 +348,41 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     if linear.get("matching") and not any(e.name not in BASE_TERMS for e in chosen):
         return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
                               explain=linear["matching"])
+    others = [e.name for e in chosen if e.name not in BASE_TERMS and e.name != explain]
+    if explain is not None and others:
+        alone = _without_explanation(ctx, others, prediction, explain, floor_sse)
+        if alone is not None:
+            linear["held_by"] = others  # the gain or shift is theirs: not named
+            linear["matching"] = linear.pop("named", explain)
+            return Selection(alone.chosen, rounds + alone.rounds, alone.prediction, linear)
     if not any(e.name not in BASE_TERMS for e in chosen):
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
     return Selection(chosen, rounds, prediction, linear)
+
+
+def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
+                         explain: str, floor_sse: float | None) -> Selection | None:
+    """The effects ``names`` named on top of a gain or a shift (``explain``), fitted again
+    without it: a friction's describing function or a map's Bussgang gain also looks like
+    a gain change. The selection without the explanation when it names the same effects
+    and the explanation does not pay on top of them (F-test at ALPHA, its parameters
+    against the held-out SSE); None when it does."""
+    from dataclasses import replace
+
+    alone = select_effects(replace(ctx, candidates=tuple(names)), len(names),
+                           floor_sse=floor_sse)
+    if sorted(e.name for e in alone.named) != sorted(names):
+        return None
+    test = ctx.split.test
+    e_with = ctx.target[test] - prediction[test]
+    e_alone = ctx.target[test] - alone.prediction[test]
+    sse_with, sse_alone = float(e_with @ e_with), float(e_alone @ e_alone)
+    n_eff = effective_samples(ctx.target[test])
+    k = 1 + (SPECS[explain].param is not None)  # a gain: 1; a shift: its share and τ
+    k_total = k + sum(e.n_params for e in alone.chosen)
+    dof = n_eff - k_total
+    if sse_with >= sse_alone or dof <= 1:
+        return alone
+    f_stat = ((sse_alone - sse_with) / k) / (sse_with / dof)
+    return alone if float(stats.f.sf(f_stat, k, dof)) >= ALPHA else None

@@ -235,8 +235,7 @@ def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | No
     MATCH_SHARE of what the refit removes (``refit_share``) is the refit's main content
     even when the refit beats it (the rest: the nominal model's own imperfection, or a
     nonlinearity of the plant the linear model lacks); it is reported as ``matching``, and
-    `select_effects` names it (``explain``: named here, in the refit's place) when no
-    effect of the library is named on top of the refit.
+    `select_effects` names it (``explain``: named here, in the refit's place).
     """
     test = ctx.split.test
     e0 = ctx.target[test]
@@ -295,11 +294,11 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     looked for.
 
     When the refit check found a gain or a shift that matches the refit without replacing
-    it (``matching``) and no effect of the library is named on top of the refit, the rounds
-    are run again with it named in the refit's place (``explain``). When an effect is named,
-    the refit's apparent gain may be that effect's own best linear approximation (a static
-    map's Bussgang gain, a friction's describing function), so it is not named a gain
-    fault: the refit stays in the base and ``matching`` is reported.
+    it (``matching``), it is named in the refit's place (``explain``: the refit never
+    swallows it). The effects then named on top of it are fitted again without it: a
+    friction's describing function or a static map's Bussgang gain also looks like a gain
+    change, and when they hold it (`_without_explanation`: it does not pay on top of them)
+    it is not named (``held_by``).
     """
     chosen: list[FittedEffect] = []
     base_cols = None
@@ -345,9 +344,17 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 for e in chosen]
         base_cols = np.column_stack(cols)
         prediction = best.prediction
-    if linear.get("matching") and not any(e.name not in BASE_TERMS for e in chosen):
-        return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
-                              explain=linear["matching"])
+    named = [e.name for e in chosen if e.name not in BASE_TERMS]
+    if linear.get("matching") and explain is None:
+        if not named:  # nothing but the refit: name what it matches
+            return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
+                                  explain=linear["matching"])
+        held = _explanation_on_top(ctx, named, linear["matching"], prediction, floor_sse)
+        if held is not None:
+            held.linear = {**linear, "named": linear["matching"], "on_top_of": named}
+            held.linear.pop("matching")
+            held.rounds = rounds + held.rounds
+            return held
     others = [e.name for e in chosen if e.name not in BASE_TERMS and e.name != explain]
     if explain is not None and others:
         alone = _without_explanation(ctx, others, prediction, explain, floor_sse)
@@ -359,6 +366,67 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
     return Selection(chosen, rounds, prediction, linear)
+
+
+def _fit_set(ctx: Context, names: list[str], base: list[FittedEffect]
+             ) -> tuple[list[FittedEffect], np.ndarray, float]:
+    """``names`` fitted in turn on top of ``base`` (jointly refitted, whatever their
+    plausibility): (effects, contribution over the record, held-out SSE)."""
+    test = ctx.split.test
+    chosen = list(base)
+    prediction = np.zeros_like(ctx.target)
+    base_cols = None
+    if chosen:
+        base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
+                                             ctx.regressors(SPECS[e.name], e.param))
+                                     for e in chosen])
+        prediction = base_cols @ np.concatenate([np.ravel(c) for e in chosen
+                                                 for c in e.coefficients])
+    for name in names:
+        e0 = ctx.target[test] - prediction[test]
+        c = evaluate(name, ctx, chosen, base_cols, float(e0 @ e0), effective_samples(e0))
+        chosen = c.base + [c.effect]
+        base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
+                                             ctx.regressors(SPECS[e.name], e.param))
+                                     for e in chosen])
+        prediction = c.prediction
+    e = ctx.target[test] - prediction[test]
+    return chosen, prediction, float(e @ e)
+
+
+def _explanation_on_top(ctx: Context, named: list[str], explain: str,
+                        prediction: np.ndarray, floor_sse: float | None) -> Selection | None:
+    """Effects ``named`` with the refit in the base, whose refit the check found to be
+    mostly a gain or a shift (``explain``): is it still that on top of them? The three
+    nested fits E ⊂ E + explanation ⊂ E + refit on the held-out part: the explanation is
+    named (a Selection of it and E, E refitted on top of it) when the refit adds to E at
+    all, and the explanation pays on top of E (F-test at ALPHA) and accounts for more than
+    MATCH_SHARE of what the refit adds to E.
+    Otherwise (None) E holds the apparent gain or shift (a friction's describing function,
+    a static map's Bussgang gain) and the refit stays in the base."""
+    test = ctx.split.test
+    e_refit = ctx.target[test] - prediction[test]
+    sse_refit = float(e_refit @ e_refit)
+    try:
+        _, _, sse_alone = _fit_set(ctx, named, [])
+        first, _, _ = linear_round(ctx, floor_sse, explain)
+        if first[0].name != explain:
+            return None
+        chosen, pred, sse_with = _fit_set(ctx, named, first)
+    except NotApplicable:
+        return None
+    if not all(e.physical.get("plausible", True) for e in chosen):
+        return None
+    n_eff = effective_samples(ctx.target[test])
+    k = first[0].n_params
+    dof = n_eff - sum(e.n_params for e in chosen)
+    if sse_with >= sse_alone or sse_refit >= sse_alone or dof <= 1:
+        return None  # nothing to explain: the refit adds nothing to E on held-out data
+    p = float(stats.f.sf(((sse_alone - sse_with) / k) / (sse_with / dof), k, dof))
+    share = (sse_alone - sse_with) / (sse_alone - sse_refit)
+    if p >= ALPHA or share <= MATCH_SHARE:
+        return None
+    return Selection(chosen, [], pred, {})
 
 
 def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,

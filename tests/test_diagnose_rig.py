@@ -35,9 +35,9 @@ STRONG = {"rms_v": 0.8, "duration_s": 40.0}
     # heavy contact friction: the mass sticks for long stretches
     ("bearing_supply", 0.55, {"coulomb_friction", "stribeck_friction"}, STRONG),
 ])
-def test_rig_fault_is_named_and_gap_halves(fault, value, right, excitation):
+def test_rig_fault_is_named_first_and_gap_halves(fault, value, right, excitation):
     result = _diagnose(fault, value, **excitation)
-    assert right & set(result.named[:2]), f"{fault}: named {result.named}"
+    assert right & set(result.named[:1]), f"{fault}: named {result.named}"
     assert result.gap_after <= 0.5 * result.gap_before
 
 
@@ -46,8 +46,11 @@ def test_rig_without_fault_names_nothing_or_its_seal_friction():
     assert set(result.named) <= SEAL
 
 
-def test_rig_valve_gain_fault_is_named():
-    result = _diagnose("valve_gain", 0.7, **STRONG)
+@pytest.mark.parametrize("ratio,excitation", [(0.7, STRONG), (1.3, {})])
+def test_rig_valve_gain_fault_is_named(ratio, excitation):
+    # the valve's flapper gain; its flow and the chamber pressures are not linear in the
+    # flapper travel, so the gain seen at the load is close to, not exactly, the ratio
+    result = _diagnose("valve_gain", ratio, **excitation)
     assert result.named[:1] == ["gain_fault"]
-    assert result.selection.named[0].physical["gain_ratio"] == pytest.approx(0.7, abs=0.05)
+    assert result.selection.named[0].physical["gain_ratio"] == pytest.approx(ratio, abs=0.05)
     assert result.gap_after <= 0.5 * result.gap_before

@@ -294,11 +294,15 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     looked for.
 
     When the refit check found a gain or a shift that matches the refit without replacing
-    it (``matching``), it is named in the refit's place (``explain``: the refit never
-    swallows it). The effects then named on top of it are fitted again without it: a
-    friction's describing function or a static map's Bussgang gain also looks like a gain
-    change, and when they hold it (`_without_explanation`: it does not pay on top of them)
-    it is not named (``held_by``).
+    it (``matching``), the refit never swallows it:
+    - nothing named on top of the refit: the rounds run again with the match named in the
+      refit's place (``explain``); the effects then named on top of it are fitted again
+      without it (`_without_explanation`), and when it does not pay on top of them it is
+      theirs and not named (``held_by``);
+    - effects E named on top of the refit: the match is named first, E refitted on top
+      of it, when it still matches on top of E (`_explanation_on_top`, ``on_top_of``);
+      otherwise E holds it (a friction's describing function or a static map's Bussgang
+      gain also looks like a gain change) and the refit stays in the base.
     """
     chosen: list[FittedEffect] = []
     base_cols = None

@@ -297,7 +297,6 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
             if ff else np.zeros((len(ctx.u), 0)))
     n_ff = x_ff.shape[1]
     cols = [c for e in fb for c in kinds(e.name, e.param)]
-    b_path = _padded(ctx.b_dom, width)
 
     def run(theta_ff, nums):
         with np.errstate(all="ignore"):
@@ -306,44 +305,56 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
             sse = float(np.sum((y_meas - y)[fit] ** 2))
         return (y, phi, v), (sse if np.isfinite(sse) else np.inf)
 
-    # 1. feed-forward start, 2. amplitudes on B̂ in the loop
-    x_fb = np.column_stack([signal.lfilter(ctx.b_dom, ctx.a_dom, _phi(k, p, ctx.v, ctx.x))
-                            for k, p in cols])
-    theta = least_squares(np.column_stack([x_ff, x_fb])[fit], ctx.target[fit])
-    scale = 1e3 * (float(np.std(y_meas[fit])) or 1.0)
+    def from_start(b_path):
+        """Steps 1-3 from the force path B_F = θ b_path."""
+        # 1. feed-forward start, 2. amplitudes on b_path in the loop
+        x_fb = np.column_stack([signal.lfilter(b_path, ctx.a_dom, _phi(k, p, ctx.v, ctx.x))
+                                for k, p in cols])
+        theta = least_squares(np.column_stack([x_ff, x_fb])[fit], ctx.target[fit])
+        scale = 1e3 * (float(np.std(y_meas[fit])) or 1.0)
 
-    def residual(th):
+        def residual(th):
+            with np.errstate(all="ignore"):
+                e = (y_meas - ForceLoop(ctx.a_dom, cols, np.outer(th[n_ff:], b_path),
+                                        ctx.chain).run(ctx.y0 + x_ff @ th[:n_ff]))[fit]
+            # an unstable trial diverges: a large, finite residual keeps the solver going
+            return np.clip(np.nan_to_num(e, nan=scale), -scale, scale)
+
+        r0 = residual(theta)
         with np.errstate(all="ignore"):
-            e = (y_meas - ForceLoop(ctx.a_dom, cols, np.outer(th[n_ff:], b_path),
-                                    ctx.chain).run(ctx.y0 + x_ff @ th[:n_ff]))[fit]
-        # an unstable trial diverges: a large, finite residual keeps the solver going
-        return np.clip(np.nan_to_num(e, nan=scale), -scale, scale)
-
-    r0 = residual(theta)
-    with np.errstate(all="ignore"):
-        sol = least_squares_nl(residual, theta, method="trf", x_scale="jac",
-                               max_nfev=30 * theta.size)
-    if float(sol.fun @ sol.fun) < float(r0 @ r0):
-        theta = sol.x
-    best_ff, best_nums = theta[:n_ff], np.outer(theta[n_ff:], b_path)
-    (y, phi, v), best = run(best_ff, best_nums)
-    # 3. free numerators, passes on the regressors the loop applied (its own motion; the
-    #    stick value while the mass is held)
-    for _ in range(PASSES if np.all(np.isfinite(y)) else 0):
-        xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), width)
-                       for j in range(len(cols))]
-        target = least_squares(np.column_stack(xs)[fit], ctx.target[fit])
-        start = np.concatenate([best_ff, best_nums.ravel()])
-        before = best
-        for frac in (1.0, 0.5, 0.25, 0.125):
-            trial = start + frac * (target - start)
-            traced, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
-            if sse < best:
-                (y, phi, v), best = traced, sse
-                best_ff, best_nums = trial[:n_ff], trial[n_ff:].reshape(len(cols), width)
+            sol = least_squares_nl(residual, theta, method="trf", x_scale="jac",
+                                   max_nfev=30 * theta.size)
+        if float(sol.fun @ sol.fun) < float(r0 @ r0):
+            theta = sol.x
+        best_ff, best_nums = theta[:n_ff], np.outer(theta[n_ff:], b_path)
+        (y, phi, v), best = run(best_ff, best_nums)
+        # 3. free numerators, passes on the regressors the loop applied (its own motion;
+        #    the stick value while the mass is held)
+        for _ in range(PASSES if np.isfinite(best) else 0):
+            xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), width)
+                           for j in range(len(cols))]
+            target = least_squares(np.column_stack(xs)[fit], ctx.target[fit])
+            start = np.concatenate([best_ff, best_nums.ravel()])
+            before = best
+            for frac in (1.0, 0.5, 0.25, 0.125):
+                trial = start + frac * (target - start)
+                traced, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
+                if sse < best:
+                    (y, phi, v), best = traced, sse
+                    best_ff, best_nums = trial[:n_ff], trial[n_ff:].reshape(len(cols), width)
+                    break
+            if best > 0.999 * before:
                 break
-        if best > 0.999 * before:
-            break
+        return best, best_ff, best_nums, y, phi, v
+
+    # two starts, the lower training error kept: the input's path B̂ (a force input) and
+    # a force that moves the acceleration at once (B_F = θ Â, G_F = θ: the path of a force
+    # on the mass where the input acts through a valve's lag)
+    starts = [_padded(ctx.b_dom, width), _padded(ctx.a_dom, width)]
+    if ctx.chain[0] != 0:  # velocity or position output: in its domain G_F = θ Â is not
+        starts = starts[:1]  # a force on the mass; only the input's path
+    fits = [from_start(b) for b in starts]
+    best, best_ff, best_nums, y, phi, v = min(fits, key=lambda f: f[0])
     out, pos, row = [], 0, 0
     for e in effects:
         if e.name in LOOPED:

@@ -86,6 +86,16 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     if floor.get("floor") is not None:
         lines.append(f"noise floor (NRMSE): {floor['floor']:.4g} ({floor['method']})"
                      + ("  -- the nominal model is at the floor" if floor["at_floor"] else ""))
+    check = report["linear_check"]
+    if check.get("matching"):
+        held = check.get("held_by")
+        lines.append(f"the numerator refit is mostly a {check['matching']}"
+                     + (f", held by {', '.join(held)}" if held else
+                        ", held by the named effects" if report["effect"] else "")
+                     + ": not named (see linear_check)")
+    elif check.get("named") and check.get("on_top_of"):
+        lines.append(f"the numerator refit is mostly a {check['named']}, also on top of "
+                     f"{', '.join(check['on_top_of'])}: named")
     if report["linear_check"].get("unexplained"):
         lines.append("the numerator refit alone is significant (a missing effect's linear "
                      "part, or a numerator that is off) and is neither a gain change nor a "

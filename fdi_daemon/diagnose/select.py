@@ -119,10 +119,41 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
             p = float(stats.f.sf(f_stat, k, dof))
         else:
             p = 1.0
+    input_share(refitted + [eff])
     plausible = all(e.physical.get("plausible", True) for e in refitted + [eff])
     return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, float(score), p,
                      bool(p < ALPHA and score < 0.0 and plausible
                           and sse1 <= (1.0 - MIN_REDUCTION) * sse_reference), prediction)
+
+
+#: input maps whose φ = N(u) − u must enter with the gain of the input itself
+INPUT_MAPS = ("input_saturation", "dead_zone", "backlash")
+#: the share of the full map a fitted input map may have (as a dead time's shift share)
+SHARE_RANGE = (0.5, 1.5)
+
+
+def input_share(effects: list[FittedEffect]) -> None:
+    """A saturation, dead zone or backlash is the input map N itself: the plant sees
+    (1 + r) N(u) = (1 + r) u + (1 + r) [N(u) − u], r the numerator refit's gain
+    (``linear_refit``, 0 without it). The fitted coefficient c of φ = N(u) − u (referred to
+    the input, `effects.physical_report`) is the map's share s = c / (1 + r): 1 for the
+    effect, 0 for none. A share far from 1 is another map: s < 0 turns a saturation into
+    an input gain that *rises* with amplitude and a dead zone into one that falls; 0 < s ≪ 1
+    is a gain that changes a little with amplitude, not an input that stops (saturation),
+    moves nothing (dead zone) or has play (backlash). The effect being added (the last of
+    ``effects``) is plausible only within SHARE_RANGE, the tolerance of a dead time's shift
+    share; a map named in an earlier round keeps its name when a later effect takes over
+    part of it (its share is reported, in ``physical``, for every map)."""
+    r = next((e.physical.get("input_gain", 0.0) for e in effects
+              if e.name == "linear_refit"), 0.0)
+    new = effects[-1]
+    for e in effects:
+        if e.name in INPUT_MAPS and "input_gain" in e.physical and 1.0 + r > 0.0:
+            share = e.physical["input_gain"] / (1.0 + r)
+            e.physical["map_share"] = share
+            if e is new:
+                e.physical["plausible"] = bool(e.physical.get("plausible", True)
+                                               and SHARE_RANGE[0] <= share <= SHARE_RANGE[1])
 
 
 def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffect:
@@ -182,9 +213,12 @@ class Selection:
 
 #: what a significant numerator refit may be: a pure gain change or a pure shift
 LINEAR_EXPLANATIONS = ("gain_fault", "dead_time")
+#: share of the refit's improvement a gain or a shift must account for to be what the refit
+#: is (more than half: the refit's main content)
+MATCH_SHARE = 0.5
 
 
-def linear_round(ctx: Context, floor_sse: float | None = None
+def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | None = None
                  ) -> tuple[list[FittedEffect], np.ndarray, dict]:
     """The refit never swallows an effect silently.
 
@@ -193,9 +227,15 @@ def linear_round(ctx: Context, floor_sse: float | None = None
     (``dead_time``, ŷ₀(t − τ)) are tried: the best one that the refit does not beat
     (nested F-test at ALPHA) and that leaves no more than the noise floor (floor_sse; a
     dead zone or a saturation also looks like a lower gain, but leaves its nonlinear part)
-    is named with its value and replaces the refit. Otherwise the refit stays in the base
-    and is reported (``linear_check``: ``unexplained``, or the explanations tried, with
+    is named with its value and replaces the refit. Otherwise the refit stays in the base and
+    is reported (``linear_check``: ``unexplained``, or the explanations tried, with
     their values).
+
+    An explanation that is accepted like a candidate and accounts for more than
+    MATCH_SHARE of what the refit removes (``refit_share``) is the refit's main content
+    even when the refit beats it (the rest: the nominal model's own imperfection, or a
+    nonlinearity of the plant the linear model lacks); it is reported as ``matching``, and
+    `select_effects` names it (``explain``: named here, in the refit's place).
     """
     test = ctx.split.test
     e0 = ctx.target[test]
@@ -207,30 +247,41 @@ def linear_round(ctx: Context, floor_sse: float | None = None
            "explanations": []}
     if not refit.accepted:
         return [refit.effect], refit.prediction, out
-    simple = []
+    simple, matching = [], []
+    removed = sse0 - refit.sse_test
     for name in LINEAR_EXPLANATIONS:
         try:
             c = evaluate(name, ctx, [], None, sse0, n_eff)
         except NotApplicable:
             continue
         p_refit = nested_p_value(refit, c, n_eff)
+        share = (sse0 - c.sse_test) / removed if removed > 0 else 0.0
         out["explanations"].append({"effect": name, "sse_ratio": c.sse_test / sse0,
                                     "p_value": c.p_value, "refit_beats_it_p": p_refit,
+                                    "refit_share": share,
                                     "params": dict(c.effect.physical)})
+        if name == explain:
+            simple = [c]
+            break
         if (c.accepted and p_refit >= ALPHA
                 and (floor_sse is None or c.sse_test <= floor_sse)):
             simple.append(c)
+        elif c.accepted and share > MATCH_SHARE:
+            matching.append(c)
     if simple:
         best = min(simple, key=lambda c: c.sse_test)
         out["named"] = best.name
         return [best.effect], best.prediction, out
-    out["unexplained"] = not any(x["p_value"] < ALPHA and x["refit_beats_it_p"] >= ALPHA
-                                 for x in out["explanations"])
+    if matching:
+        out["matching"] = min(matching, key=lambda c: c.sse_test).name
+    out["unexplained"] = not matching and not any(
+        x["p_value"] < ALPHA and x["refit_beats_it_p"] >= ALPHA for x in out["explanations"])
     return [refit.effect], refit.prediction, out
 
 
 def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
-                   refit_linear: bool = False, floor_sse: float | None = None) -> Selection:
+                   refit_linear: bool = False, floor_sse: float | None = None,
+                   explain: str | None = None) -> Selection:
     """Rounds of candidate search; see the module docstring.
 
     refit_linear: the nominal model's numerator is refitted jointly with every candidate
@@ -241,6 +292,17 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     not a missing effect: it is dropped when nothing is named. floor_sse: the held-out SSE
     at the noise floor (`floor`); once the remaining error is there, no further effect is
     looked for.
+
+    When the refit check found a gain or a shift that matches the refit without replacing
+    it (``matching``), the refit never swallows it:
+    - nothing named on top of the refit: the rounds run again with the match named in the
+      refit's place (``explain``); the effects then named on top of it are fitted again
+      without it (`_without_explanation`), and when it does not pay on top of them it is
+      theirs and not named (``held_by``);
+    - effects E named on top of the refit: the match is named first, E refitted on top
+      of it, when it still matches on top of E (`_explanation_on_top`, ``on_top_of``);
+      otherwise E holds it (a friction's describing function or a static map's Bussgang
+      gain also looks like a gain change) and the refit stays in the base.
     """
     chosen: list[FittedEffect] = []
     base_cols = None
@@ -250,7 +312,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         balance, _ = fit_effect("force_balance", ctx)
         chosen = [balance]
     elif refit_linear:
-        chosen, prediction, linear = linear_round(ctx, floor_sse)
+        chosen, prediction, linear = linear_round(ctx, floor_sse, explain)
     if chosen:
         base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
                                              ctx.regressors(SPECS[e.name], e.param))
@@ -286,7 +348,113 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 for e in chosen]
         base_cols = np.column_stack(cols)
         prediction = best.prediction
+    named = [e.name for e in chosen if e.name not in BASE_TERMS]
+    if linear.get("matching") and explain is None:
+        if not named:  # nothing but the refit: name what it matches
+            return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
+                                  explain=linear["matching"])
+        held = _explanation_on_top(ctx, named, linear["matching"], prediction, floor_sse)
+        if held is not None:
+            held.linear = {**linear, "named": linear["matching"], "on_top_of": named}
+            held.linear.pop("matching")
+            held.rounds = rounds + held.rounds
+            return held
+    others = [e.name for e in chosen if e.name not in BASE_TERMS and e.name != explain]
+    if explain is not None and others:
+        alone = _without_explanation(ctx, others, prediction, explain, floor_sse)
+        if alone is not None:
+            linear["held_by"] = others  # the gain or shift is theirs: not named
+            linear["matching"] = linear.pop("named", explain)
+            return Selection(alone.chosen, rounds + alone.rounds, alone.prediction, linear)
     if not any(e.name not in BASE_TERMS for e in chosen):
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
     return Selection(chosen, rounds, prediction, linear)
+
+
+def _fit_set(ctx: Context, names: list[str], base: list[FittedEffect]
+             ) -> tuple[list[FittedEffect], np.ndarray, float]:
+    """``names`` fitted in turn on top of ``base`` (jointly refitted, whatever their
+    plausibility): (effects, contribution over the record, held-out SSE)."""
+    test = ctx.split.test
+    chosen = list(base)
+    prediction = np.zeros_like(ctx.target)
+    base_cols = None
+    if chosen:
+        base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
+                                             ctx.regressors(SPECS[e.name], e.param))
+                                     for e in chosen])
+        prediction = base_cols @ np.concatenate([np.ravel(c) for e in chosen
+                                                 for c in e.coefficients])
+    for name in names:
+        e0 = ctx.target[test] - prediction[test]
+        c = evaluate(name, ctx, chosen, base_cols, float(e0 @ e0), effective_samples(e0))
+        chosen = c.base + [c.effect]
+        base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
+                                             ctx.regressors(SPECS[e.name], e.param))
+                                     for e in chosen])
+        prediction = c.prediction
+    e = ctx.target[test] - prediction[test]
+    return chosen, prediction, float(e @ e)
+
+
+def _explanation_on_top(ctx: Context, named: list[str], explain: str,
+                        prediction: np.ndarray, floor_sse: float | None) -> Selection | None:
+    """Effects ``named`` with the refit in the base, whose refit the check found to be
+    mostly a gain or a shift (``explain``): is it still that on top of them? The three
+    nested fits E ⊂ E + explanation ⊂ E + refit on the held-out part: the explanation is
+    named (a Selection of it and E, E refitted on top of it) when the refit adds to E at
+    all, and the explanation pays on top of E (F-test at ALPHA) and accounts for more than
+    MATCH_SHARE of what the refit adds to E.
+    Otherwise (None) E holds the apparent gain or shift (a friction's describing function,
+    a static map's Bussgang gain) and the refit stays in the base."""
+    test = ctx.split.test
+    e_refit = ctx.target[test] - prediction[test]
+    sse_refit = float(e_refit @ e_refit)
+    try:
+        _, _, sse_alone = _fit_set(ctx, named, [])
+        first, _, _ = linear_round(ctx, floor_sse, explain)
+        if first[0].name != explain:
+            return None
+        chosen, pred, sse_with = _fit_set(ctx, named, first)
+    except NotApplicable:
+        return None
+    if not all(e.physical.get("plausible", True) for e in chosen):
+        return None
+    n_eff = effective_samples(ctx.target[test])
+    k = first[0].n_params
+    dof = n_eff - sum(e.n_params for e in chosen)
+    if sse_with >= sse_alone or sse_refit >= sse_alone or dof <= 1:
+        return None  # nothing to explain: the refit adds nothing to E on held-out data
+    p = float(stats.f.sf(((sse_alone - sse_with) / k) / (sse_with / dof), k, dof))
+    share = (sse_alone - sse_with) / (sse_alone - sse_refit)
+    if p >= ALPHA or share <= MATCH_SHARE:
+        return None
+    return Selection(chosen, [], pred, {})
+
+
+def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
+                         explain: str, floor_sse: float | None) -> Selection | None:
+    """The effects ``names`` named on top of a gain or a shift (``explain``), fitted again
+    without it: a friction's describing function or a map's Bussgang gain also looks like
+    a gain change. The selection without the explanation when it names the same effects
+    and the explanation does not pay on top of them (F-test at ALPHA, its parameters
+    against the held-out SSE); None when it does."""
+    from dataclasses import replace
+
+    alone = select_effects(replace(ctx, candidates=tuple(names)), len(names),
+                           floor_sse=floor_sse)
+    if sorted(e.name for e in alone.named) != sorted(names):
+        return None
+    test = ctx.split.test
+    e_with = ctx.target[test] - prediction[test]
+    e_alone = ctx.target[test] - alone.prediction[test]
+    sse_with, sse_alone = float(e_with @ e_with), float(e_alone @ e_alone)
+    n_eff = effective_samples(ctx.target[test])
+    k = 1 + (SPECS[explain].param is not None)  # a gain: 1; a shift: its share and τ
+    k_total = k + sum(e.n_params for e in alone.chosen)
+    dof = n_eff - k_total
+    if sse_with >= sse_alone or dof <= 1:
+        return alone
+    f_stat = ((sse_alone - sse_with) / k) / (sse_with / dof)
+    return alone if float(stats.f.sf(f_stat, k, dof)) >= ALPHA else None

@@ -191,7 +191,7 @@ def packed_row_into(f, src, p, dst):  # pragma: no cover - jit
     f[c] = y * y
 
 
-@jit
+@jit(inline=True)
 def itest_tick(f, ii, io, need):  # pragma: no cover - jit
     """One tick of the innovation test whose ints start at ``io``; φ and y in its phi slots.
 
@@ -212,7 +212,6 @@ def _itest_body(f, ii, io, need, p):  # pragma: no cover - jit
     lag = ii[io + 2]
     m = ii[io + 3]
     every = ii[io + 4]
-    phase = ii[io + 5]
     w = ii[io + 6]
     ph = ii[io + 15]
     fifo = ii[io + 17]
@@ -222,8 +221,8 @@ def _itest_body(f, ii, io, need, p):  # pragma: no cover - jit
     scr = ii[io + 21]
     sc = ii[io + 22]
     y = f[ph + p]
-    tick = ii[io + 7]
-    solve = tick % every == phase
+    wait = ii[io + 7]  # ticks until the next solve (a countdown, not tick % every)
+    solve = wait == 0
     need = need or solve
     q = p + 1
     if lag == 0:
@@ -248,7 +247,7 @@ def _itest_body(f, ii, io, need, p):  # pragma: no cover - jit
             ii[io + 8] = 1 if ok else 0
         else:
             ii[io + 8] = 0
-    ii[io + 7] = tick + 1
+    ii[io + 7] = every - 1 if solve else wait - 1
     if ii[io + 8]:
         acc = f[th] * f[ph]
         for a in range(1, p):

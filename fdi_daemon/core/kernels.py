@@ -44,30 +44,11 @@ def sums_floats(n: int, w: int) -> int:
 @jit(inline=True)
 def sums_push(f, ii, ro, n, w, ip, src):  # pragma: no cover - jit
     """Push row f[src:src+w] into the sums block at ``ro`` (pos, count in ii[ip], ii[ip+1]);
-    the window sums are then at ro + (n + 2)·w (`core.sliding_sums`)."""
-    pos = ii[ip]
-    fresh = ro + n * w
-    prev = fresh + w
-    sl = prev + w
-    rp = ro + pos * w
-    if ii[ip + 1] < n:
-        ii[ip + 1] += 1
-    if pos + 1 == n:  # end of the block: exact
-        for k in range(w):
-            c = f[fresh + k] + f[src + k]
-            f[rp + k] = c
-            f[sl + k] = c
-            f[prev + k] = c
-            f[fresh + k] = 0.0
-        ii[ip] = 0
-    else:
-        for k in range(w):
-            c = f[fresh + k] + f[src + k]
-            before = f[rp + k]
-            f[rp + k] = c
-            f[sl + k] = f[prev + k] + (c - before)
-            f[fresh + k] = c
-        ii[ip] = pos + 1
+    the window sums are then at ro + (n + 2)·w (module docstring)."""
+    fresh, prev, sl, rp, end = _slot(ii, ro, n, w, ip)
+    for k in range(w):
+        _column(f, fresh, prev, sl, rp, k, f[src + k], end, True)
+    ii[ip] = 0 if end else ii[ip] + 1
 
 
 @jit
@@ -133,6 +114,18 @@ def itest_floats(p: int, n: int, lag: int, m: int) -> int:
 
 
 @jit(inline=True)
+def _slot(ii, ro, n, w, ip):  # pragma: no cover - jit
+    """The offsets of a sums block's fresh, previous and sliding rows and of the ring row
+    this push writes, and whether it ends the block (the row count grows up to n)."""
+    pos = ii[ip]
+    fresh = ro + n * w
+    prev = fresh + w
+    if ii[ip + 1] < n:
+        ii[ip + 1] += 1
+    return fresh, prev, prev + w, ro + pos * w, pos + 1 == n
+
+
+@jit(inline=True)
 def _column(f, fresh, prev, sl, rp, k, value, end, need):  # pragma: no cover - jit
     """One column of `sums_push` (the window sums only when ``need``: the reader's tick)."""
     c = f[fresh + k] + value
@@ -155,14 +148,7 @@ def push_products(f, ii, ro, n, ip, src, p, need):  # pragma: no cover - jit
     (the products of `innovation_test.packed_row`); the window sums are written only when
     ``need`` (a block's other sums are exact whatever the ticks that read them)."""
     w = p * (p + 1) // 2 + p + 1
-    pos = ii[ip]
-    fresh = ro + n * w
-    prev = fresh + w
-    sl = prev + w
-    rp = ro + pos * w
-    if ii[ip + 1] < n:
-        ii[ip + 1] += 1
-    end = pos + 1 == n
+    fresh, prev, sl, rp, end = _slot(ii, ro, n, w, ip)
     y = f[src + p]
     k = 0
     for a in range(p):
@@ -173,7 +159,7 @@ def push_products(f, ii, ro, n, ip, src, p, need):  # pragma: no cover - jit
         _column(f, fresh, prev, sl, rp, k, f[src + a] * y, end, need)
         k += 1
     _column(f, fresh, prev, sl, rp, k, y * y, end, need)
-    ii[ip] = 0 if end else pos + 1
+    ii[ip] = 0 if end else ii[ip] + 1
 
 
 @jit

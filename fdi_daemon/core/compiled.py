@@ -28,8 +28,7 @@ except ImportError:  # pragma: no cover
 
 
 def jit(func=None, *, inline: bool = False):
-    """``numba.njit(cache=True, nogil=True)``; ``inline``: inlined into its compiled
-    callers (numba IR inlining; the per-tick kernels are inlined into one loop body)."""
+    """``numba.njit(cache=True, nogil=True)``; ``inline``: inlined into its callers."""
     def wrap(f):
         if not JIT_ENABLED or _njit is None:
             return f

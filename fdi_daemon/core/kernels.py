@@ -177,7 +177,7 @@ def packed_row_into(f, src, p, dst):  # pragma: no cover - jit
     f[c] = y * y
 
 
-@jit(inline=True)
+@jit
 def itest_tick(f, ii, io, need):  # pragma: no cover - jit
     """One tick of the innovation test whose ints start at ``io``; φ and y in its phi slots.
 

@@ -60,7 +60,7 @@ E_CAL = 16  # calibration buffer (θ1, θ2) × calibration samples, then the bas
 STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER = range(1, 6)
 
 
-@jit(inline=True)
+@jit
 def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
     """One tick of the signal chain (see the module docstring); results at its C_OUT."""
     L = ii[io + C_WIDTH]
@@ -160,7 +160,7 @@ def chain_run(f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums
         v_rms[k] = f[out + O_VRMS]
 
 
-@jit(inline=True)
+@jit
 def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baseline
                   ):  # pragma: no cover - jit
     """The detector's per-tick arithmetic and quiet decisions; returns the tick's code."""
@@ -268,7 +268,7 @@ def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
     return CLEARED
 
 
-@jit(inline=True)
+@jit
 def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
     """``chain_tick`` then ``detector_tick`` (with the level's excess over the baseline of
     the window's operating condition); returns the tick's code (also in ii[io + D_CODE])."""

@@ -42,6 +42,9 @@ from fdi_daemon.service.trend import open_trend_store
 
 log = logging.getLogger("fdi.daemon")
 
+#: after this long compiling the kernels, `prepare` says what it is doing (s)
+COMPILE_NOTICE_S = 2.0
+
 
 def setup_logging(level: int = logging.INFO) -> None:
     """Log records on stderr; with ``<N>`` priorities when journald reads it."""
@@ -266,7 +269,17 @@ class Daemon:
         from fdi_daemon.detect.monitor import Monitor
 
         monitor = Monitor(model)
-        monitor.warm_up()
+        # numba compiles the kernels once after an install (about a minute) and caches them:
+        # say so when it takes long, so a first run does not look hung
+        notice = threading.Timer(COMPILE_NOTICE_S, self.echo, ("compiling the monitor's kernels "
+                                 "(once after an install: about a minute; cached for later "
+                                 "runs) ...",))
+        notice.daemon = True
+        notice.start()
+        try:
+            monitor.warm_up()
+        finally:
+            notice.cancel()
         return model, monitor, self.link_config(config)
 
     def assemble(self, config: RigConfig, model: FdiModel, monitor: Any,

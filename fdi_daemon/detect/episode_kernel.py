@@ -171,14 +171,15 @@ def _friction_kind(f, ii, eo, fmin):  # pragma: no cover - jit
 
 
 @jit
-def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, row,
-                 ref_sums, band, out):  # pragma: no cover - jit
+def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, trusted,
+                 row, ref_sums, band, out):  # pragma: no cover - jit
     """One episode tick; θ as reported in out[0], out[1]; returns the transition.
 
     ``state``: 3 fault_detected, 4 friction_isolated, 5 other_fault (`detector.STATES`);
     ``row``: the residual fit's packed row of this tick; ``ref_sums``: the offset of the
     residual test's reference window sums; ``band``: the offset of the calibrated band
-    (lo1, hi1, lo2, hi2), −1 without one; θ: the pipeline's window θ (NaN at rest)."""
+    (lo1, hi1, lo2, hi2), −1 without one; θ: the pipeline's window θ (NaN at rest);
+    ``trusted``: the window's velocity lies where v̂ is right (`kernel.chain_tick`)."""
     n = ii[eo + P_N]
     m = ii[eo + P_M]
     iso = ii[eo + P_ISO]
@@ -274,6 +275,10 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
             ii[eo + P_QUIET] = 0
             return TO_OTHER
     if state == 4:
+        if not trusted:
+            # sign v̂ is wrong for much of each cycle: θ1 cannot show that friction is gone
+            # (nor that it is there), so the clearing count holds
+            return NO_CHANGE
         s_xx = f[ref_sums + 7]
         s_xr = f[ref_sums + 12]
         s_rr = f[ref_sums + 14]

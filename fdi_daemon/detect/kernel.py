@@ -9,6 +9,8 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
     v̂  = V(q) ẍ | L(q) x̂̈ + V(q) r | P(q) x + A(q) ẍ    the three velocity methods
     g1 = G_e(q)[sign v̂], g2 = G_e(q)[v̂]  eq. (15)
     θ  = argmin Σ_N (r − θ1 g1 − θ2 g2)²  eqs. (16)–(17): six window sums + Σ v̂²
+    trusted: Σ (LP v̂)² <= share · Σ v̂²   at most that share of the window's velocity energy
+             below the frequency where v̂'s phase error exceeds its bound (`Pipeline`)
 
 ``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
 of v_in (`core.kernels.itest_tick`), the operating-point guard, the friction level's
@@ -36,17 +38,20 @@ __all__ = ["chain_tick", "chain_run", "detector_tick", "monitor_tick", "monitor_
 #: computed there too)
 QUIET, LEVEL_ALARM, CALIBRATED, FAST_ALARM, ISOLATED, OTHER_FAULT, CLEARED = range(7)
 
-# --- chain ints (offsets from the chain's int base)
-C_METHOD, C_EXTERNAL, C_N, C_WIDTH, C_ORDER = 0, 1, 2, 3, 4  # C_ORDER .. +5: 5 filters
-C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = 9, 10, 11, 12, 13, 14, 15, 16
-CHAIN_INTS = 17
 # filters
-F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL = range(5)
+F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL, F_VEL_LOW = range(6)
+CHAIN_FILTERS = 6
+# --- chain ints (offsets from the chain's int base)
+C_METHOD, C_EXTERNAL, C_N, C_WIDTH, C_ORDER = 0, 1, 2, 3, 4  # C_ORDER .. +6: the filters
+C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = range(C_ORDER + CHAIN_FILTERS,
+                                                          C_ORDER + CHAIN_FILTERS + 8)
+CHAIN_INTS = C_OUT + 1
 # --- chain floats at C_OUT
 (O_XHAT, O_R, O_V, O_G1, O_G2, O_T1, O_T2, O_WT1, O_WT2, O_WOK, O_WSSE, O_VRMS, O_MOVING,
- O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11, O_MIN_S22) = range(18)
-CHAIN_OUT = 18
-SUMS_WIDTH = 7  # S11, S12, S22, S1y, S2y, Syy, Σv̂²
+ O_TRUSTED, O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11, O_MIN_S22, O_TRUST_SHARE
+ ) = range(20)
+CHAIN_OUT = 20
+SUMS_WIDTH = 8  # S11, S12, S22, S1y, S2y, Syy, Σv̂², Σ(LP v̂)²
 
 # --- detector ints
 (D_METHOD, D_HAS_BAND, D_HAS_BASELINE, D_STATE, D_TICK, D_GUARD_UNTIL, D_ABOVE,
@@ -94,6 +99,7 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
     g1 = iir_step(f, bo + 3 * L, ao + 3 * L, zo + 3 * (L - 1), ii[od + 3], s)
     g2 = iir_step(f, bo + 4 * L, ao + 4 * L, zo + 4 * (L - 1), ii[od + 4], v)
+    v_low = iir_step(f, bo + 5 * L, ao + 5 * L, zo + 5 * (L - 1), ii[od + 5], v)
     row = ii[io + C_ROW]
     f[row] = g1 * g1
     f[row + 1] = g1 * g2
@@ -102,6 +108,7 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     f[row + 4] = g2 * r
     f[row + 5] = r * r
     f[row + 6] = v * v
+    f[row + 7] = v_low * v_low
     n = ii[io + C_N]
     so = ii[io + C_SUMS]
     sums_push(f, ii, so, n, SUMS_WIDTH, io + C_POS, row)
@@ -129,6 +136,7 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     v2 = f[sl + 6]
     moving = v2 >= f[out + O_MIN_V2]
     f[out + O_MOVING] = 1.0 if moving else 0.0
+    f[out + O_TRUSTED] = 1.0 if f[sl + 7] <= f[out + O_TRUST_SHARE] * v2 else 0.0
     f[out + O_VRMS] = math.sqrt((0.0 if v2 < 0.0 else v2) / n)
     f[out + O_T1] = t1 if moving else math.nan
     f[out + O_T2] = t2 if moving else math.nan
@@ -161,9 +169,10 @@ def chain_run(f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums
 
 
 @jit
-def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baseline
+def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baseline, trusted
                   ):  # pragma: no cover - jit
-    """The detector's per-tick arithmetic and quiet decisions; returns the tick's code."""
+    """The detector's per-tick arithmetic and quiet decisions; returns the tick's code.
+    ``trusted``: the chain's window velocity lies where v̂ is right (`chain_tick`)."""
     fo = ii[io + D_FLOATS]
     res = ii[io + D_RES]
     cmd = ii[io + D_CMD]
@@ -195,7 +204,8 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
         over = (theta1 - f[fo + E_LEVEL_BASE]) / f[fo + E_FRICTION_MIN]
     f[fo + E_OVER] = over
     if ii[io + D_EPISODE]:
-        return _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over)
+        return _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over,
+                        trusted)
     if tick < ii[io + D_HOLD_UNTIL]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
@@ -237,7 +247,7 @@ def _start(f, ii, io, res, level):  # pragma: no cover - jit
 
 
 @jit
-def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
+def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over, trusted
              ):  # pragma: no cover - jit
     """A tick of the running episode, and its transition applied to the detector."""
     ep = ii[io + D_EPI]
@@ -245,7 +255,7 @@ def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
     ref_sums = ii[res + 18] + (ii[res + 1] + 2) * ii[res + 6]
     packed_row_into(f, ii[res + 15], 4, ii[res + 16])  # this tick's row of the residual fit
     change = E.episode_tick(f, ii, ep, tick, ii[io + D_STATE], r, g1, g2, xhat, theta1,
-                            theta2, over, ii[res + 16], ref_sums, band,
+                            theta2, over, trusted, ii[res + 16], ref_sums, band,
                             f[fo + E_THETA1:fo + E_THETA2 + 1])
     if change == E.NO_CHANGE:
         return QUIET
@@ -292,7 +302,7 @@ def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - 
             b = min(max(b, 0), nb - 1)
         over = (theta1 - f[edges + nb + 1 + b]) / f[edges + 2 * nb + 1 + b]
     code = detector_tick(f, ii, io, v_in, f[out + O_XHAT], f[out + O_R], f[out + O_G1],
-                         f[out + O_G2], theta1, f[out + O_T2], over)
+                         f[out + O_G2], theta1, f[out + O_T2], over, f[out + O_TRUSTED] != 0.0)
     ii[io + D_CODE] = code
     return code
 

@@ -109,7 +109,9 @@ class Monitor:
                                  baseline_bins=bins)
         self.pipeline = Pipeline(model, self.detector.window_samples,
                                  min_velocity_rms_mps=self.settings.min_velocity_rms_mps,
-                                 arena=self.arena)
+                                 arena=self.arena,
+                                 trust_phase_deg=self.settings.velocity_trust_phase_deg,
+                                 trust_share=self.settings.velocity_trust_share)
         self.arena.i[self.detector.io + K.D_CHAIN] = self.pipeline.io
         self._io = self.detector.io
         self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))

@@ -84,6 +84,14 @@ class DetectorSettings:
     moving freely, for this long while the rig moves, before ``cleared``. Friction goes away
     by maintenance, not within a second; a stretch of operation at which θ under-reads it
     (docs/detector.md §4a) must not end the episode."""
+    velocity_trust_phase_deg: float = 30.0
+    """The velocity estimate is trusted above the frequency where its phase error against the
+    true velocity falls below this (degrees; from its transfer function: 3.9 Hz for the 1 Hz
+    high-pass, none for the observers) ..."""
+    velocity_trust_share: float = 0.3
+    """... and a window counts as evidence that friction is gone only when at most this
+    share of its velocity energy lies below that frequency: elsewhere sign v̂ is wrong for
+    much of each cycle and θ1 under-reads friction, so the clearing count holds."""
 
     @classmethod
     def from_mapping(cls, mapping: Mapping[str, Any] | None,

@@ -6,7 +6,8 @@ Per rig: `fdi identify` on its chirps; `fdi signature` as shipped (high-pass vel
 signature_calibration.yaml) and with ``--velocity-method model_observer`` and
 ``position_observer`` on the paired calibration run; the models replay test cases 1
 and 2 and the steady fault under changing
-operation. Truths from the simulator: a fault's size is the mean air-bearing contact force
+operation; the level is the reported `friction_level` (`detect.friction_level`). Truths from
+the simulator: a fault's size is the mean air-bearing contact force
 after the fault over the calibration fault's (Coulomb force μ·N relative to the signature's).
 """
 
@@ -93,7 +94,8 @@ def measure(name: str, rig: dict, root: Path) -> list[str]:
             det = next((e for e in events if e["kind"] == "fault_detected"), None)
             iso = next((e for e in events if e["kind"] in ("friction_isolated", "other_fault")),
                        None)
-            level = trace.theta1[(trace.t >= fault_t + after) & np.isfinite(trace.theta1)]
+            level = trace.friction_level[(trace.t >= fault_t + after)
+                                         & np.isfinite(trace.friction_level)]
             med = np.median(level)
             lo, hi = np.percentile(level, [5, 95])
             episodes = sum(e["kind"] == "fault_detected" for e in events)

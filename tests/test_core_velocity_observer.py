@@ -7,8 +7,8 @@ import pytest
 from scipy.signal import butter, lfilter
 
 from fdi_daemon.core.velocity import VelocityEstimator
-from fdi_daemon.core.velocity_observer import (ModelVelocityObserver, velocity_from_settings,
-                                               velocity_setting_names)
+from fdi_daemon.core.velocity_observer import (ModelVelocityObserver, trusted_from_hz,
+                                               velocity_from_settings, velocity_setting_names)
 
 FS = 256.0
 
@@ -125,3 +125,29 @@ def test_settings_round_trip_and_method_selection():
 def test_bad_settings_are_refused(settings, message):
     with pytest.raises(ValueError, match=message):
         velocity_from_settings(settings, FS)
+
+
+def _butterworth_highpass_lead_deg(f_hz, fc_hz, order=3):
+    """Phase of the bilinear Butterworth high-pass at f (the trapezoid integrator is exactly
+    -90°, so this is the estimator's lead): the analog prototype at the warped frequency."""
+    w = math.tan(math.pi * f_hz / FS) / math.tan(math.pi * fc_hz / FS)
+    poles = [np.exp(1j * math.pi * (2 * k + order + 1) / (2 * order)) for k in range(order)]
+    h = np.prod([1.0 / (1.0 / (1j * w) - p) for p in poles]) * np.prod([-p for p in poles])
+    return math.degrees(np.angle(h))
+
+
+def test_trusted_from_hz_is_where_the_phase_error_falls_below_its_bound():
+    """High-pass (1 Hz, order 3): the analog prototype's lead is 30° there and above 30° 3 %
+    below; the observer: atan(f_leak/f) = 30° at f = f_leak/tan 30°; position: nowhere."""
+    hp = velocity_from_settings({}, FS)
+    f30 = trusted_from_hz(hp, 30.0)
+    assert 3.5 < f30 < 4.3
+    assert _butterworth_highpass_lead_deg(f30, 1.0) == pytest.approx(30.0, abs=0.5)
+    assert _butterworth_highpass_lead_deg(0.97 * f30, 1.0) > 30.0
+    assert _butterworth_highpass_lead_deg(f30, 1.0) == pytest.approx(hp.phase_lead_deg(f30),
+                                                                    abs=1e-6)
+    obs = velocity_from_settings({"method": "model_observer", "leak_hz": 0.02}, FS)
+    assert trusted_from_hz(obs, 30.0) == pytest.approx(0.02 / math.tan(math.radians(30)),
+                                                       rel=0.02)
+    assert trusted_from_hz(velocity_from_settings({"method": "position_observer"}, FS),
+                           30.0) == 0.0

@@ -14,7 +14,7 @@ Truths come from the simulator, never from the code under test:
 
 import numpy as np
 import pytest
-from conftest_detect import MODEL, scenario_recording
+from conftest_detect import MODEL, scenario_recording, sim_rig_model
 
 from fdi_daemon.cli import main
 from fdi_daemon.detect.monitor import Monitor
@@ -53,8 +53,8 @@ def _fault_size(rec, fault_t):
 
 def _level(model, rec, after_t):
     events, trace = Monitor(model).run(rec)
-    theta1 = trace.theta1[(trace.t >= after_t) & np.isfinite(trace.theta1)]
-    return events, theta1
+    level = trace.friction_level[(trace.t >= after_t) & np.isfinite(trace.friction_level)]
+    return events, level
 
 
 def test_gamma_f_within_20_percent_of_the_rigs_with_an_interval_holding_it(observer_model):
@@ -103,9 +103,24 @@ def test_a_steady_fault_under_changing_operation_is_one_episode(observer_model):
     assert 20.0 <= events[1]["t"] <= 20.1
 
 
-@pytest.mark.xfail(strict=True, reason="measured: 5th-95th percentile at -51/+77 % of the "
-                   "median (0.72 against a truth of 1.0): on this rig G_e from one 6 Hz "
-                   "calibration does not describe friction at 1-3 Hz (docs/identification.md)")
+def test_the_shipped_models_steady_fault_level_stays_within_20_percent_of_its_median():
+    """The high-pass model's reported level leaves out the windows where its velocity is not
+    trusted (1.5-3.7 Hz) and takes the median over 10 s: from 10 s after the fault the 5th
+    and 95th percentiles are within 20 % of the median (measured -18/+8 %, median 0.945),
+    the median within 10 % of the fault (the raw θ1 spread -100/+15 %)."""
+    rec = _steady()
+    _, level = _level(sim_rig_model(), rec, 30.0)
+    median = np.median(level)
+    lo, hi = np.percentile(level, [5, 95])
+    assert lo >= 0.8 * median and hi <= 1.2 * median
+    assert abs(median / _fault_size(rec, 20.0) - 1) <= 0.10
+    assert level.size > 0.5 * np.sum(rec.t >= 30.0)  # shown most of the time
+
+
+@pytest.mark.xfail(strict=True, reason="measured: 5th-95th percentile at -35/+70 % of the "
+                   "median (0.72 against a truth of 1.0): the observer's velocity is trusted "
+                   "at every operation, and on this rig G_e from one 6 Hz calibration does not "
+                   "describe friction at 1-3 Hz (docs/identification.md)")
 def test_a_steady_faults_level_stays_within_20_percent_of_its_median(observer_model):
     rec = _steady()
     _, theta1 = _level(observer_model, rec, 30.0)

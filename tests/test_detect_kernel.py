@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
+from scipy.signal import butter, lfilter
 
 from conftest_detect import msd_system, scenario_recording, sim_rig_model
 from fdi_daemon.core.compiled import Arena
@@ -109,6 +109,29 @@ def test_chain_matches_the_reference_blocks(method):
                                              g[:, 1] @ g[:, 1], g[:, 0] @ out.residual[sl],
                                              g[:, 1] @ out.residual[sl],
                                              out.residual[sl] @ out.residual[sl]], rtol=1e-9)
+
+
+def test_the_trusted_flag_matches_a_direct_computation():
+    """`trusted` per tick (high-pass velocity: 2 Hz and 8 Hz stretches) against scipy: the
+    low-pass at `trusted_from_hz`, window sums by direct addition, share <= 0.3."""
+    model = sim_rig_model()
+    t = np.arange(int(12 * 256)) / 256.0
+    freq = np.where((t // 3) % 2 == 0, 2.0, 8.0)
+    accel = np.sin(2 * np.pi * np.cumsum(freq) / 256.0) * (2 * np.pi * freq) ** 2 * 0.002
+    pl = Pipeline(model, N)
+    got = []
+    for a in accel:
+        pl.step(0.0, float(a))
+        got.append(pl.trusted)
+    v = velocity_from_settings(model.velocity, model.fs).run(accel)
+    low = lfilter(*butter(2, pl.trusted_from_hz, fs=model.fs), v)
+    k = np.arange(N - 1, t.size)
+    low2 = np.array([low[i - N + 1:i + 1] @ low[i - N + 1:i + 1] for i in k])
+    v2 = np.array([v[i - N + 1:i + 1] @ v[i - N + 1:i + 1] for i in k])
+    share = low2 / v2
+    clear = np.abs(share - 0.3) > 1e-6
+    np.testing.assert_array_equal(np.array(got)[k][clear], (share <= 0.3)[clear])
+    assert 0.2 < np.mean(share <= 0.3) < 0.8
 
 
 def _rig_model(method):

@@ -151,8 +151,8 @@ def test_snapshot_schema():
     rec = scenario_recording("test_case_2")
     mon.run(rec)
     snap = mon.snapshot()
-    assert set(snap) == {"state", "theta1", "theta2", "friction_level", "baseline_level",
-                         "band", "signature",
+    assert set(snap) == {"state", "theta1", "theta2", "friction_level", "friction_level_spread",
+                         "baseline_level", "band", "signature",
                          "residual_rms", "statistic", "threshold", "history"}
     assert snap["state"] in STATES
     assert snap["signature"] == [1.0, model.fault_filter.gamma_f]

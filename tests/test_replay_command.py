@@ -148,18 +148,23 @@ def test_trace_csv_and_npz_hold_every_nth_sample_with_the_events_states(files, t
     t = np.array([float(r[0]) for r in rows])
     np.testing.assert_allclose(t, src.t[::every], atol=1e-9)
     theta1 = np.array([float(r[1]) for r in rows])
-    np.testing.assert_array_equal(theta1, np.array([float(r[3]) for r in rows]))
+    level = np.array([float(r[3]) for r in rows])
     states = np.array([r[5] for r in rows])
     events = {e["kind"]: e["t"] for e in read_events(events_path)}
     assert set(states[t < events["calibrated"]]) <= {"starting", "calibrating"}
     assert set(states[(t > events["calibrated"]) & (t < events["fault_detected"])]) == \
         {"monitoring"}
     assert set(states[t >= events["friction_isolated"]]) == {"friction_isolated"}
-    # after isolation θ1 is the friction level the event reports, not NaN
-    assert np.all(np.isfinite(theta1[t >= events["friction_isolated"]]))
+    # after isolation θ1 is the friction level the event reports, not NaN, and the reported
+    # level (the median of the trusted windows since the detection) follows it
+    after = t >= events["friction_isolated"]
+    assert np.all(np.isfinite(theta1[after])) and np.all(np.isfinite(level[after]))
+    late = t >= events["friction_isolated"] + 1.0
+    assert abs(np.median(level[late]) / np.median(theta1[late]) - 1) < 0.05
     npz = np.load(npz_path)
     assert set(npz.files) == set(header)
     np.testing.assert_allclose(npz["theta1"], theta1, rtol=1e-9, equal_nan=True)
+    np.testing.assert_allclose(npz["friction_level"], level, rtol=1e-9, equal_nan=True)
     assert list(npz["state"]) == list(states)
 
 

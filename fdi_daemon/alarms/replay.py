@@ -7,8 +7,8 @@ operating condition (minus 0 without a baseline). A replay does the same with th
 recording's sample time as the clock:
 
 - **readings** every ``round(fs · status_period_s)`` samples (`status_stride`; 26 samples
-  = 9.85 Hz of sample time at 256 Hz), from the monitor's trace (θ1 = the snapshot's
-  ``friction_level``, and the window's velocity RMS for the baseline's bin);
+  = 9.85 Hz of sample time at 256 Hz), from the monitor's trace (its ``friction_level``, as
+  in the snapshot, and the window's velocity RMS for the baseline's bin);
 - **detector events** at their sample time ``t``; at a tie the event goes first (the daemon's
   loop hands a batch's events to the lifecycle before the status refresh that follows).
 
@@ -76,7 +76,7 @@ def alarm_events(monitor, events: list[dict[str, Any]], trace, stride: int,
     monitor's ``trace`` (whose ``every`` divides ``stride``), θ1 minus the baseline of the
     window's velocity RMS."""
     rows = slice(None, None, stride // trace.every)
-    times, levels = level_readings(trace.t[rows], trace.theta1[rows],
+    times, levels = level_readings(trace.t[rows], trace.friction_level[rows],
                                    monitor.baseline_levels(trace.v_rms[rows]))
     return replay_alarms(events, times, levels, settings)
 

@@ -163,7 +163,7 @@ def _paced(monitor, rec, on_tick=None):
     import numpy as np
 
     from fdi_daemon.detect.detector import STATES
-    from fdi_daemon.detect.monitor import MonitorTrace
+    from fdi_daemon.detect.monitor import TRACE_NAMES, MonitorTrace
     from fdi_daemon.io.sample import Sample
 
     cols = rec.columns
@@ -175,8 +175,7 @@ def _paced(monitor, rec, on_tick=None):
     seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
            else monitor.sample_numbers(t))
     period = 1.0 / monitor.fs_hz
-    names = ("t", "accel", "residual", "theta1", "theta2", "statistic", "state", "v_rms")
-    out = {k: np.empty(n) for k in names}
+    out = {k: np.empty(n) for k in TRACE_NAMES}
     events = []
     rows, last_seq = 0, None
     progress, task = (None, None) if on_tick is not None else _progress(n, "replay (real time)")
@@ -193,8 +192,9 @@ def _paced(monitor, rec, on_tick=None):
                 last_seq = int(seq[k])
                 pl, det = monitor.pipeline, monitor.detector
                 values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
-                          det.theta2, det.statistic, STATES.index(det.state), pl.v_rms)
-                for name, value in zip(names, values):
+                          det.theta2, det.statistic, STATES.index(det.state), pl.v_rms,
+                          monitor.level.level)
+                for name, value in zip(TRACE_NAMES, values):
                     out[name][rows] = value
                 rows += 1
             if on_tick is not None:

@@ -143,14 +143,18 @@ class VelocityEstimator:
     def reset(self) -> None:
         self._filter.reset()
 
+    def response(self, f_hz: float) -> complex:
+        """V(e^jω)·jω at ``f_hz``: v̂ over the true velocity, 1 for an exact integral."""
+        w, h = freqz(self.b, self.a, worN=[float(f_hz)], fs=self.fs_hz)
+        return complex(h[0] * 2j * math.pi * float(f_hz))
+
     def phase_lead_deg(self, f_hz: float) -> float:
         """Phase of the estimator minus that of an ideal integrator (-90°) at ``f_hz``."""
-        return _phase_lead_deg(self.b, self.a, self.fs_hz, f_hz)
+        return float(np.degrees(np.angle(self.response(f_hz))))
 
     def gain_error(self, f_hz: float) -> float:
         """|V(e^jω)| · 2πf: 1 where the estimator integrates exactly."""
-        w, h = freqz(self.b, self.a, worN=[float(f_hz)], fs=self.fs_hz)
-        return float(abs(h[0]) * 2 * math.pi * float(f_hz))
+        return abs(self.response(f_hz))
 
 
 def _design(fs_hz: float, highpass_hz: float, order: int, integrator: str

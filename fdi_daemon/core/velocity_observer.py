@@ -41,7 +41,7 @@ from fdi_daemon.core.velocity import VelocityEstimator
 from fdi_daemon.core.velocity_position import POSITION_DEFAULTS, PositionVelocityObserver
 
 __all__ = ["ModelVelocityObserver", "OBSERVER_DEFAULTS", "METHODS", "VelocityBlock",
-           "velocity_from_settings", "velocity_setting_names"]
+           "velocity_from_settings", "velocity_setting_names", "trusted_from_hz"]
 
 #: ``velocity.method`` values; a mapping without ``method`` is ``highpass`` (today's models)
 METHODS = ("highpass", "model_observer", "position_observer")
@@ -155,3 +155,17 @@ def velocity_from_settings(settings: Mapping[str, Any] | None, fs_hz: float) -> 
         if key in settings:
             raise ValueError(f"{key} does not belong to method highpass")
     return VelocityEstimator.from_settings(settings, fs_hz)
+
+
+def trusted_from_hz(block: VelocityBlock, max_phase_error_deg: float) -> float:
+    """The lowest frequency (Hz) from which up to fs/4 the block's phase error against the
+    true velocity stays within ``max_phase_error_deg`` (its ``response``; for the observer
+    with an exact plant model); 0.0 when it does from 0.01 Hz on. A 1 %-step grid; the
+    high-pass estimator (1 Hz, order 3, 256 Hz): 3.9 Hz for 30°. Above fs/4 the bilinear
+    transform's own warping dominates the error, and a rig's motion lies far below."""
+    grid = np.geomspace(0.01, 0.25 * block.fs_hz, 1000)
+    error = np.abs(np.degrees(np.angle([block.response(f) for f in grid])))
+    beyond = np.flatnonzero(error > max_phase_error_deg)
+    if beyond.size == 0:
+        return 0.0
+    return float(grid[min(beyond[-1] + 1, grid.size - 1)])

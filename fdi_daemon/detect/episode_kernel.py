@@ -171,14 +171,15 @@ def _friction_kind(f, ii, eo, fmin):  # pragma: no cover - jit
 
 
 @jit
-def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, row,
-                 ref_sums, band, out):  # pragma: no cover - jit
+def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, trusted,
+                 sliding, row, band, out):  # pragma: no cover - jit
     """One episode tick; θ as reported in out[0], out[1]; returns the transition.
 
     ``state``: 3 fault_detected, 4 friction_isolated, 5 other_fault (`detector.STATES`);
-    ``row``: the residual fit's packed row of this tick; ``ref_sums``: the offset of the
-    residual test's reference window sums; ``band``: the offset of the calibrated band
-    (lo1, hi1, lo2, hi2), −1 without one; θ: the pipeline's window θ (NaN at rest)."""
+    ``row``: the residual fit's packed row of this tick; ``band``: the offset of the
+    calibrated band (lo1, hi1, lo2, hi2), −1 without one; θ: the pipeline's window θ (NaN
+    at rest); ``trusted``, ``sliding``: the window's velocity lies where v̂ is right, the
+    load moves freely (`kernel.chain_tick`)."""
     n = ii[eo + P_N]
     m = ii[eo + P_M]
     iso = ii[eo + P_ISO]
@@ -274,15 +275,17 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
             ii[eo + P_QUIET] = 0
             return TO_OTHER
     if state == 4:
-        s_xx = f[ref_sums + 7]
-        s_xr = f[ref_sums + 12]
-        s_rr = f[ref_sums + 14]
-        # the level back within half its margin, the load moving freely (Σẍ² >= Σx̂̈²/2 over
-        # the reference window) and what raised the episode gone: an episode the residual
-        # test raised also needs its innovations against the frozen pre-fault reference
-        # back below h (a level episode's reference may hold the fault: the level alone)
-        normal = (over < 0.5 and (ii[eo + P_LEVEL] != 0 or frozen_stat <= threshold)
-                  and (s_xx > 0.0 and s_rr + 2.0 * s_xr + s_xx >= 0.5 * s_xx))
+        if not trusted:
+            # sign v̂ is wrong for much of each cycle: θ1 cannot show that friction is gone
+            # (nor that it is there), so the clearing count holds
+            return NO_CHANGE
+        # the level back within half its margin, the load moving freely (a load that
+        # friction holds shows little of it in θ) and what raised the episode gone: an
+        # episode the residual test raised also needs its innovations against the frozen
+        # pre-fault reference back below h (a level episode's reference may hold the
+        # fault: the level alone)
+        normal = (over < 0.5 and sliding
+                  and (ii[eo + P_LEVEL] != 0 or frozen_stat <= threshold))
         needed = ii[eo + P_FRICTION_CLEAR]
     else:
         normal = frozen_stat <= threshold

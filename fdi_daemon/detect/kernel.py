@@ -9,12 +9,17 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
     v̂  = V(q) ẍ | L(q) x̂̈ + V(q) r | P(q) x + A(q) ẍ    the three velocity methods
     g1 = G_e(q)[sign v̂], g2 = G_e(q)[v̂]  eq. (15)
     θ  = argmin Σ_N (r − θ1 g1 − θ2 g2)²  eqs. (16)–(17): six window sums + Σ v̂²
+    trusted: Σ (LP v̂)² <= share · Σ v̂²   at most that share of the window's velocity energy
+             below the frequency where v̂'s phase error exceeds its bound (`Pipeline`)
+    sliding: Σ ẍ² >= ½ Σ x̂̈²               the load moves freely (friction holds it little)
+    level valid: moving and trusted: θ1 of the window measures friction
 
 ``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
 of v_in (`core.kernels.itest_tick`), the operating-point guard, the friction level's
 excess over its fault-free value, the quiet path's counters (level path, fast path,
 calibration buffer) and a running alarm episode (`detect.episode_kernel`). It returns a
 code; anything but ``QUIET`` is an event that Python formats (`Detector.decide`).
+``monitor_tick`` also keeps the reported friction level (`detect.friction_level`).
 
 ``monitor_run`` loops ``monitor_tick`` over arrays and stops after a tick that needs
 Python, so ``Monitor.step`` (one call per sample) and ``Monitor.run`` are bit-equal.
@@ -27,6 +32,7 @@ import math
 from fdi_daemon.core.compiled import jit
 from fdi_daemon.core.kernels import iir_step, itest_tick, packed_row_into, sums_push
 from fdi_daemon.detect import episode_kernel as E
+from fdi_daemon.detect.friction_level import L_CAPACITY, L_FLOATS, level_restart, level_tick
 
 __all__ = ["chain_tick", "chain_run", "detector_tick", "monitor_tick", "monitor_run",
            "QUIET", "LEVEL_ALARM", "CALIBRATED", "FAST_ALARM", "ISOLATED", "OTHER_FAULT",
@@ -36,23 +42,30 @@ __all__ = ["chain_tick", "chain_run", "detector_tick", "monitor_tick", "monitor_
 #: computed there too)
 QUIET, LEVEL_ALARM, CALIBRATED, FAST_ALARM, ISOLATED, OTHER_FAULT, CLEARED = range(7)
 
-# --- chain ints (offsets from the chain's int base)
-C_METHOD, C_EXTERNAL, C_N, C_WIDTH, C_ORDER = 0, 1, 2, 3, 4  # C_ORDER .. +5: 5 filters
-C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = 9, 10, 11, 12, 13, 14, 15, 16
-CHAIN_INTS = 17
 # filters
-F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL = range(5)
+F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL, F_VEL_LOW = range(6)
+CHAIN_FILTERS = 6
+# --- chain ints (offsets from the chain's int base)
+C_METHOD, C_EXTERNAL, C_N, C_WIDTH, C_ORDER = 0, 1, 2, 3, 4  # C_ORDER .. +6: the filters
+C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = range(C_ORDER + CHAIN_FILTERS,
+                                                          C_ORDER + CHAIN_FILTERS + 8)
+CHAIN_INTS = C_OUT + 1
 # --- chain floats at C_OUT
 (O_XHAT, O_R, O_V, O_G1, O_G2, O_T1, O_T2, O_WT1, O_WT2, O_WOK, O_WSSE, O_VRMS, O_MOVING,
- O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11, O_MIN_S22) = range(18)
-CHAIN_OUT = 18
-SUMS_WIDTH = 7  # S11, S12, S22, S1y, S2y, Syy, Σv̂²
+ O_TRUSTED, O_SLIDING, O_LEVEL_VALID, O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11,
+ O_MIN_S22, O_TRUST_SHARE) = range(22)
+CHAIN_OUT = 22
+SUMS_WIDTH = 10  # S11, S12, S22, S1y, S2y, Syy, Σv̂², Σ(LP v̂)², Σẍ², Σx̂̈²
+#: the load moves freely when Σẍ² over the window is at least this share of Σx̂̈² (a load that
+#: friction holds part of the time accelerates less than the model says)
+SLIDING_SHARE = 0.5
 
 # --- detector ints
 (D_METHOD, D_HAS_BAND, D_HAS_BASELINE, D_STATE, D_TICK, D_GUARD_UNTIL, D_ABOVE,
  D_LEVEL_ABOVE, D_HOLD_UNTIL, D_HOLD, D_LEVEL_SAMPLES, D_PERSISTENCE, D_CAL_COUNT,
- D_CAL_SAMPLES, D_EPISODE, D_BINS, D_RES, D_CMD, D_CHAIN, D_FLOATS, D_CODE, D_EPI) = range(22)
-DET_INTS = 22
+ D_CAL_SAMPLES, D_EPISODE, D_BINS, D_RES, D_CMD, D_CHAIN, D_FLOATS, D_CODE, D_EPI,
+ D_LEVEL) = range(23)
+DET_INTS = 23
 # --- detector floats
 (E_THRESHOLD, E_GUARD_THRESHOLD, E_LO1, E_HI1, E_LO2, E_HI2, E_LEVEL_BASE, E_FRICTION_MIN,
  E_THETA1, E_THETA2, E_OVER, E_VHIST) = range(12)  # E_VHIST .. +4
@@ -94,6 +107,7 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
     g1 = iir_step(f, bo + 3 * L, ao + 3 * L, zo + 3 * (L - 1), ii[od + 3], s)
     g2 = iir_step(f, bo + 4 * L, ao + 4 * L, zo + 4 * (L - 1), ii[od + 4], v)
+    v_low = iir_step(f, bo + 5 * L, ao + 5 * L, zo + 5 * (L - 1), ii[od + 5], v)
     row = ii[io + C_ROW]
     f[row] = g1 * g1
     f[row + 1] = g1 * g2
@@ -102,6 +116,9 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     f[row + 4] = g2 * r
     f[row + 5] = r * r
     f[row + 6] = v * v
+    f[row + 7] = v_low * v_low
+    f[row + 8] = accel * accel
+    f[row + 9] = xhat * xhat
     n = ii[io + C_N]
     so = ii[io + C_SUMS]
     sums_push(f, ii, so, n, SUMS_WIDTH, io + C_POS, row)
@@ -129,6 +146,11 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     v2 = f[sl + 6]
     moving = v2 >= f[out + O_MIN_V2]
     f[out + O_MOVING] = 1.0 if moving else 0.0
+    trusted = f[sl + 7] <= f[out + O_TRUST_SHARE] * v2
+    sliding = f[sl + 9] > 0.0 and f[sl + 8] >= SLIDING_SHARE * f[sl + 9]
+    f[out + O_TRUSTED] = 1.0 if trusted else 0.0
+    f[out + O_SLIDING] = 1.0 if sliding else 0.0
+    f[out + O_LEVEL_VALID] = 1.0 if moving and trusted else 0.0
     f[out + O_VRMS] = math.sqrt((0.0 if v2 < 0.0 else v2) / n)
     f[out + O_T1] = t1 if moving else math.nan
     f[out + O_T2] = t2 if moving else math.nan
@@ -161,9 +183,10 @@ def chain_run(f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums
 
 
 @jit
-def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baseline
-                  ):  # pragma: no cover - jit
-    """The detector's per-tick arithmetic and quiet decisions; returns the tick's code."""
+def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baseline, trusted,
+                  sliding):  # pragma: no cover - jit
+    """The detector's per-tick arithmetic and quiet decisions; returns the tick's code.
+    ``trusted``, ``sliding``: the chain window's flags (`chain_tick`)."""
     fo = ii[io + D_FLOATS]
     res = ii[io + D_RES]
     cmd = ii[io + D_CMD]
@@ -195,7 +218,8 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
         over = (theta1 - f[fo + E_LEVEL_BASE]) / f[fo + E_FRICTION_MIN]
     f[fo + E_OVER] = over
     if ii[io + D_EPISODE]:
-        return _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over)
+        return _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over,
+                        trusted, sliding)
     if tick < ii[io + D_HOLD_UNTIL]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
@@ -230,22 +254,23 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
 
 @jit
 def _start(f, ii, io, res, level):  # pragma: no cover - jit
-    """fault_detected: an episode starts (level: raised by the level path)."""
+    """fault_detected: an episode starts (level: raised by the level path); the reported
+    friction level restarts from the new picks."""
     E.episode_start(f, ii, ii[io + D_EPI], res, level)
+    level_restart(f, ii, ii[io + D_LEVEL])
     ii[io + D_EPISODE] = 1
     ii[io + D_STATE] = STATE_DETECTED
 
 
 @jit
-def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
-             ):  # pragma: no cover - jit
+def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over, trusted,
+             sliding):  # pragma: no cover - jit
     """A tick of the running episode, and its transition applied to the detector."""
     ep = ii[io + D_EPI]
     band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
-    ref_sums = ii[res + 18] + (ii[res + 1] + 2) * ii[res + 6]
     packed_row_into(f, ii[res + 15], 4, ii[res + 16])  # this tick's row of the residual fit
     change = E.episode_tick(f, ii, ep, tick, ii[io + D_STATE], r, g1, g2, xhat, theta1,
-                            theta2, over, ii[res + 16], ref_sums, band,
+                            theta2, over, trusted, sliding, ii[res + 16], band,
                             f[fo + E_THETA1:fo + E_THETA2 + 1])
     if change == E.NO_CHANGE:
         return QUIET
@@ -263,6 +288,7 @@ def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
         ii[io + D_STATE] = STATE_MONITORING
     ii[io + D_CAL_COUNT] = 0
     ii[io + D_EPISODE] = 0
+    level_restart(f, ii, ii[io + D_LEVEL])
     ii[io + D_ABOVE] = 0
     ii[io + D_GUARD_UNTIL] = max(ii[io + D_GUARD_UNTIL], ii[io + D_TICK] + ii[io + D_HOLD])
     return CLEARED
@@ -270,12 +296,14 @@ def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
 
 @jit
 def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
-    """``chain_tick`` then ``detector_tick`` (with the level's excess over the baseline of
-    the window's operating condition); returns the tick's code (also in ii[io + D_CODE])."""
+    """``chain_tick``, the reported friction level, then ``detector_tick`` (with the level's
+    excess over the baseline of the window's operating condition); returns the tick's code
+    (also in ii[io + D_CODE])."""
     chain = ii[io + D_CHAIN]
     chain_tick(f, ii, chain, v_in, accel, position, xext)
     out = ii[chain + C_OUT]
     theta1 = f[out + O_T1]
+    level_tick(f, ii, ii[io + D_LEVEL], theta1, f[out + O_LEVEL_VALID] != 0.0)
     over = math.nan
     nb = ii[io + D_BINS]
     if ii[io + D_HAS_BASELINE]:
@@ -292,20 +320,23 @@ def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - 
             b = min(max(b, 0), nb - 1)
         over = (theta1 - f[edges + nb + 1 + b]) / f[edges + 2 * nb + 1 + b]
     code = detector_tick(f, ii, io, v_in, f[out + O_XHAT], f[out + O_R], f[out + O_G1],
-                         f[out + O_G2], theta1, f[out + O_T2], over)
+                         f[out + O_G2], theta1, f[out + O_T2], over,
+                         f[out + O_TRUSTED] != 0.0, f[out + O_SLIDING] != 0.0)
     ii[io + D_CODE] = code
     return code
 
 
 @jit
 def monitor_run(f, ii, io, v_in, accel, position, xext, start, stat, state, theta1, theta2,
-                residual, v_rms):  # pragma: no cover - jit
+                residual, v_rms, level):  # pragma: no cover - jit
     """``monitor_tick`` from index ``start`` on, traces kept; returns the index after the
     first tick whose code is not QUIET (its code in ii[io + D_CODE]), or the length."""
     chain = ii[io + D_CHAIN]
     out = ii[chain + C_OUT]
     fo = ii[io + D_FLOATS]
     res = ii[io + D_RES]
+    lo = ii[io + D_LEVEL]
+    level_out = ii[lo + L_FLOATS] + 2 * ii[lo + L_CAPACITY]
     for k in range(start, v_in.shape[0]):
         code = monitor_tick(f, ii, io, v_in[k], accel[k], position[k], xext[k])
         stat[k] = f[ii[res + 22] + 2]
@@ -314,6 +345,7 @@ def monitor_run(f, ii, io, v_in, accel, position, xext, start, stat, state, thet
         theta2[k] = f[fo + E_THETA2]
         residual[k] = f[out + O_R]
         v_rms[k] = f[out + O_VRMS]
+        level[k] = f[level_out]
         if code != QUIET:
             return k + 1
     ii[io + D_CODE] = QUIET

@@ -32,6 +32,7 @@ from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.baseline import Baseline
 from fdi_daemon.detect.detector import STATES, Detector
 from fdi_daemon.detect.events import make_event
+from fdi_daemon.detect.friction_level import FrictionLevel
 from fdi_daemon.detect.pipeline import Pipeline
 from fdi_daemon.detect.settings import DetectorSettings
 from fdi_daemon.errors import ConfigError, UserError
@@ -41,6 +42,9 @@ from fdi_daemon.io.sample import Sample
 
 __all__ = ["Monitor", "MonitorTrace"]
 
+#: the arrays of a `MonitorTrace`, in order
+TRACE_NAMES = ("t", "accel", "residual", "theta1", "theta2", "statistic", "state", "v_rms",
+               "friction_level")
 HISTORY_S = 30.0
 HISTORY_POINTS = 300
 _CHUNK = 16384
@@ -62,6 +66,7 @@ class MonitorTrace:
     statistic: np.ndarray
     state: np.ndarray  # int8 codes into detect.detector.STATES
     v_rms: np.ndarray  # the window's velocity RMS (m/s): the baseline's operating condition
+    friction_level: np.ndarray  # the reported level (`detect.friction_level`)
 
 
 class Monitor:
@@ -109,8 +114,12 @@ class Monitor:
                                  baseline_bins=bins)
         self.pipeline = Pipeline(model, self.detector.window_samples,
                                  min_velocity_rms_mps=self.settings.min_velocity_rms_mps,
-                                 arena=self.arena)
+                                 arena=self.arena,
+                                 trust_phase_deg=self.settings.velocity_trust_phase_deg,
+                                 trust_share=self.settings.velocity_trust_share)
         self.arena.i[self.detector.io + K.D_CHAIN] = self.pipeline.io
+        self.level = FrictionLevel(self.settings.level_median_s, self.fs_hz, self.arena)
+        self.arena.i[self.detector.io + K.D_LEVEL] = self.level.io
         self._io = self.detector.io
         self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))
         self._history: deque = deque(maxlen=HISTORY_POINTS)
@@ -129,7 +138,7 @@ class Monitor:
         K.monitor_tick(f, ii, self._io, 0.0, 0.0, math.nan, 0.0)
         one = np.zeros(1)
         K.monitor_run(f, ii, self._io, one, one, one, one, 0, one.copy(),
-                      np.zeros(1, dtype=np.int8), *(one.copy() for _ in range(4)))
+                      np.zeros(1, dtype=np.int8), *(one.copy() for _ in range(5)))
         from fdi_daemon.detect.episode_kernel import episode_restart
 
         episode_restart(f, ii, self.detector.epi)
@@ -238,8 +247,7 @@ class Monitor:
         seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
                else self.sample_numbers(t))
         events: list[dict[str, Any]] = []
-        parts: dict[str, list[np.ndarray]] = {k: [] for k in (
-            "t", "accel", "residual", "theta1", "theta2", "statistic", "state", "v_rms")}
+        parts: dict[str, list[np.ndarray]] = {k: [] for k in TRACE_NAMES}
         start = 0
         while start < n:
             stop = min(n, start + _CHUNK)
@@ -364,14 +372,14 @@ class Monitor:
         accel = np.ascontiguousarray(accel, dtype=float)
         position = np.ascontiguousarray(position, dtype=float)
         xext = pl.external_xhat(v_in)
-        stat, theta1, theta2, residual, v_rms = (np.empty(n) for _ in range(5))
+        stat, theta1, theta2, residual, v_rms, level = (np.empty(n) for _ in range(6))
         state = np.empty(n, dtype=np.int8)
         f, ii, io = self.arena.f, self.arena.i, self._io
         events: list[dict[str, Any]] = []
         pos = 0
         while pos < n:
             pos = K.monitor_run(f, ii, io, v_in, accel, position, xext, pos, stat, state,
-                                theta1, theta2, residual, v_rms)
+                                theta1, theta2, residual, v_rms, level)
             code = int(ii[io + K.D_CODE])
             if code:
                 k = pos - 1
@@ -385,7 +393,8 @@ class Monitor:
         keep = np.arange((-self._samples) % trace_every, n, trace_every)
         for name, values in (("t", t), ("accel", accel), ("residual", residual),
                              ("theta1", theta1), ("theta2", theta2),
-                             ("statistic", stat), ("state", state), ("v_rms", v_rms)):
+                             ("statistic", stat), ("state", state), ("v_rms", v_rms),
+                             ("friction_level", level)):
             parts[name].append(np.asarray(values)[keep])
         self._samples += n
         self._v_in = float(v_in[-1])
@@ -403,7 +412,8 @@ class Monitor:
         values = {"t": self._last_t, "accel": pl.residual + pl.xhat, "residual": pl.residual,
                   "theta1": self.detector.theta1, "theta2": self.detector.theta2,
                   "statistic": self.detector.statistic,
-                  "state": STATES.index(self.detector.state), "v_rms": pl.v_rms}
+                  "state": STATES.index(self.detector.state), "v_rms": pl.v_rms,
+                  "friction_level": self.level.level}
         for name, value in values.items():
             parts[name].append(np.array([value], dtype=np.int8 if name == "state" else float))
 
@@ -419,7 +429,8 @@ class Monitor:
             "state": det.state if self._samples else "starting",
             "theta1": _finite(det.theta1),
             "theta2": _finite(det.theta2),
-            "friction_level": _finite(det.theta1),
+            "friction_level": _finite(self.level.level),
+            "friction_level_spread": _finite(self.level.spread),
             "baseline_level": self.baseline_level(),
             "band": det.band,
             "signature": [1.0, _finite(self.gamma_f)],

@@ -13,6 +13,12 @@ Per tick::
 θ is reported as NaN while the rig is at rest: the RMS of v̂ over the window below
 ``min_velocity_rms_mps`` (at rest g1 is the filtered sign of noise, and the fit means nothing).
 
+``trusted``: the window's velocity lies mostly where v̂ is right, i.e. at most
+``trust_share`` of Σ v̂² passes a 2nd-order low-pass at the frequency below which v̂'s phase
+error exceeds ``trust_phase_deg`` (`core.velocity_observer.trusted_from_hz`: 3.9 Hz for the
+1 Hz high-pass at 30°, none for the observers). Where it is not, sign v̂ is wrong for a
+large part of each cycle and θ1 under-reads friction (docs/detector.md §4a).
+
 The blocks (`core.iir.IIRFilter`, the velocity estimators) give the coefficients; the
 state lives in an `Arena` and every tick is the compiled `detect.kernel.chain_tick`:
 ``step`` is one call per sample, ``run`` one call over arrays, bit-equal, and a replay can
@@ -25,11 +31,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import butter
 
 from fdi_daemon.core.compiled import Arena
 from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.core.kernels import sums_floats
-from fdi_daemon.core.velocity_observer import velocity_from_settings
+from fdi_daemon.core.velocity_observer import trusted_from_hz, velocity_from_settings
 from fdi_daemon.core.window_ls import MIN_RCOND, solve_sums
 from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.settings import velocity_settings
@@ -98,10 +105,11 @@ class Pipeline:
 
     __slots__ = ("plant", "velocity", "model_velocity", "needs_position", "ge_sign",
                  "ge_velocity", "wls", "window_samples", "external_plant", "arena", "fo",
-                 "io", "_zo", "_zn", "_out_o")
+                 "io", "_zo", "_zn", "_out_o", "trusted_from_hz")
 
     def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = MIN_RCOND,
-                 min_velocity_rms_mps: float = 0.0, arena: Arena | None = None) -> None:
+                 min_velocity_rms_mps: float = 0.0, arena: Arena | None = None,
+                 trust_phase_deg: float = 30.0, trust_share: float = 0.3) -> None:
         ff = model.fault_filter
         if ff is None:
             raise ConfigError("the model has no fault_filter (G_e, γ_f): run `fdi signature` "
@@ -132,14 +140,19 @@ class Pipeline:
         else:
             vel_a, vel_b, method = vel, None, 0
         plant = None if self.external_plant else self.plant
-        filters = [plant, vel_a, vel_b, self.ge_sign, self.ge_velocity]
+        self.trusted_from_hz = trusted_from_hz(vel, trust_phase_deg)
+        low = (IIRFilter(*butter(2, self.trusted_from_hz, fs=model.fs))
+               if self.trusted_from_hz > 0 else None)  # None: v̂ is trusted everywhere
+        filters = [plant, vel_a, vel_b, self.ge_sign, self.ge_velocity, low]
         width = max(f.b.size for f in filters if f is not None)
         self.arena = arena if arena is not None else Arena()
-        n_float = 5 * (3 * width - 1) + sums_floats(n, K.SUMS_WIDTH) + K.SUMS_WIDTH + K.CHAIN_OUT
+        nf = K.CHAIN_FILTERS
+        n_float = nf * (3 * width - 1) + sums_floats(n, K.SUMS_WIDTH) + K.SUMS_WIDTH \
+            + K.CHAIN_OUT
         self.fo, self.io = fo, io = self.arena.alloc(n_float, K.CHAIN_INTS)
-        b_o, a_o = fo, fo + 5 * width
-        self._zo = z_o = a_o + 5 * width
-        sums_o = z_o + 5 * (width - 1)
+        b_o, a_o = fo, fo + nf * width
+        self._zo = z_o = a_o + nf * width
+        sums_o = z_o + nf * (width - 1)
         row_o = sums_o + sums_floats(n, K.SUMS_WIDTH)
         self._out_o = out_o = row_o + K.SUMS_WIDTH
         self._zn = sums_o - z_o
@@ -156,6 +169,7 @@ class Pipeline:
                                     0, 0, b_o, a_o, z_o, sums_o, row_o, out_o)
         f[out_o + K.O_MIN_V2] = float(min_velocity_rms_mps) ** 2 * n
         f[out_o + K.O_MIN_RCOND] = float(min_rcond)
+        f[out_o + K.O_TRUST_SHARE] = float(trust_share)
         self.reset()
 
     def _out(self, k: int) -> float:
@@ -196,6 +210,11 @@ class Pipeline:
     @property
     def v_rms(self) -> float:
         return self._out(K.O_VRMS)
+
+    @property
+    def trusted(self) -> bool:
+        """The window's velocity lies mostly where v̂ is right (module docstring)."""
+        return bool(self._out(K.O_TRUSTED))
 
     def reset(self) -> None:
         """Zero every state (after a data gap)."""

@@ -84,6 +84,18 @@ class DetectorSettings:
     moving freely, for this long while the rig moves, before ``cleared``. Friction goes away
     by maintenance, not within a second; a stretch of operation at which θ under-reads it
     (docs/detector.md §4a) must not end the episode."""
+    level_median_s: float = 10.0
+    """The reported friction level is the median of θ1 over this much of the windows where
+    it measures friction (velocity trusted), picked four times a second since the last
+    episode began or ended; NaN where it does not (`detect.friction_level`)."""
+    velocity_trust_phase_deg: float = 30.0
+    """The velocity estimate is trusted above the frequency where its phase error against the
+    true velocity falls below this (degrees; from its transfer function: 3.9 Hz for the 1 Hz
+    high-pass, none for the observers) ..."""
+    velocity_trust_share: float = 0.3
+    """... and a window counts as evidence that friction is gone only when at most this
+    share of its velocity energy lies below that frequency: elsewhere sign v̂ is wrong for
+    much of each cycle and θ1 under-reads friction, so the clearing count holds."""
 
     @classmethod
     def from_mapping(cls, mapping: Mapping[str, Any] | None,
@@ -111,7 +123,8 @@ class DetectorSettings:
             values[name] = value
         settings = cls(**values)
         for name in ("window_s", "test_window_s", "threshold", "isolation_window_s",
-                     "clear_s", "friction_clear_s", "band_k", "guard_threshold"):
+                     "clear_s", "friction_clear_s", "band_k", "guard_threshold",
+                     "level_median_s"):
             if getattr(settings, name) <= 0:
                 raise ConfigError(f"{source}.{name} must be > 0")
         return settings

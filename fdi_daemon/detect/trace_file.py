@@ -1,7 +1,8 @@
 """`fdi replay --trace FILE`: the monitor's trace as a table engineers load into their tools.
 
 Columns (DESIGN.md "Replay trace"): ``t`` (s), ``theta1``, ``theta2`` (eq. 17, or the
-episode's own fit during an alarm), ``friction_level`` (θ1: 1 = the calibrated fault),
+episode's own fit during an alarm), ``friction_level`` (1 = the calibrated fault: the median
+θ1 of the last seconds of windows where θ1 measures friction, `detect.friction_level`),
 ``statistic`` (the detector's test statistic) and ``state`` (the detector state's name).
 NaN where a quantity is not estimated (the rig at rest, windows not full).
 
@@ -28,7 +29,7 @@ def trace_columns(trace, every: int = 1) -> dict[str, np.ndarray]:
     rows = slice(None, None, int(every))
     names = np.asarray(STATES)
     return {"t": trace.t[rows], "theta1": trace.theta1[rows], "theta2": trace.theta2[rows],
-            "friction_level": trace.theta1[rows], "statistic": trace.statistic[rows],
+            "friction_level": trace.friction_level[rows], "statistic": trace.statistic[rows],
             "state": names[trace.state[rows].astype(int)]}
 
 

@@ -1,0 +1,121 @@
+"""The friction level as reported: θ1 where it measures friction, robust over seconds.
+
+θ1 of the sliding window (eq. 17, units of the calibrated signature) measures the Coulomb
+coefficient only where the rig moves and the window's velocity is trusted
+(`detect.kernel.chain_tick`'s *level valid*): elsewhere it reads 0 or below under a friction
+that is there (docs/detector.md §3, "Clearing"). The reported level is the median of θ1
+picked four times a second at valid windows, over the last ``level_median_s`` worth of
+picks since the last alarm episode began or ended (`level_restart`: a level that jumps at
+a fault is reported at its new value within seconds, not after the median has forgotten the
+old one). It is reported only while the current window is valid (NaN elsewhere, as at rest:
+a level that cannot be measured is not shown, and the alarm lifecycle and the trend take
+no reading), and NaN before the first pick. Its spread, the 25–75 % range of the same
+picks, is the level's uncertainty.
+
+``level_tick`` is compiled and called once per tick from `detect.kernel.monitor_tick`, so
+``Monitor.step`` and ``Monitor.run`` report the same level.
+"""
+
+from __future__ import annotations
+
+import math
+
+from fdi_daemon.core.compiled import Arena, jit
+
+__all__ = ["FrictionLevel", "level_tick", "level_restart", "LEVEL_INTS", "PICKS_PER_S"]
+
+PICKS_PER_S = 4.0
+# ints: pick period (ticks), capacity (picks), countdown to the next pick, picks held, next
+# slot, float base (ring, sorted copy, then level and spread as reported, then as held)
+L_PICK, L_CAPACITY, L_WAIT, L_COUNT, L_HEAD, L_FLOATS = range(6)
+LEVEL_INTS = 6
+
+
+@jit
+def level_tick(f, ii, lo, theta1, valid):  # pragma: no cover - jit
+    """One tick: on a pick tick with a valid window, θ1 enters the ring and the median and
+    the 25–75 % spread of the ring are recomputed (insertion sort of at most the capacity);
+    on every tick they are reported if the window is valid, else NaN."""
+    cap = ii[lo + L_CAPACITY]
+    ring = ii[lo + L_FLOATS]
+    out = ring + 2 * cap
+    valid = valid and math.isfinite(theta1)
+    wait = ii[lo + L_WAIT]
+    if wait > 0:
+        ii[lo + L_WAIT] = wait - 1
+    else:
+        ii[lo + L_WAIT] = ii[lo + L_PICK] - 1
+        if valid:
+            _pick(f, ii, lo, ring, cap, out + 2, theta1)
+    f[out] = f[out + 2] if valid else math.nan
+    f[out + 1] = f[out + 3] if valid else math.nan
+
+
+@jit
+def level_restart(f, ii, lo):  # pragma: no cover - jit
+    """Forget the picks (an alarm episode begins or ends); the level is NaN until the next."""
+    ii[lo + L_COUNT] = 0
+    ii[lo + L_HEAD] = 0
+    held = ii[lo + L_FLOATS] + 2 * ii[lo + L_CAPACITY] + 2
+    f[held] = math.nan
+    f[held + 1] = math.nan
+
+
+@jit(inline=True)
+def _pick(f, ii, lo, ring, cap, held, theta1):  # pragma: no cover - jit
+    """θ1 into the ring; its median and 25–75 % range into f[held], f[held + 1]."""
+    head = ii[lo + L_HEAD]
+    f[ring + head] = theta1
+    ii[lo + L_HEAD] = head + 1 if head + 1 < cap else 0
+    count = min(ii[lo + L_COUNT] + 1, cap)
+    ii[lo + L_COUNT] = count
+    srt = ring + cap
+    for i in range(count):
+        x = f[ring + i]
+        j = i
+        while j > 0 and f[srt + j - 1] > x:
+            f[srt + j] = f[srt + j - 1]
+            j -= 1
+        f[srt + j] = x
+    half = count // 2
+    f[held] = f[srt + half] if count % 2 else 0.5 * (f[srt + half - 1] + f[srt + half])
+    f[held + 1] = f[srt + (3 * (count - 1)) // 4] - f[srt + (count - 1) // 4]
+
+
+class FrictionLevel:
+    """State of the reported friction level in an `Arena` (see the module docstring)."""
+
+    __slots__ = ("arena", "fo", "io", "pick_samples", "capacity")
+
+    def __init__(self, level_median_s: float, fs_hz: float, arena: Arena) -> None:
+        self.arena = arena
+        self.pick_samples = max(1, int(round(fs_hz / PICKS_PER_S)))
+        self.capacity = max(1, int(round(level_median_s * PICKS_PER_S)))
+        self.fo, self.io = arena.alloc(2 * self.capacity + 4, LEVEL_INTS)
+        ii = arena.i
+        ii[self.io + L_PICK] = self.pick_samples
+        ii[self.io + L_CAPACITY] = self.capacity
+        ii[self.io + L_FLOATS] = self.fo
+        self.reset()
+
+    @property
+    def out(self) -> int:
+        """Offset of (level, spread) as reported in the float array."""
+        return self.fo + 2 * self.capacity
+
+    def reset(self) -> None:
+        """No pick yet: the level is NaN."""
+        self.arena.i[self.io + L_WAIT] = 0
+        level_restart(self.arena.f, self.arena.i, self.io)
+        self.arena.f[self.out:self.out + 2] = math.nan
+
+    @property
+    def level(self) -> float:
+        """Median θ1 of the last valid picks (units of the signature) while the window is
+        valid; NaN elsewhere and before the first pick."""
+        return float(self.arena.f[self.out])
+
+    @property
+    def spread(self) -> float:
+        """25–75 % range of the same picks (the level's uncertainty); NaN with the level."""
+        return float(self.arena.f[self.out + 1])

@@ -1,0 +1,69 @@
+"""The reported friction level (`detect.friction_level`): against a direct computation with
+numpy, and in the monitor (where the level is valid, a restart at an episode's start)."""
+
+import math
+
+import numpy as np
+
+from conftest_detect import scenario_recording, sim_rig_model
+from fdi_daemon.core.compiled import Arena
+from fdi_daemon.detect.friction_level import FrictionLevel, level_restart, level_tick
+from fdi_daemon.detect.monitor import Monitor
+
+FS = 256.0
+
+
+def _reference(theta1, valid, pick, capacity, restart_at=()):
+    """Median and 25-75 % range of the last ``capacity`` valid picks (ticks 0, pick, ...),
+    forgotten at ``restart_at``; reported where valid, NaN elsewhere."""
+    picks, level, spread = [], np.full(theta1.size, np.nan), np.full(theta1.size, np.nan)
+    held = (math.nan, math.nan)
+    for k in range(theta1.size):
+        if k in restart_at:
+            picks, held = [], (math.nan, math.nan)
+        ok = valid[k] and math.isfinite(theta1[k])
+        if k % pick == 0 and ok:
+            picks = (picks + [theta1[k]])[-capacity:]
+            s = np.sort(picks)
+            n = len(s)
+            held = (float(np.median(s)), s[(3 * (n - 1)) // 4] - s[(n - 1) // 4])
+        if ok:
+            level[k], spread[k] = held
+    return level, spread
+
+
+def test_level_and_spread_match_a_direct_computation():
+    rng = np.random.default_rng(3)
+    n = 6000
+    theta1 = 0.5 + 0.1 * rng.standard_normal(n)
+    theta1[1000:1100] = np.nan  # the rig at rest
+    valid = rng.random(n) > 0.3
+    valid[2000:2600] = False  # operation where the velocity is not trusted
+    arena = Arena()
+    block = FrictionLevel(10.0, FS, arena)
+    restart = {3500}
+    got = np.empty((n, 2))
+    for k in range(n):
+        if k in restart:
+            level_restart(arena.f, arena.i, block.io)
+        level_tick(arena.f, arena.i, block.io, float(theta1[k]), bool(valid[k]))
+        got[k] = block.level, block.spread
+    level, spread = _reference(theta1, valid, block.pick_samples, block.capacity, restart)
+    assert block.pick_samples == 64 and block.capacity == 40
+    np.testing.assert_array_equal(got[:, 0], level)
+    np.testing.assert_array_equal(got[:, 1], spread)
+    assert np.isnan(got[2000:2600]).all() and np.isfinite(got[2700:3400][valid[2700:3400]]).all()
+
+
+def test_the_monitor_reports_the_level_of_a_fault_from_its_own_picks():
+    """Test case 2 (2.3x the calibrated fault at 2.9 s): after the detection the level
+    restarts, so it reads the fault within a second of the isolation, not a median of the
+    fault-free seconds before; before the fault it reads the fault-free level."""
+    events, trace = Monitor(sim_rig_model()).run(scenario_recording("test_case_2"))
+    isolated = next(e["t"] for e in events if e["kind"] == "friction_isolated")
+    before = trace.friction_level[(trace.t > 2.0) & (trace.t < 2.9)]
+    after = trace.friction_level[trace.t > isolated + 1.0]
+    theta1 = trace.theta1[trace.t > isolated + 1.0]
+    assert np.all(np.abs(before[np.isfinite(before)]) < 0.2)
+    assert np.isfinite(after).all()
+    assert abs(np.median(after) / np.median(theta1) - 1) < 0.05

@@ -355,7 +355,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                                   explain=linear["matching"])
         held = _explanation_on_top(ctx, named, linear["matching"], prediction, floor_sse)
         if held is not None:
-            held.linear = {**linear, "named": linear["matching"], "on_top_of": named}
+            held.linear = {**linear, "named": linear["matching"],
+                           "on_top_of": [e.name for e in held.named
+                                         if e.name != linear["matching"]]}
             held.linear.pop("matching")
             held.rounds = rounds + held.rounds
             return held
@@ -405,21 +407,26 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
     nested fits E ⊂ E + explanation ⊂ E + refit on the held-out part: the explanation is
     named (a Selection of it and E, E refitted on top of it) when the refit adds to E at
     all, and the explanation pays on top of E (F-test at ALPHA) and accounts for more than
-    MATCH_SHARE of what the refit adds to E.
+    MATCH_SHARE of what the refit adds to E. E on top of the explanation is refitted as the
+    rounds name effects (`_physical_on_top`): the larger of a nested pair that is not
+    physically possible there is replaced by the smaller (a Stribeck excess that pushes
+    the motion once the gain has taken its part: Coulomb friction); the refit with E stays
+    the reference (the smaller effect does not do better with the refit than the larger).
     Otherwise (None) E holds the apparent gain or shift (a friction's describing function,
     a static map's Bussgang gain) and the refit stays in the base."""
     test = ctx.split.test
     e_refit = ctx.target[test] - prediction[test]
     sse_refit = float(e_refit @ e_refit)
     try:
-        _, _, sse_alone = _fit_set(ctx, named, [])
         first, _, _ = linear_round(ctx, floor_sse, explain)
         if first[0].name != explain:
             return None
-        chosen, pred, sse_with = _fit_set(ctx, named, first)
+        on_top = _physical_on_top(ctx, named, first)
+        if on_top is None:
+            return None
+        names, chosen, pred, sse_with = on_top
+        _, _, sse_alone = _fit_set(ctx, names, [])
     except NotApplicable:
-        return None
-    if not all(e.physical.get("plausible", True) for e in chosen):
         return None
     n_eff = effective_samples(ctx.target[test])
     k = first[0].n_params
@@ -431,6 +438,20 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
     if p >= ALPHA or share <= MATCH_SHARE:
         return None
     return Selection(chosen, [], pred, {})
+
+
+def _physical_on_top(ctx: Context, named: list[str], first: list[FittedEffect]
+                     ) -> tuple[list[str], list[FittedEffect], np.ndarray, float] | None:
+    """The effects ``named`` refitted on top of ``first`` (`_fit_set`), each the smaller of
+    its nested pair (`NESTS`) when the set is not physically possible there (the rounds
+    never name an effect that is not): (names, effects, contribution, held-out SSE), or
+    None when no such set is possible."""
+    smaller = [NESTS.get(n, n) for n in named]
+    for names in ([named, smaller] if smaller != named else [named]):
+        chosen, pred, sse = _fit_set(ctx, names, first)
+        if all(e.physical.get("plausible", True) for e in chosen):
+            return names, chosen, pred, sse
+    return None
 
 
 def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,

@@ -7,6 +7,9 @@ they never drift) and the 2×2 solve. No checks, no NaN handling, no decisions: 
 arithmetic a tick cannot do without. ``step`` is one compiled call per sample from Python
 (what the daemon's loop would pay), ``run`` one call over arrays (what a replay would pay).
 The monitor's figures in `fdi bench` are ratios against these two, measured in the same run.
+It is compiled with numba's runtime (``jit(nrt=True)``: reference counts on its arrays at
+every call), as when the ratios' targets were set (issue 15); the monitor's kernels run
+without it.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ __all__ = ["ReferenceChain"]
 PLANT, VELOCITY, GE_SIGN, GE_VELOCITY = range(4)
 
 
-@jit(inline=True)
+@jit(inline=True, nrt=True)
 def _iir(b, a, z, x):
     """One sample through row ``b``/``a`` (a[0] = 1) with state ``z`` (transposed DF-II)."""
     n = z.shape[0]
@@ -34,7 +37,7 @@ def _iir(b, a, z, x):
     return y
 
 
-@jit(inline=True)
+@jit(inline=True, nrt=True)
 def _accumulate(sums, q1, q2, qy, weight):
     """Add (weight 1) or remove (weight -1) one sample's products to the six sums."""
     sums[0] += weight * q1 * q1
@@ -45,7 +48,7 @@ def _accumulate(sums, q1, q2, qy, weight):
     sums[5] += weight * qy * qy
 
 
-@jit
+@jit(nrt=True)
 def _tick(b, a, z, ring, sums, idx, v_in, accel, out):
     """One sample of the chain; θ in out[0], out[1] (NaN until the window is full)."""
     xhat = _iir(b[PLANT], a[PLANT], z[PLANT], v_in)
@@ -79,7 +82,7 @@ def _tick(b, a, z, ring, sums, idx, v_in, accel, out):
         out[1] = (sums[0] * sums[4] - sums[1] * sums[3]) / det
 
 
-@jit
+@jit(nrt=True)
 def _run(b, a, z, ring, sums, idx, v_in, accel, theta1, theta2):
     out = np.empty(2)
     for k in range(v_in.shape[0]):

@@ -77,11 +77,11 @@ class InnovationTest:
 
     def reset(self) -> None:
         f, ii, io = self.arena.f, self.arena.i, self.io
-        f[self.fo:self._o(22) + 4] = 0.0
+        f[self.fo:self._o(22) + 6] = 0.0
         ii[io + 7:io + 15] = 0
         ii[io + 7] = self.phase
         sc = self._o(22)
-        f[sc:sc + 4] = (self.min_sigma2, math.inf, math.nan, 0.0)
+        f[sc:sc + 6] = (self.min_sigma2, math.inf, math.nan, 0.0, 0.0, 1.0 / self.test_samples)
 
     @property
     def theta(self) -> list[float]:

@@ -107,10 +107,11 @@ ITEST_INTS = 23
 
 def itest_floats(p: int, n: int, lag: int, m: int) -> int:
     """Floats of an innovation test block: φ and y, the packed row, the FIFO of (φ, y) of
-    the last ``lag`` ticks, the reference and test sums, θ, scratch, scalars."""
+    the last ``lag`` ticks, the reference and test sums, θ, scratch, scalars (σ² floor,
+    σ², T, z², 1/σ², 1/M)."""
     w = p * (p + 1) // 2 + p + 1
     return (p + 1) + w + lag * (p + 1) + sums_floats(n, w) + sums_floats(m, 1) + p \
-        + (2 * p * p + p) + 4
+        + (2 * p * p + p) + 6
 
 
 @jit(inline=True)
@@ -182,7 +183,8 @@ def itest_tick(f, ii, io, need):  # pragma: no cover - jit
     """One tick of the innovation test whose ints start at ``io``; φ and y in its phi slots.
 
     Reference fit on the window ending ``lag`` ticks ago (re-solved when tick % every ==
-    phase), σ² = SSE/(N − p) floored, z² = (y − φᵀθ)²/σ², T = mean of z² over M ticks.
+    phase), σ² = SSE/(N − p) floored, z² = (y − φᵀθ)²/σ², T = mean of z² over M ticks
+    (both divisions by reciprocals kept in the block: 1/σ² set at the solve, 1/M).
     ``need``: keep the reference window sums current on this tick (for a reader other than
     the solve). The monitor's tests have four regressors: that case is compiled with p
     constant (the same operations, unrolled)."""
@@ -230,6 +232,7 @@ def _itest_body(f, ii, io, need, p):  # pragma: no cover - jit
             sse, ok = _solve(f, ref + (n + 2) * w, p, 1e-9, scr, th)
             s2 = sse / (n - p)
             f[sc + 1] = s2 if s2 > f[sc] else f[sc]
+            f[sc + 4] = 1.0 / f[sc + 1]
             ii[io + 8] = 1 if ok else 0
         else:
             ii[io + 8] = 0
@@ -239,10 +242,10 @@ def _itest_body(f, ii, io, need, p):  # pragma: no cover - jit
         for a in range(1, p):
             acc = acc + f[th + a] * f[ph + a]
         e = y - acc
-        f[sc + 3] = e * e / f[sc + 1]
+        f[sc + 3] = e * e * f[sc + 4]
     else:
         f[sc + 3] = 0.0
     sums_push(f, ii, tst, m, 1, io + 13, sc + 3)
-    stat = f[tst + (m + 2)] / m
+    stat = f[tst + (m + 2)] * f[sc + 5]
     f[sc + 2] = stat
     return stat

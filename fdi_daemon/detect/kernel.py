@@ -55,8 +55,8 @@ SUMS_WIDTH = 7  # S11, S12, S22, S1y, S2y, Syy, Σv̂²
 DET_INTS = 22
 # --- detector floats
 (E_THRESHOLD, E_GUARD_THRESHOLD, E_LO1, E_HI1, E_LO2, E_HI2, E_LEVEL_BASE, E_FRICTION_MIN,
- E_THETA1, E_THETA2, E_OVER, E_VHIST) = range(12)  # E_VHIST .. +4
-E_CAL = 16  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
+ E_THETA1, E_THETA2, E_OVER) = range(11)
+E_CAL = 11  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
 STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER = range(1, 6)
 
 
@@ -174,15 +174,12 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
     f[ph + 3] = 1.0
     f[ph + 4] = r
     stat = itest_tick(f, ii, res, ii[io + D_EPISODE] != 0)
-    hv = fo + E_VHIST
-    ph = ii[cmd + 15]
-    for q in range(4):
-        f[ph + q] = f[hv + q]
+    ph = ii[cmd + 15]  # φ = v_in(k−1..k−4): the command test's regressors are its history
     f[ph + 4] = v_in
     guard_stat = itest_tick(f, ii, cmd, False)
     for q in range(3, 0, -1):
-        f[hv + q] = f[hv + q - 1]
-    f[hv] = v_in
+        f[ph + q] = f[ph + q - 1]
+    f[ph] = v_in
     tick = ii[io + D_TICK]
     if guard_stat > f[fo + E_GUARD_THRESHOLD]:
         ii[io + D_GUARD_UNTIL] = tick + ii[io + D_HOLD]

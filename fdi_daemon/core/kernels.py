@@ -11,7 +11,8 @@ reference implementation, so compiled and reference results agree:
   (`core.normal_equations.solve_packed`, the float path);
 - ``itest_tick``: one tick of the innovation test (`core.innovation_test`): lagged
   reference fit, standardised innovation, windowed mean of its square; the FIFO of the lag
-  holds (φ, y), and the packed row is formed while it is added (`push_products`).
+  holds (φ, y), and the packed row is formed while it is added (`push_products`); its
+  three phases (push, solve, statistic: ``itest_*_p``) are inlined where p is constant.
 
 Offsets are absolute indices into the float array ``f`` and the int array ``ii``.
 """
@@ -21,7 +22,8 @@ from __future__ import annotations
 from fdi_daemon.core.compiled import jit
 
 __all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed", "push_products",
-           "packed_row_into", "itest_tick", "ITEST_INTS", "itest_floats"]
+           "packed_row_into", "itest_tick", "itest_push_p", "itest_solve_p", "itest_statistic_p",
+           "ITEST_INTS", "itest_floats"]
 
 
 @jit(inline=True)
@@ -186,62 +188,82 @@ def itest_tick(f, ii, io, need):  # pragma: no cover - jit
     phase), σ² = SSE/(N − p) floored, z² = (y − φᵀθ)²/σ², T = mean of z² over M ticks
     (both divisions by reciprocals kept in the block: 1/σ² set at the solve, 1/M).
     ``need``: keep the reference window sums current on this tick (for a reader other than
-    the solve). The monitor's tests have four regressors: that case is compiled with p
-    constant (the same operations, unrolled)."""
+    the solve). The tick is three phases, `itest_push_p`, `itest_solve_p` and
+    `itest_statistic_p`, inlined where p is a compile-time constant (the loops unroll): the
+    monitor's kernel inlines those of its two four-regressor tests, phase by phase."""
     p = ii[io]
     if p == 4:
-        return _itest_body(f, ii, io, need, 4)
-    return _itest_body(f, ii, io, need, p)
+        itest_push_p(f, ii, io, need, 4)
+        itest_solve_p(f, ii, io, 4)
+        return itest_statistic_p(f, ii, io, 4)
+    itest_push_p(f, ii, io, need, p)
+    itest_solve_p(f, ii, io, p)
+    return itest_statistic_p(f, ii, io, p)
 
 
 @jit(inline=True)
-def _itest_body(f, ii, io, need, p):  # pragma: no cover - jit
+def itest_push_p(f, ii, io, need, p):  # pragma: no cover - jit
+    """The lag's FIFO takes this tick's (φ, y); the row leaving it goes into the reference
+    window sums (current when ``need`` or on a solve tick)."""
     n = ii[io + 1]
     lag = ii[io + 2]
-    m = ii[io + 3]
-    every = ii[io + 4]
-    w = ii[io + 6]
     ph = ii[io + 15]
-    fifo = ii[io + 17]
     ref = ii[io + 18]
-    tst = ii[io + 19]
-    th = ii[io + 20]
-    scr = ii[io + 21]
-    sc = ii[io + 22]
-    y = f[ph + p]
-    wait = ii[io + 7]  # ticks until the next solve (a countdown, not tick % every)
-    solve = wait == 0
-    need = need or solve
-    q = p + 1
+    need = need or ii[io + 7] == 0  # the countdown to the next solve
     if lag == 0:
         push_products(f, ii, ref, n, io + 11, ph, p, need)
+        return
+    q = p + 1
+    fifo = ii[io + 17]
+    ln = ii[io + 10]
+    head = ii[io + 9]
+    if ln == lag:
+        slot = fifo + head * q
+        push_products(f, ii, ref, n, io + 11, slot, p, need)
+        ii[io + 9] = head + 1 if head + 1 < lag else 0
     else:
-        ln = ii[io + 10]
-        head = ii[io + 9]
-        if ln == lag:
-            slot = fifo + head * q
-            push_products(f, ii, ref, n, io + 11, slot, p, need)
-            ii[io + 9] = head + 1 if head + 1 < lag else 0
-        else:
-            slot = fifo + (head + ln if head + ln < lag else head + ln - lag) * q
-            ii[io + 10] = ln + 1
-        for k in range(q):
-            f[slot + k] = f[ph + k]
-    if solve:
-        if ii[io + 12] == n:
-            sse, ok = _solve(f, ref + (n + 2) * w, p, 1e-9, scr, th)
-            s2 = sse / (n - p)
-            f[sc + 1] = s2 if s2 > f[sc] else f[sc]
-            f[sc + 4] = 1.0 / f[sc + 1]
-            ii[io + 8] = 1 if ok else 0
-        else:
-            ii[io + 8] = 0
-    ii[io + 7] = every - 1 if solve else wait - 1
+        slot = fifo + (head + ln if head + ln < lag else head + ln - lag) * q
+        ii[io + 10] = ln + 1
+    for k in range(q):
+        f[slot + k] = f[ph + k]
+
+
+@jit(inline=True)
+def itest_solve_p(f, ii, io, p):  # pragma: no cover - jit
+    """On a solve tick (countdown ii[io+7] at 0, then ``every`` − 1 again): θ, σ² (floored)
+    and 1/σ² of the reference window, and whether it is ok (full, pivots above 1e-9)."""
+    wait = ii[io + 7]
+    if wait:
+        ii[io + 7] = wait - 1
+        return
+    ii[io + 7] = ii[io + 4] - 1
+    n = ii[io + 1]
+    if ii[io + 12] == n:
+        sc = ii[io + 22]
+        sse, ok = _solve(f, ii[io + 18] + (n + 2) * ii[io + 6], p, 1e-9, ii[io + 21],
+                         ii[io + 20])
+        s2 = sse / (n - p)
+        f[sc + 1] = s2 if s2 > f[sc] else f[sc]
+        f[sc + 4] = 1.0 / f[sc + 1]
+        ii[io + 8] = 1 if ok else 0
+    else:
+        ii[io + 8] = 0
+
+
+@jit(inline=True)
+def itest_statistic_p(f, ii, io, p):  # pragma: no cover - jit
+    """z² of this tick against the reference θ (0 while it is not ok) into the test window;
+    returns T (also kept at the block's scalars)."""
+    ph = ii[io + 15]
+    th = ii[io + 20]
+    sc = ii[io + 22]
+    m = ii[io + 3]
+    tst = ii[io + 19]
     if ii[io + 8]:
         acc = f[th] * f[ph]
         for a in range(1, p):
             acc = acc + f[th + a] * f[ph + a]
-        e = y - acc
+        e = f[ph + p] - acc
         f[sc + 3] = e * e * f[sc + 4]
     else:
         f[sc + 3] = 0.0

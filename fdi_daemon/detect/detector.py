@@ -63,6 +63,8 @@ _KINDS = (None, "harmonics", "load_stopped", "level")
 N_REGRESSORS = 4
 #: order of the autoregressive model of the valve command (the operating-point guard)
 COMMAND_ORDER = 4
+#: `detect.kernel.detector_tick` is compiled for these two (four regressors each)
+assert N_REGRESSORS == COMMAND_ORDER == 4
 
 
 class Detector:

@@ -11,7 +11,7 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
     θ  = argmin Σ_N (r − θ1 g1 − θ2 g2)²  eqs. (16)–(17): six window sums + Σ v̂²
 
 ``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
-of v_in (`core.kernels.itest_tick`), the operating-point guard, the friction level's
+of v_in (`core.kernels.itest_tick`, phase by phase), the operating-point guard, the friction level's
 excess over its fault-free value, the quiet path's counters (level path, fast path,
 calibration buffer) and a running alarm episode (`detect.episode_kernel`). It returns a
 code; anything but ``QUIET`` is an event that Python formats (`Detector.decide`).
@@ -25,7 +25,8 @@ from __future__ import annotations
 import math
 
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.core.kernels import iir_step, itest_tick, packed_row_into, sums_push
+from fdi_daemon.core.kernels import (iir_step, itest_push_p, itest_solve_p,
+                                     itest_statistic_p, packed_row_into, sums_push)
 from fdi_daemon.detect import episode_kernel as E
 
 __all__ = ["chain_tick", "chain_run", "detector_tick", "monitor_tick", "monitor_run",
@@ -173,10 +174,15 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
     f[ph + 2] = xhat
     f[ph + 3] = 1.0
     f[ph + 4] = r
-    stat = itest_tick(f, ii, res, ii[io + D_EPISODE] != 0)
     ph = ii[cmd + 15]  # φ = v_in(k−1..k−4): the command test's regressors are its history
     f[ph + 4] = v_in
-    guard_stat = itest_tick(f, ii, cmd, False)
+    # `itest_tick` of both tests (four regressors each: p constant), inlined phase by phase
+    itest_push_p(f, ii, res, ii[io + D_EPISODE] != 0, 4)
+    itest_push_p(f, ii, cmd, False, 4)
+    itest_solve_p(f, ii, res, 4)
+    itest_solve_p(f, ii, cmd, 4)
+    stat = itest_statistic_p(f, ii, res, 4)
+    guard_stat = itest_statistic_p(f, ii, cmd, 4)
     for q in range(3, 0, -1):
         f[ph + q] = f[ph + q - 1]
     f[ph] = v_in

@@ -12,18 +12,26 @@ reference implementation, so compiled and reference results agree:
 - ``itest_tick``: one tick of the innovation test (`core.innovation_test`): lagged
   reference fit, standardised innovation, windowed mean of its square; the FIFO of the lag
   holds (φ, y), and the packed row is formed while it is added (`push_products`); its
-  three phases (push, solve, statistic: ``itest_*_p``) are inlined where p is constant.
+  phases (``itest_*_p``) are inlined where p is constant.
 
 Offsets are absolute indices into the float array ``f`` and the int array ``ii``.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from fdi_daemon.core.compiled import jit
 
 __all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed", "push_products",
-           "packed_row_into", "itest_tick", "itest_push_p", "itest_solve_p", "itest_statistic_p",
+           "packed_row_into", "itest_tick", "itest_pop_p", "itest_insert_p", "itest_solve_p",
+           "itest_statistic_p",
            "ITEST_INTS", "itest_floats"]
+
+
+#: an offset as an unsigned integer: indexing with it skips the test for a negative index
+#: (the hot loops; every operand of its arithmetic must be unsigned too)
+_u = np.uint64
 
 
 @jit(inline=True)
@@ -48,7 +56,8 @@ def sums_push(f, ii, ro, n, w, ip, src):  # pragma: no cover - jit
     """Push row f[src:src+w] into the sums block at ``ro`` (pos, count in ii[ip], ii[ip+1]);
     the window sums are then at ro + (n + 2)·w (module docstring)."""
     fresh, prev, sl, rp, end = _slot(ii, ro, n, w, ip)
-    for k in range(w):
+    src = _u(src)
+    for k in range(_u(w)):
         _column(f, fresh, prev, sl, rp, k, f[src + k], end, True)
     ii[ip] = 0 if end else ii[ip] + 1
 
@@ -62,15 +71,20 @@ def solve_packed(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
 
 @jit(inline=True)
 def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
-    """`solve_packed`, inlined where p is a constant (the loops then unroll)."""
-    s = scr
-    low = scr + p * p
+    """`solve_packed`, inlined where p is a constant (the loops then unroll). Offsets are
+    unsigned (`_u`): no negative-index test per access, and the compiler sees which
+    scratch entries each step reads, so they stay in registers."""
+    p = _u(p)
+    one = _u(1)
+    s = _u(scr)
+    to = _u(to)
+    low = s + p * p
     d = low + p * p
-    k = so
+    k = _u(so)
     for i in range(p):
         for j in range(i, p):
             f[s + i * p + j] = f[k]
-            k += 1
+            k += one
     sy = k
     syy = f[k + p]
     ok = True
@@ -80,7 +94,7 @@ def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
             acc = acc - f[low + j * p + m] * f[low + j * p + m] * f[d + m]
         f[d + j] = acc
         ok = ok & (acc > min_pivot * f[s + j * p + j])
-        for i in range(j + 1, p):
+        for i in range(j + one, p):
             acc = f[s + j * p + i]
             for m in range(j):
                 acc = acc - f[low + i * p + m] * f[low + j * p + m] * f[d + m]
@@ -91,10 +105,11 @@ def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
         for m in range(i):
             acc = acc - f[low + i * p + m] * f[to + m]
         f[to + i] = acc
-    for i in range(p - 1, -1, -1):
+    for r in range(p):
+        i = p - one - r
         zi = f[to + i]
         acc = zi / f[d + i] if f[d + i] != 0.0 else zi * 0.0
-        for m in range(i + 1, p):
+        for m in range(i + one, p):
             acc = acc - f[low + m * p + i] * f[to + m]
         f[to + i] = acc
     sse = syy
@@ -118,14 +133,15 @@ def itest_floats(p: int, n: int, lag: int, m: int) -> int:
 
 @jit(inline=True)
 def _slot(ii, ro, n, w, ip):  # pragma: no cover - jit
-    """The offsets of a sums block's fresh, previous and sliding rows and of the ring row
-    this push writes, and whether it ends the block (the row count grows up to n)."""
+    """The offsets (unsigned, `_u`) of a sums block's fresh, previous and sliding rows and
+    of the ring row this push writes, and whether it ends the block (the row count grows up
+    to n)."""
     pos = ii[ip]
     fresh = ro + n * w
     prev = fresh + w
     if ii[ip + 1] < n:
         ii[ip + 1] += 1
-    return fresh, prev, prev + w, ro + pos * w, pos + 1 == n
+    return _u(fresh), _u(prev), _u(prev + w), _u(ro + pos * w), pos + 1 == n
 
 
 @jit(inline=True)
@@ -152,15 +168,18 @@ def push_products(f, ii, ro, n, ip, src, p, need):  # pragma: no cover - jit
     ``need`` (a block's other sums are exact whatever the ticks that read them)."""
     w = p * (p + 1) // 2 + p + 1
     fresh, prev, sl, rp, end = _slot(ii, ro, n, w, ip)
+    p = _u(p)
+    one = _u(1)
+    src = _u(src)
     y = f[src + p]
-    k = 0
+    k = _u(0)
     for a in range(p):
         for b in range(a, p):
             _column(f, fresh, prev, sl, rp, k, f[src + a] * f[src + b], end, need)
-            k += 1
+            k += one
     for a in range(p):
         _column(f, fresh, prev, sl, rp, k, f[src + a] * y, end, need)
-        k += 1
+        k += one
     _column(f, fresh, prev, sl, rp, k, y * y, end, need)
     ii[ip] = 0 if end else ii[ip] + 1
 
@@ -188,41 +207,50 @@ def itest_tick(f, ii, io, need):  # pragma: no cover - jit
     phase), σ² = SSE/(N − p) floored, z² = (y − φᵀθ)²/σ², T = mean of z² over M ticks
     (both divisions by reciprocals kept in the block: 1/σ² set at the solve, 1/M).
     ``need``: keep the reference window sums current on this tick (for a reader other than
-    the solve). The tick is three phases, `itest_push_p`, `itest_solve_p` and
-    `itest_statistic_p`, inlined where p is a compile-time constant (the loops unroll): the
-    monitor's kernel inlines those of its two four-regressor tests, phase by phase."""
+    the solve). The tick is four phases, `itest_pop_p`, `itest_insert_p`, `itest_solve_p`
+    and `itest_statistic_p`, inlined where p is a compile-time constant (the loops unroll):
+    the monitor's kernel inlines those of its two four-regressor tests, phase by phase."""
     p = ii[io]
     if p == 4:
-        itest_push_p(f, ii, io, need, 4)
+        itest_pop_p(f, ii, io, need, 4)
+        itest_insert_p(f, ii, io, need, 4)
         itest_solve_p(f, ii, io, 4)
         return itest_statistic_p(f, ii, io, 4)
-    itest_push_p(f, ii, io, need, p)
+    itest_pop_p(f, ii, io, need, p)
+    itest_insert_p(f, ii, io, need, p)
     itest_solve_p(f, ii, io, p)
     return itest_statistic_p(f, ii, io, p)
 
 
 @jit(inline=True)
-def itest_push_p(f, ii, io, need, p):  # pragma: no cover - jit
-    """The lag's FIFO takes this tick's (φ, y); the row leaving it goes into the reference
-    window sums (current when ``need`` or on a solve tick)."""
-    n = ii[io + 1]
+def itest_pop_p(f, ii, io, need, p):  # pragma: no cover - jit
+    """The row leaving the lag's FIFO (its oldest, once it is full) into the reference
+    window sums (current when ``need`` or on a solve tick). It does not read this tick's
+    (φ, y): the monitor calls it, and the solve, before the signal chain."""
+    lag = ii[io + 2]
+    if lag and ii[io + 10] == lag:
+        push_products(f, ii, ii[io + 18], ii[io + 1], io + 11,
+                      ii[io + 17] + ii[io + 9] * (p + 1), p, need or ii[io + 7] == 0)
+
+
+@jit(inline=True)
+def itest_insert_p(f, ii, io, need, p):  # pragma: no cover - jit
+    """This tick's (φ, y) into the lag's FIFO, in the slot `itest_pop_p` emptied (without a
+    lag: straight into the reference window sums, current when ``need`` or on a solve
+    tick)."""
     lag = ii[io + 2]
     ph = ii[io + 15]
-    ref = ii[io + 18]
-    need = need or ii[io + 7] == 0  # the countdown to the next solve
     if lag == 0:
-        push_products(f, ii, ref, n, io + 11, ph, p, need)
+        push_products(f, ii, ii[io + 18], ii[io + 1], io + 11, ph, p, need or ii[io + 7] == 0)
         return
     q = p + 1
-    fifo = ii[io + 17]
     ln = ii[io + 10]
     head = ii[io + 9]
     if ln == lag:
-        slot = fifo + head * q
-        push_products(f, ii, ref, n, io + 11, slot, p, need)
+        slot = ii[io + 17] + head * q
         ii[io + 9] = head + 1 if head + 1 < lag else 0
     else:
-        slot = fifo + (head + ln if head + ln < lag else head + ln - lag) * q
+        slot = ii[io + 17] + (head + ln if head + ln < lag else head + ln - lag) * q
         ii[io + 10] = ln + 1
     for k in range(q):
         f[slot + k] = f[ph + k]

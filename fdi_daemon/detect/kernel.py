@@ -25,13 +25,13 @@ from __future__ import annotations
 import math
 
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.core.kernels import (iir_step, itest_push_p, itest_solve_p,
+from fdi_daemon.core.kernels import (iir_step, itest_insert_p, itest_pop_p, itest_solve_p,
                                      itest_statistic_p, packed_row_into, sums_push)
 from fdi_daemon.detect import episode_kernel as E
 
-__all__ = ["chain_tick", "chain_run", "detector_tick", "monitor_tick", "monitor_run",
-           "QUIET", "LEVEL_ALARM", "CALIBRATED", "FAST_ALARM", "ISOLATED", "OTHER_FAULT",
-           "CLEARED"]
+__all__ = ["chain_tick", "chain_run", "detector_pre", "detector_tick", "monitor_tick",
+           "monitor_run", "QUIET", "LEVEL_ALARM", "CALIBRATED", "FAST_ALARM", "ISOLATED",
+           "OTHER_FAULT", "CLEARED"]
 
 #: codes of a tick: nothing to tell, or the event Python formats (the calibration's end is
 #: computed there too)
@@ -161,6 +161,21 @@ def chain_run(f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums
         v_rms[k] = f[out + O_VRMS]
 
 
+@jit(inline=True)
+def detector_pre(f, ii, io):  # pragma: no cover - jit
+    """The detector's work that does not need this tick's signals, done before the chain so
+    that the reference solves' chains of divisions overlap with it: the rows leaving the
+    lag's FIFOs into the reference sums and, with a lag, the reference fits (`itest_tick`
+    of both tests, four regressors each, inlined phase by phase; both have the same lag)."""
+    res = ii[io + D_RES]
+    cmd = ii[io + D_CMD]
+    itest_pop_p(f, ii, res, ii[io + D_EPISODE] != 0, 4)
+    itest_pop_p(f, ii, cmd, False, 4)
+    if ii[res + 2]:
+        itest_solve_p(f, ii, res, 4)
+        itest_solve_p(f, ii, cmd, 4)
+
+
 @jit
 def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baseline
                   ):  # pragma: no cover - jit
@@ -176,11 +191,12 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
     f[ph + 4] = r
     ph = ii[cmd + 15]  # φ = v_in(k−1..k−4): the command test's regressors are its history
     f[ph + 4] = v_in
-    # `itest_tick` of both tests (four regressors each: p constant), inlined phase by phase
-    itest_push_p(f, ii, res, ii[io + D_EPISODE] != 0, 4)
-    itest_push_p(f, ii, cmd, False, 4)
-    itest_solve_p(f, ii, res, 4)
-    itest_solve_p(f, ii, cmd, 4)
+    # the rest of `itest_tick` of both tests after `detector_pre`
+    itest_insert_p(f, ii, res, ii[io + D_EPISODE] != 0, 4)
+    itest_insert_p(f, ii, cmd, False, 4)
+    if ii[res + 2] == 0:  # no lag: the reference fits end with this tick's rows
+        itest_solve_p(f, ii, res, 4)
+        itest_solve_p(f, ii, cmd, 4)
     stat = itest_statistic_p(f, ii, res, 4)
     guard_stat = itest_statistic_p(f, ii, cmd, 4)
     for q in range(3, 0, -1):
@@ -273,8 +289,10 @@ def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over
 
 @jit
 def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
-    """``chain_tick`` then ``detector_tick`` (with the level's excess over the baseline of
-    the window's operating condition); returns the tick's code (also in ii[io + D_CODE])."""
+    """``detector_pre``, ``chain_tick``, then ``detector_tick`` (with the level's excess over
+    the baseline of the window's operating condition); returns the tick's code (also in
+    ii[io + D_CODE])."""
+    detector_pre(f, ii, io)
     chain = ii[io + D_CHAIN]
     chain_tick(f, ii, chain, v_in, accel, position, xext)
     out = ii[chain + C_OUT]

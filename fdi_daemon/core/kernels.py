@@ -36,13 +36,19 @@ _u = np.uint64
 
 @jit(inline=True)
 def iir_step(f, bo, ao, zo, n, x):  # pragma: no cover - jit
-    """One sample through b = f[bo:bo+n+1], a = f[ao:..] (a0 = 1), state f[zo:zo+n]."""
+    """One sample through b = f[bo:bo+n+1], a = f[ao:..] (a0 = 1), state f[zo:zo+n]
+    (offsets unsigned inside, `_u`)."""
+    bo = _u(bo)
     if n == 0:
         return f[bo] * x
+    one = _u(1)
+    ao = _u(ao)
+    zo = _u(zo)
+    n = _u(n)
     y = f[bo] * x + f[zo]
-    for i in range(n - 1):
-        f[zo + i] = f[zo + i + 1] + f[bo + i + 1] * x - f[ao + i + 1] * y
-    f[zo + n - 1] = f[bo + n] * x - f[ao + n] * y
+    for i in range(n - one):
+        f[zo + i] = f[zo + i + one] + f[bo + i + one] * x - f[ao + i + one] * y
+    f[zo + n - one] = f[bo + n] * x - f[ao + n] * y
     return y
 
 

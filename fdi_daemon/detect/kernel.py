@@ -11,8 +11,9 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
     θ  = argmin Σ_N (r − θ1 g1 − θ2 g2)²  eqs. (16)–(17): six window sums + Σ v̂²
 
 ``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
-of v_in (`core.kernels.itest_tick`, phase by phase), the operating-point guard, the friction level's
-excess over its fault-free value, the quiet path's counters (level path, fast path,
+of v_in (`core.kernels.itest_tick`, phase by phase; their reference fits are pushed and
+re-solved before the chain, ``detector_pre``), the operating-point guard, the friction
+level's excess over its fault-free value, the quiet path's counters (level path, fast path,
 calibration buffer) and a running alarm episode (`detect.episode_kernel`). It returns a
 code; anything but ``QUIET`` is an event that Python formats (`Detector.decide`).
 

@@ -7,6 +7,8 @@ they never drift) and the 2×2 solve. No checks, no NaN handling, no decisions: 
 arithmetic a tick cannot do without. ``step`` is one compiled call per sample from Python
 (what the daemon's loop would pay), ``run`` one call over arrays (what a replay would pay).
 The monitor's figures in `fdi bench` are ratios against these two, measured in the same run.
+It is compiled as the monitor's kernels are (`core.compiled.jit`: without numba's runtime,
+no reference counts on its arrays), so the ratios compare arithmetic with arithmetic.
 """
 
 from __future__ import annotations
@@ -80,8 +82,7 @@ def _tick(b, a, z, ring, sums, idx, v_in, accel, out):
 
 
 @jit
-def _run(b, a, z, ring, sums, idx, v_in, accel, theta1, theta2):
-    out = np.empty(2)
+def _run(b, a, z, ring, sums, idx, v_in, accel, theta1, theta2, out):
     for k in range(v_in.shape[0]):
         _tick(b, a, z, ring, sums, idx, v_in[k], accel[k], out)
         theta1[k] = out[0]
@@ -128,5 +129,5 @@ class ReferenceChain:
         theta2 = np.empty(len(v_in))
         _run(self.b, self.a, self.z, self.ring, self.sums, self.idx,
              np.ascontiguousarray(v_in, dtype=float), np.ascontiguousarray(accel, dtype=float),
-             theta1, theta2)
+             theta1, theta2, self.out)
         return theta1, theta2

@@ -1,7 +1,10 @@
 """The one place that compiles: numba ``njit`` with ``cache=True`` (compiled once per
 install, then loaded from ``__pycache__``), and a plain-Python fallback.
 
-``jit`` is used by every per-tick kernel (`core.kernels`, `detect.kernel`). With
+``jit`` is used by every per-tick kernel (`core.kernels`, `detect.kernel`). The kernels
+work on arrays they are given and never allocate, so they are compiled without numba's
+runtime (``nrt``): no reference counts taken on the arrays at every call (about a fifth of
+a monitor tick). A kernel that allocates asks for it (``jit(nrt=True)``). With
 ``NUMBA_DISABLE_JIT=1`` (or without numba) the kernels run as ordinary Python functions,
 the same arithmetic in the same order, so results do not depend on the setting.
 
@@ -27,14 +30,16 @@ except ImportError:  # pragma: no cover
     JIT_ENABLED = False
 
 
-def jit(func=None, *, inline: bool = False):
-    """``numba.njit(cache=True, nogil=True)``; ``inline``: inlined into its callers."""
+def jit(func=None, *, inline: bool = False, nrt: bool = False):
+    """``numba.njit(cache=True, nogil=True)``; ``inline``: inlined into its callers;
+    ``nrt``: with numba's runtime (needed to allocate arrays; see the module docstring)."""
     def wrap(f):
         if not JIT_ENABLED or _njit is None:
             return f
+        options = {"cache": True, "nogil": True, "_nrt": nrt}
         if inline:
-            return _njit(cache=True, nogil=True, inline="always")(f)
-        return _njit(cache=True, nogil=True)(f)
+            options["inline"] = "always"
+        return _njit(**options)(f)
     return wrap(func) if func is not None else wrap
 
 

@@ -77,11 +77,11 @@ class InnovationTest:
 
     def reset(self) -> None:
         f, ii, io = self.arena.f, self.arena.i, self.io
-        f[self.fo:self._o(22) + 4] = 0.0
+        f[self.fo:self._o(22) + 6] = 0.0
         ii[io + 7:io + 15] = 0
         ii[io + 7] = self.phase
         sc = self._o(22)
-        f[sc:sc + 4] = (self.min_sigma2, math.inf, math.nan, 0.0)
+        f[sc:sc + 6] = (self.min_sigma2, math.inf, math.nan, 0.0, 0.0, 1.0 / self.test_samples)
 
     @property
     def theta(self) -> list[float]:
@@ -109,7 +109,7 @@ class InnovationTest:
         f = self.arena.f
         f[ph:ph + self.p] = phi
         f[ph + self.p] = y
-        return float(itest_tick(f, self.arena.i, self.io, False))
+        return float(itest_tick(f, self.arena.i, self.io))
 
     # ------------------------------------------------------------------ batch
     def run(self, phi: np.ndarray, y: np.ndarray
@@ -135,7 +135,7 @@ def _itest_run(f, ii, io, phi, y, stat, ok, theta):  # pragma: no cover - jit
         for q in range(p):
             f[ph + q] = phi[k, q]
         f[ph + p] = y[k]
-        stat[k] = itest_tick(f, ii, io, False)
+        stat[k] = itest_tick(f, ii, io)
         ok[k] = ii[io + 8] != 0
         for q in range(p):
             theta[k, q] = f[th + q]

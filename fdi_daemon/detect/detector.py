@@ -63,6 +63,8 @@ _KINDS = (None, "harmonics", "load_stopped", "level")
 N_REGRESSORS = 4
 #: order of the autoregressive model of the valve command (the operating-point guard)
 COMMAND_ORDER = 4
+#: `detect.kernel.detector_tick` is compiled for these two (four regressors each)
+assert N_REGRESSORS == COMMAND_ORDER == 4
 
 
 class Detector:
@@ -185,8 +187,7 @@ class Detector:
         """Forget every window (start-up, data gap); the band and an episode are kept."""
         self._tick = 0
         self.residual_test.reset()
-        self.command_test.reset()
-        self.arena.f[self.fo + K.E_VHIST:self.fo + K.E_VHIST + COMMAND_ORDER] = 0.0
+        self.command_test.reset()  # and the history of v_in (its regressors)
         self._guard_until = 0
         self._above = 0
         self._level_above = 0

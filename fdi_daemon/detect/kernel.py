@@ -15,8 +15,9 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
     level valid: moving and trusted: θ1 of the window measures friction
 
 ``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
-of v_in (`core.kernels.itest_tick`), the operating-point guard, the friction level's
-excess over its fault-free value, the quiet path's counters (level path, fast path,
+of v_in (`core.kernels.itest_tick`, phase by phase; their reference fits are pushed and
+re-solved before the chain, ``detector_pre``), the operating-point guard, the friction
+level's excess over its fault-free value, the quiet path's counters (level path, fast path,
 calibration buffer) and a running alarm episode (`detect.episode_kernel`). It returns a
 code; anything but ``QUIET`` is an event that Python formats (`Detector.decide`).
 ``monitor_tick`` also keeps the reported friction level (`detect.friction_level`).
@@ -30,13 +31,14 @@ from __future__ import annotations
 import math
 
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.core.kernels import iir_step, itest_tick, packed_row_into, sums_push
+from fdi_daemon.core.kernels import (iir_step, itest_insert_p, itest_pop_p, itest_solve_p,
+                                     itest_statistic_p, packed_row_into, sums_push)
 from fdi_daemon.detect import episode_kernel as E
 from fdi_daemon.detect.friction_level import L_CAPACITY, L_FLOATS, level_restart, level_tick
 
-__all__ = ["chain_tick", "chain_run", "detector_tick", "monitor_tick", "monitor_run",
-           "QUIET", "LEVEL_ALARM", "CALIBRATED", "FAST_ALARM", "ISOLATED", "OTHER_FAULT",
-           "CLEARED"]
+__all__ = ["chain_tick", "chain_run", "detector_pre", "detector_tick", "monitor_tick",
+           "monitor_run", "QUIET", "LEVEL_ALARM", "CALIBRATED", "FAST_ALARM", "ISOLATED",
+           "OTHER_FAULT", "CLEARED"]
 
 #: codes of a tick: nothing to tell, or the event Python formats (the calibration's end is
 #: computed there too)
@@ -68,8 +70,8 @@ SLIDING_SHARE = 0.5
 DET_INTS = 23
 # --- detector floats
 (E_THRESHOLD, E_GUARD_THRESHOLD, E_LO1, E_HI1, E_LO2, E_HI2, E_LEVEL_BASE, E_FRICTION_MIN,
- E_THETA1, E_THETA2, E_OVER, E_VHIST) = range(12)  # E_VHIST .. +4
-E_CAL = 16  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
+ E_THETA1, E_THETA2, E_OVER) = range(11)
+E_CAL = 11  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
 STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER = range(1, 6)
 
 
@@ -182,6 +184,21 @@ def chain_run(f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums
         v_rms[k] = f[out + O_VRMS]
 
 
+@jit(inline=True)
+def detector_pre(f, ii, io):  # pragma: no cover - jit
+    """The detector's work that does not need this tick's signals, done before the chain so
+    that the reference solves' chains of divisions overlap with it: the rows leaving the
+    lag's FIFOs into the reference sums and, with a lag, the reference fits (`itest_tick`
+    of both tests, four regressors each, inlined phase by phase; both have the same lag)."""
+    res = ii[io + D_RES]
+    cmd = ii[io + D_CMD]
+    itest_pop_p(f, ii, res, 4)
+    itest_pop_p(f, ii, cmd, 4)
+    if ii[res + 2]:
+        itest_solve_p(f, ii, res, 4)
+        itest_solve_p(f, ii, cmd, 4)
+
+
 @jit
 def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baseline, trusted,
                   sliding):  # pragma: no cover - jit
@@ -196,16 +213,19 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
     f[ph + 2] = xhat
     f[ph + 3] = 1.0
     f[ph + 4] = r
-    stat = itest_tick(f, ii, res, ii[io + D_EPISODE] != 0)
-    hv = fo + E_VHIST
-    ph = ii[cmd + 15]
-    for q in range(4):
-        f[ph + q] = f[hv + q]
+    ph = ii[cmd + 15]  # φ = v_in(k−1..k−4): the command test's regressors are its history
     f[ph + 4] = v_in
-    guard_stat = itest_tick(f, ii, cmd, False)
+    # the rest of `itest_tick` of both tests after `detector_pre`
+    itest_insert_p(f, ii, res, 4)
+    itest_insert_p(f, ii, cmd, 4)
+    if ii[res + 2] == 0:  # no lag: the reference fits end with this tick's rows
+        itest_solve_p(f, ii, res, 4)
+        itest_solve_p(f, ii, cmd, 4)
+    stat = itest_statistic_p(f, ii, res, 4)
+    guard_stat = itest_statistic_p(f, ii, cmd, 4)
     for q in range(3, 0, -1):
-        f[hv + q] = f[hv + q - 1]
-    f[hv] = v_in
+        f[ph + q] = f[ph + q - 1]
+    f[ph] = v_in
     tick = ii[io + D_TICK]
     if guard_stat > f[fo + E_GUARD_THRESHOLD]:
         ii[io + D_GUARD_UNTIL] = tick + ii[io + D_HOLD]
@@ -296,9 +316,10 @@ def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over, tr
 
 @jit
 def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
-    """``chain_tick``, the reported friction level, then ``detector_tick`` (with the level's
-    excess over the baseline of the window's operating condition); returns the tick's code
-    (also in ii[io + D_CODE])."""
+    """``detector_pre``, ``chain_tick``, the reported friction level, then ``detector_tick``
+    (with the level's excess over the baseline of the window's operating condition); returns
+    the tick's code (also in ii[io + D_CODE])."""
+    detector_pre(f, ii, io)
     chain = ii[io + D_CHAIN]
     chain_tick(f, ii, chain, v_in, accel, position, xext)
     out = ii[chain + C_OUT]

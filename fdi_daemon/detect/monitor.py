@@ -243,16 +243,27 @@ class Monitor:
         t = np.asarray(cols["t"], dtype=float)
         v_in = np.asarray(cols["v_in"], dtype=float)
         accel = np.asarray(cols["accel"], dtype=float)
-        position = self.position_column(rec)
-        seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
-               else self.sample_numbers(t))
+        # per chunk (in cache): the sample numbers of a recording without seq, and NaN for
+        # the position the velocity does not use
+        needs_position = self.pipeline.needs_position
+        position = (self.position_column(rec) if needs_position
+                    else np.full(min(n, _CHUNK), np.nan))
+        seq = np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols else None
+        last = None  # the number of the sample before the chunk (no seq column)
         events: list[dict[str, Any]] = []
         parts: dict[str, list[np.ndarray]] = {k: [] for k in TRACE_NAMES}
         start = 0
         while start < n:
             stop = min(n, start + _CHUNK)
+            if seq is not None:
+                numbers = seq[start:stop]
+            else:
+                lo = max(start - 1, 0)
+                numbers = self.sample_numbers(t[lo:stop], last)[start - lo:]
+                last = int(numbers[-1])
             events.extend(self._run_chunk(t[start:stop], v_in[start:stop], accel[start:stop],
-                                          position[start:stop], seq[start:stop], parts,
+                                          position[start:stop] if needs_position
+                                          else position[:stop - start], numbers, parts,
                                           trace_every))
             start = stop
             if progress is not None:
@@ -292,14 +303,16 @@ class Monitor:
                             "position_observer) but the recording has no position column")
         return np.asarray(rec.columns["position"], dtype=float)
 
-    def sample_numbers(self, t: np.ndarray) -> np.ndarray:
-        """Sample numbers from the time column (recordings without ``seq``)."""
+    def sample_numbers(self, t: np.ndarray, base: int | None = None) -> np.ndarray:
+        """Sample numbers from the time column (recordings without ``seq``); ``base``: the
+        first sample's (default: the one after the last sample seen)."""
         if t.size == 0:
             return np.zeros(0, dtype=np.int64)
         with np.errstate(invalid="ignore"):
             steps = np.rint(np.diff(t) * self.fs_hz)
         steps = np.where(np.isfinite(steps), steps, 1).astype(np.int64)
-        base = 0 if self._last_seq is None else self._last_seq + 1
+        if base is None:
+            base = 0 if self._last_seq is None else self._last_seq + 1
         return base + np.concatenate([[0], np.cumsum(steps)])
 
     def _run_chunk(self, t, v_in, accel, position, seq, parts, trace_every
@@ -387,9 +400,8 @@ class Monitor:
                 state[k] = STATES.index(det.state)
                 theta1[k], theta2[k] = det.theta1, det.theta2
         every = self._history_every
-        hist = np.arange((-self._samples) % every, n, every)
-        for k in hist[-HISTORY_POINTS:]:
-            self._history.append((float(t[k]), float(theta1[k]), float(theta2[k])))
+        hist = np.arange((-self._samples) % every, n, every)[-HISTORY_POINTS:]
+        self._history.extend(zip(t[hist].tolist(), theta1[hist].tolist(), theta2[hist].tolist()))
         keep = np.arange((-self._samples) % trace_every, n, trace_every)
         for name, values in (("t", t), ("accel", accel), ("residual", residual),
                              ("theta1", theta1), ("theta2", theta2),

@@ -120,7 +120,7 @@ def _slope(chain_n, vb0, fs):
     return fs
 
 
-@jit
+@jit(nrt=True)
 def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs,
             phi_out, v_out):
     n = a.size - 1

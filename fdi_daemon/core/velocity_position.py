@@ -32,6 +32,7 @@ import numpy as np
 from scipy.signal import bilinear
 
 from fdi_daemon.core.iir import IIRFilter
+from fdi_daemon.core.velocity import frequency_response
 
 __all__ = ["PositionVelocityObserver", "POSITION_DEFAULTS"]
 
@@ -114,13 +115,11 @@ class PositionVelocityObserver:
         self.accel_path.reset()
         self._last_position = math.nan
 
-    def response(self, f_hz: float) -> complex:
-        """v̂/(jω x) at ``f_hz`` for a consistent pair ẍ = (jω)² x: 1 up to the bilinear
-        transform's warping (the weights add up to one exactly for its own derivative)."""
-        from scipy.signal import freqz
-
-        w = [float(f_hz)]
-        hx = freqz(self.position_path.b, self.position_path.a, worN=w, fs=self.fs_hz)[1][0]
-        ha = freqz(self.accel_path.b, self.accel_path.a, worN=w, fs=self.fs_hz)[1][0]
-        jw = 2j * math.pi * float(f_hz)
-        return complex((hx + ha * jw * jw) / jw)
+    def response(self, f_hz):
+        """v̂/(jω x) at ``f_hz`` (Hz; a number or an array) for a consistent pair
+        ẍ = (jω)² x: 1 up to the bilinear transform's warping (the weights add up to one
+        exactly for its own derivative)."""
+        hx = frequency_response(self.position_path.b, self.position_path.a, self.fs_hz, f_hz)
+        ha = frequency_response(self.accel_path.b, self.accel_path.a, self.fs_hz, f_hz)
+        jw = 2j * np.pi * np.asarray(f_hz)
+        return (hx + ha * jw * jw) / jw

@@ -39,7 +39,7 @@ from fdi_daemon.core.kernels import sums_floats
 from fdi_daemon.core.velocity_observer import trusted_from_hz, velocity_from_settings
 from fdi_daemon.core.window_ls import MIN_RCOND, solve_sums
 from fdi_daemon.detect import kernel as K
-from fdi_daemon.detect.settings import velocity_settings
+from fdi_daemon.detect.settings import DetectorSettings, velocity_settings
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.model_file import FdiModel
 
@@ -109,7 +109,8 @@ class Pipeline:
 
     def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = MIN_RCOND,
                  min_velocity_rms_mps: float = 0.0, arena: Arena | None = None,
-                 trust_phase_deg: float = 30.0, trust_share: float = 0.3) -> None:
+                 trust_phase_deg: float = DetectorSettings.velocity_trust_phase_deg,
+                 trust_share: float = DetectorSettings.velocity_trust_share) -> None:
         ff = model.fault_filter
         if ff is None:
             raise ConfigError("the model has no fault_filter (G_e, γ_f): run `fdi signature` "

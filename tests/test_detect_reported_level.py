@@ -67,3 +67,30 @@ def test_the_monitor_reports_the_level_of_a_fault_from_its_own_picks():
     assert np.all(np.abs(before[np.isfinite(before)]) < 0.2)
     assert np.isfinite(after).all()
     assert abs(np.median(after) / np.median(theta1) - 1) < 0.05
+
+
+def test_events_and_the_replay_summary_carry_the_reported_level_not_theta1(tmp_path):
+    """An event's ``friction_level`` is the level reported at its tick (None where it is not
+    measured); the summary's ``friction_level_final`` is the file's last reported level."""
+    from fdi_daemon.fleet.replay_one import replay_recording
+    from fdi_daemon.io.model_file import save_model
+    from fdi_daemon.io.recordings import write_recording
+
+    rec = scenario_recording("test_case_2")
+    write_recording(tmp_path / "tc2.npz", rec)
+    save_model(tmp_path / "model.yaml", sim_rig_model())
+    replay = replay_recording(tmp_path / "tc2.npz", tmp_path / "model.yaml",
+                              runner=lambda monitor, r, stride: monitor.run(r, trace_every=1))
+    trace = replay.trace
+    decided = [e for e in replay.events if e["kind"] in ("fault_detected", "friction_isolated")]
+    assert [e["kind"] for e in decided] == ["fault_detected", "friction_isolated"]
+    for event in decided:
+        reported = trace.friction_level[trace.t == event["t"]][0]
+        assert (event["friction_level"] is None) == (not np.isfinite(reported))
+        if event["friction_level"] is not None:
+            assert event["friction_level"] == reported
+    isolated = decided[1]
+    assert isolated["friction_level"] is not None and isolated["friction_level"] != isolated["theta1"]
+    levels = trace.friction_level[np.isfinite(trace.friction_level)]
+    assert replay.summary["friction_level_final"] == float(levels[-1])
+    assert replay.summary["friction_level_final"] != replay.summary["theta_final"][0]

@@ -193,7 +193,7 @@ def _paced(monitor, rec, on_tick=None):
                 pl, det = monitor.pipeline, monitor.detector
                 values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
                           det.theta2, det.statistic, STATES.index(det.state), pl.v_rms,
-                          monitor.level.level)
+                          det.level.level)
                 for name, value in zip(TRACE_NAMES, values):
                     out[name][rows] = value
                 rows += 1

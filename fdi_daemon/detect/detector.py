@@ -49,6 +49,7 @@ from fdi_daemon.core.innovation_test import InnovationTest
 from fdi_daemon.detect import episode_kernel as E
 from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.events import make_event
+from fdi_daemon.detect.friction_level import FrictionLevel
 from fdi_daemon.detect.settings import DetectorSettings
 
 __all__ = ["Detector", "STATES", "N_REGRESSORS"]
@@ -141,6 +142,10 @@ class Detector:
             o = fo + K.E_CAL + 2 * self.calibration_samples
             f[o:o + 3 * bins + 1] = np.concatenate([np.asarray(v, dtype=float)
                                                    for v in baseline_bins])
+        #: the friction level as reported (`detect.friction_level`), restarted by the kernel
+        #: when an episode begins or ends; events carry its value at their tick
+        self.level = FrictionLevel(s.level_median_s, fs_hz, arena)
+        arena.i[io + K.D_LEVEL] = self.level.io
         self.band: dict[str, list[float]] | None = None
         #: θ as reported for the newest tick: eq. (17) over the sliding window, or during an
         #: alarm episode over the data since the change (`_Episode.theta`)
@@ -259,5 +264,5 @@ class Detector:
 
     def _event(self, t, kind, theta1, theta2, **extra) -> dict[str, Any]:
         return make_event(t, kind, theta1, theta2, statistic=float(self.statistic),
-                          threshold=float(self.threshold), friction_level=float(theta1),
+                          threshold=float(self.threshold), friction_level=self.level.level,
                           method=self.settings.method, **extra)

@@ -32,7 +32,6 @@ from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.baseline import Baseline
 from fdi_daemon.detect.detector import STATES, Detector
 from fdi_daemon.detect.events import make_event
-from fdi_daemon.detect.friction_level import FrictionLevel
 from fdi_daemon.detect.pipeline import Pipeline
 from fdi_daemon.detect.settings import DetectorSettings
 from fdi_daemon.errors import ConfigError, UserError
@@ -118,8 +117,6 @@ class Monitor:
                                  trust_phase_deg=self.settings.velocity_trust_phase_deg,
                                  trust_share=self.settings.velocity_trust_share)
         self.arena.i[self.detector.io + K.D_CHAIN] = self.pipeline.io
-        self.level = FrictionLevel(self.settings.level_median_s, self.fs_hz, self.arena)
-        self.arena.i[self.detector.io + K.D_LEVEL] = self.level.io
         self._io = self.detector.io
         self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))
         self._history: deque = deque(maxlen=HISTORY_POINTS)
@@ -425,7 +422,7 @@ class Monitor:
                   "theta1": self.detector.theta1, "theta2": self.detector.theta2,
                   "statistic": self.detector.statistic,
                   "state": STATES.index(self.detector.state), "v_rms": pl.v_rms,
-                  "friction_level": self.level.level}
+                  "friction_level": self.detector.level.level}
         for name, value in values.items():
             parts[name].append(np.array([value], dtype=np.int8 if name == "state" else float))
 
@@ -441,8 +438,8 @@ class Monitor:
             "state": det.state if self._samples else "starting",
             "theta1": _finite(det.theta1),
             "theta2": _finite(det.theta2),
-            "friction_level": _finite(self.level.level),
-            "friction_level_spread": _finite(self.level.spread),
+            "friction_level": _finite(det.level.level),
+            "friction_level_spread": _finite(det.level.spread),
             "baseline_level": self.baseline_level(),
             "band": det.band,
             "signature": [1.0, _finite(self.gamma_f)],

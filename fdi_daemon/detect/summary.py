@@ -22,13 +22,16 @@ def _finite_or_none(value: float) -> float | None:
 
 
 def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, method: str,
-                   theta_final: tuple[float | None, float | None]) -> dict[str, Any]:
+                   theta_final: tuple[float | None, float | None],
+                   level_final: float | None = None) -> dict[str, Any]:
     """``{"samples", "fs", "first_detection_t", "isolated_t", "classification",
     "theta_final", "alarm_episodes", ...}`` (DESIGN.md keys first).
 
     ``alarm_episodes``: the detector's episodes (``fault_detected`` events); ``alarms``: the
     alarm lifecycle's alarms (``alarm_raised``, `fdi_daemon.alarms.replay`) and
     ``alarm_peak_priority`` the highest priority any of them reached (0: none).
+    ``friction_level_final``: ``level_final``, the last reported friction level of the file
+    (`detect.friction_level`; None if it was never measured), not θ1 of the last window.
     """
     kinds = [e["kind"] for e in events]
     first_detection = _first(events, "fault_detected")
@@ -55,7 +58,7 @@ def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, met
                                    default=0),
         "other_fault_t": other,
         "method": method,
-        "friction_level_final": theta_final[0],
+        "friction_level_final": None if level_final is None else _finite_or_none(level_final),
         "event_counts": counts,
         "bad_samples": sum(int(e.get("count", 1)) for e in events if e["kind"] == "bad_sample"),
         "missing_samples": sum(int(e.get("missing_samples", 0)) for e in events

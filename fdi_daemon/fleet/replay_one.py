@@ -54,6 +54,8 @@ def replay_recording(recording: str | Path, model_path: str | Path,
     alarm_settings (`AlarmSettings`, default its defaults) and status_period_s (default
     the daemon's) set the alarm lifecycle as the daemon's config would.
     """
+    import numpy as np
+
     from fdi_daemon.alarms.replay import (STATUS_PERIOD_S, alarm_events, merge_events,
                                           status_stride)
     from fdi_daemon.detect.monitor import Monitor
@@ -72,8 +74,10 @@ def replay_recording(recording: str | Path, model_path: str | Path,
     events, trace = runner(monitor, rec, stride)
     events = merge_events(events, alarm_events(monitor, events, trace, stride, alarm_settings))
     snap = monitor.snapshot()
+    levels = trace.friction_level[np.isfinite(trace.friction_level)]
     summary = replay_summary(events, len(rec), model.fs, monitor.settings.method,
-                             (snap["theta1"], snap["theta2"]))
+                             (snap["theta1"], snap["theta2"]),
+                             float(levels[-1]) if levels.size else None)
     return Replay(rec, monitor, events, trace, summary)
 
 

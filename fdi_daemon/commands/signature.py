@@ -8,6 +8,13 @@ from fdi_daemon.io.columns import add_columns_option
 
 HELP = "identify the friction signature (G_e, gamma_f) from a window with a friction fault"
 
+#: ``--velocity-method auto`` in order: the paper's high-pass estimator, and where its
+#: signature does not fit (G_e·x_f explains less than LOW_VAF_PERCENT of the fault residual,
+#: the level would not be physical) the model-based observer if it explains more. Both are
+#: computed from the valve voltage and the accelerometer alone (the position observer needs
+#: a position sensor on every sample, a choice the user makes).
+AUTO_METHODS = ("highpass", "model_observer")
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", metavar="REC", help="recording with a friction fault")
@@ -28,12 +35,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "velocity settings, else 1 Hz; with model_observer, 0.5 Hz on "
                              "the residual path)")
     parser.add_argument("--velocity-method",
-                        choices=("highpass", "model_observer", "position_observer"),
+                        choices=("auto", "highpass", "model_observer", "position_observer"),
                         help="velocity estimate: the accelerometer through a high-pass and an "
                              "integrator, the model-based observer (right in phase at 1-3 Hz), "
                              "or position and acceleration fused (needs a position column; "
-                             "docs/detector.md). Default: the model's velocity settings, else "
-                             "highpass. The monitor uses the same")
+                             "docs/detector.md); auto: highpass, or model_observer where the "
+                             "high-pass signature explains less than half of the fault "
+                             "residual and the observer's more. Default: the model's velocity "
+                             "settings, else auto. The monitor uses the same")
     parser.add_argument("--flat-fraction", type=float, default=0.2,
                         help="flag the profile flat when the 99 %% interval of γ covers more "
                              "than this fraction of the grid (default %(default)s)")
@@ -114,17 +123,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--fault-window {args.fault_window} holds {int(inside.sum())} "
                         f"samples; at least {needed} are needed")
 
-    settings = velocity_settings(model.velocity or DEFAULT_SETTINGS)
-    if args.velocity_method is not None and args.velocity_method != settings.get("method",
-                                                                                   "highpass"):
-        settings = {"method": args.velocity_method}  # the other method's own defaults
-    if args.highpass_hz is not None:
-        settings["highpass_hz"] = args.highpass_hz
-    try:
-        estimator = velocity_from_settings(settings, fs_hz=model.fs)
-    except ValueError as exc:
-        raise ConfigError(f"{args.model}: velocity: {exc}") from None
-
+    method = args.velocity_method
+    if method is None:
+        method = model.velocity.get("method", "highpass") if model.velocity else "auto"
+    candidates = AUTO_METHODS if method == "auto" else (method,)
     prefilter = _prefilter(args, model.fs)
     radius = args.max_pole_radius
     if radius is None:
@@ -134,16 +136,7 @@ def run(args: argparse.Namespace) -> int:
 
     # residual (eq. 3) and velocity from the recording start, so that filter start-up
     # transients have settled before the window; the fit uses the window only
-    residual = sig.plant_residual(nominal_plant(model), v_in, accel)
-    if estimator.needs_model:
-        velocity = estimator.run(accel, accel - residual)
-    elif estimator.needs_position:
-        if "position" not in rec.columns:
-            raise UserError(f"{args.recording}: velocity method position_observer needs a "
-                            "position column")
-        velocity = estimator.run(accel, np.asarray(rec.columns["position"], dtype=float))
-    else:
-        velocity = estimator.run(accel)
+    plant_residual = residual = sig.plant_residual(nominal_plant(model), v_in, accel)
     first, end = int(np.flatnonzero(inside)[0]), int(np.flatnonzero(inside)[-1]) + 1
     start = 0
     if args.reference_window is not None:
@@ -151,14 +144,34 @@ def run(args: argparse.Namespace) -> int:
         residual = sig.reference_difference(residual, lag)
         start = lag  # the difference exists from one lag on
     t_win = t[first:end]
-    result = _estimate(sig, residual[start:end], velocity[start:end], first - start, grid,
-                       orders, prefilter, args.flat_fraction, args.min_depth, radius)
-    fault_fit = result.fit
-    if args.lowpass_hz is not None:  # G_e for the monitor: full band, at gamma_f
-        fault_fit = sig.fit_fault_filter(residual[start:end], velocity[start:end],
-                                         result.gamma_f, orders, first - start, radius)
-    full_band_pct = sig.fit_percent(residual[first:end], fault_fit.y_sim)
-    full_band_vaf = sig.variance_accounted_for(residual[first:end], fault_fit.y_sim)
+    fits = []
+    for candidate in candidates:
+        if fits and fits[-1][0] >= sig.LOW_VAF_PERCENT:
+            break  # the signature fits: keep the estimator tried first
+        settings = velocity_settings(model.velocity or DEFAULT_SETTINGS)
+        if candidate != settings.get("method", "highpass"):
+            settings = {"method": candidate}  # the other method's own defaults
+        if args.highpass_hz is not None:
+            settings["highpass_hz"] = args.highpass_hz
+        try:
+            estimator = velocity_from_settings(settings, fs_hz=model.fs)
+        except ValueError as exc:
+            raise ConfigError(f"{args.model}: velocity: {exc}") from None
+        velocity = _velocity(estimator, rec, args.recording, accel, plant_residual)
+        result = _estimate(sig, residual[start:end], velocity[start:end], first - start, grid,
+                           orders, prefilter, args.flat_fraction, args.min_depth, radius,
+                           candidate)
+        fault_fit = result.fit
+        if args.lowpass_hz is not None:  # G_e for the monitor: full band, at gamma_f
+            fault_fit = sig.fit_fault_filter(residual[start:end], velocity[start:end],
+                                             result.gamma_f, orders, first - start, radius)
+        full_band_pct = sig.fit_percent(residual[first:end], fault_fit.y_sim)
+        full_band_vaf = sig.variance_accounted_for(residual[first:end], fault_fit.y_sim)
+        fits.append((full_band_vaf, full_band_pct, candidate, estimator, result, fault_fit))
+    # of those tried, the velocity under which the signature explains most of the residual
+    full_band_vaf, full_band_pct, _, estimator, result, fault_fit = max(
+        fits, key=lambda fit: fit[0])
+    explained = {fit[2]: round(float(fit[0]), 2) for fit in fits}
 
     nb, nf, nk = orders
     # at the grid's edge γ_f is no value: null in the model (the monitor's G_e, fitted at the
@@ -174,6 +187,8 @@ def run(args: argparse.Namespace) -> int:
                                list(parse_range(args.reference_window, "--reference-window"))),
         "prefilter_hz": args.prefilter_hz, "lowpass_hz": args.lowpass_hz,
         "max_pole_radius": float(radius),
+        "velocity_method": method,
+        "vaf_percent_by_velocity": explained,
         "fault_filter_fit_percent_full_band": float(full_band_pct),
         "fault_filter_vaf_percent_full_band": float(full_band_vaf),
         "gamma_f_status": result.status,
@@ -189,8 +204,25 @@ def run(args: argparse.Namespace) -> int:
 
         plot_signature(args.plot, t_win, result.residual, result,
                        residual_label=_fitted_residual_label(args))
-    _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf)
+    _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf,
+            explained if method == "auto" else None)
     return 0
+
+
+def _velocity(estimator, rec, path, accel, residual):
+    """v̂ over the whole recording with the estimator's inputs (x̂̈ = ẍ − r, or position)."""
+    import numpy as np
+
+    from fdi_daemon.errors import UserError
+
+    if estimator.needs_model:
+        return estimator.run(accel, accel - residual)
+    if estimator.needs_position:
+        if "position" not in rec.columns:
+            raise UserError(f"{path}: velocity method position_observer needs a position "
+                            "column")
+        return estimator.run(accel, np.asarray(rec.columns["position"], dtype=float))
+    return estimator.run(accel)
 
 
 def _fitted_residual_label(args) -> str:
@@ -251,14 +283,14 @@ def _reference_lag(args, t, v_in, first, end, fs) -> int:
 
 
 def _estimate(sig, residual, velocity, fit_from, grid, orders, prefilter, flat_fraction,
-              min_depth, radius):
+              min_depth, radius, method):
     from rich.console import Console
     from rich.progress import Progress
 
     from fdi_daemon.errors import UserError
 
     with Progress(console=Console(stderr=True), transient=True) as progress:
-        task = progress.add_task("γ grid (OE fit per point, 3 sweeps)",
+        task = progress.add_task(f"γ grid, {method} velocity (OE fit per point, 3 sweeps)",
                                  total=sig.sweep_fits(len(grid)))
         try:
             return sig.estimate_signature(residual, velocity, grid, orders,
@@ -270,7 +302,9 @@ def _estimate(sig, residual, velocity, fit_from, grid, orders, prefilter, flat_f
             raise UserError(f"signature: {exc}") from None
 
 
-def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf) -> None:
+def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf,
+            explained) -> None:
+    """The summary; ``explained``: VAF % per velocity that auto tried, or None."""
     import sys
 
     from fdi_daemon.ident.signature import LOW_VAF_PERCENT
@@ -287,6 +321,9 @@ def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf) ->
                      f"{velocity['highpass_hz']:g} Hz order {velocity['highpass_order']}"
                      + (f", leak {velocity['leak_hz']:g} Hz" if "leak_hz" in velocity else "")
                      + f", {velocity['integrator']} integrator")
+    if explained is not None:
+        described += " (auto: G_e explains " + ", ".join(
+            f"{vaf:.1f} % with {name}" for name, vaf in explained.items()) + ")"
     lines = [
         f"gamma_f           : {gamma} (grid {result.grid[0]:g}..{result.grid[-1]:g}"
         f" step {result.grid[1] - result.grid[0]:g}, refined)",
@@ -307,8 +344,10 @@ def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf) ->
     if full_band_vaf < LOW_VAF_PERCENT:
         print(f"fdi signature: warning: G_e x_f explains only {full_band_vaf:.1f} % of the fault "
               f"residual's variance (< {LOW_VAF_PERCENT:g} %): the friction level will not be "
-              "physical. Use --velocity-method model_observer and a calibration run with the "
-              "rig's operating frequencies (docs/identification.md)", file=sys.stderr)
+              "physical. Use " + ("" if velocity.get("method") == "model_observer" else
+                                  "--velocity-method model_observer and ")
+              + "a calibration run with the rig's operating frequencies "
+              "(docs/identification.md)", file=sys.stderr)
     if result.flat:
         print(f"fdi signature: warning: {result.recommendation} (G_e x_f explains "
               f"{result.info['vaf_percent']:.1f} % of the residual's variance; 99 % interval "

@@ -203,7 +203,8 @@ def run(args: argparse.Namespace) -> int:
         from fdi_daemon.ident.plots import plot_signature
 
         plot_signature(args.plot, t_win, result.residual, result,
-                       residual_label=_fitted_residual_label(args))
+                       residual_label=_fitted_residual_label(args),
+                       velocity=estimator.settings().get("method", "highpass"))
     _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf,
             explained if method == "auto" else None)
     return 0

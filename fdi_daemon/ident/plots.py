@@ -116,19 +116,20 @@ def moving_rms(x: np.ndarray, width: int) -> np.ndarray:
 
 def plot_signature(path: str | Path, t: np.ndarray, residual: np.ndarray, result,
                    title: str = "", zoom_s: float = 1.0,
-                   residual_label: str = "acceleration residual r") -> Path:
+                   residual_label: str = "acceleration residual r", velocity: str = "") -> Path:
     """Fig. 8 and the γ cost profile (`signature_figure`); returns the path."""
-    return save_figure(signature_figure(t, residual, result, title, zoom_s, residual_label),
-                       path)
+    return save_figure(signature_figure(t, residual, result, title, zoom_s, residual_label,
+                                        velocity=velocity), path)
 
 
 def signature_figure(t: np.ndarray, residual: np.ndarray, result, title: str = "",
                      zoom_s: float = 1.0, residual_label: str = "acceleration residual r",
-                     rms_s: float = 0.25):
+                     rms_s: float = 0.25, velocity: str = ""):
     """Fig. 8 as the RMS over `rms_s` of the fitted residual (as it was filtered for the fit:
     `residual_label`), of G_e x_f and of their difference over the whole window (the traces
     themselves would be a solid block), the traces over the last `zoom_s` seconds, and the
-    cost profile over γ (s/m) with its 99 % interval."""
+    cost profile over γ (s/m) with its 99 % interval; `velocity` names the estimate x_f was
+    made with (in the default title)."""
     plt = pyplot()
     fig, (ax_t, ax_z, ax_g) = plt.subplots(3, 1, figsize=(8, 9.5), constrained_layout=True)
     model = result.fit.y_sim
@@ -153,7 +154,8 @@ def signature_figure(t: np.ndarray, residual: np.ndarray, result, title: str = "
                 frameon=False)
     _legend_above(ax_z)
     ax_t.set_title(title or f"Residual and filtered friction signal (paper Fig. 8): "
-                            f"{result.info.get('fit_percent', float('nan')):.1f} % explained",
+                            f"{result.info.get('fit_percent', float('nan')):.1f} % explained"
+                            + (f", velocity {velocity}" if velocity else ""),
                    loc="left", fontsize=10)
     ax_z.set_title(f"last {zoom_s:g} s of the window", loc="left", fontsize=9)
     rel = result.relative_cost()

@@ -1,0 +1,88 @@
+"""Which velocity `fdi signature` keeps for a model without velocity settings, and what the
+levels are then (docs/identification.md, "The velocity when none is given"). Run:
+``python tests/signature_velocity_choice.py [default|v0|v1|velsrc ...]`` (about a minute
+per rig).
+
+Per rig (`tests/friction_level_variants.py`'s): `fdi identify` on its chirps, then
+`fdi signature` without ``--velocity-method`` (auto) and with ``--velocity-method
+highpass`` on two calibration runs: the shipped one (`signature_calibration.yaml`,
+``--fault-window 11:40``) and issue 12's procedure (four equal tones at 2, 3.3, 5 and 8 Hz,
+bearing supply 45 % from 4 s, ``--fault-window 5:20``; `test_detect_friction_level`'s
+``LOW_FREQUENCY_CALIBRATION``). Each model replays test cases 1 and 2 and the steady fault;
+the level is the reported `friction_level`'s median against the simulator's contact force
+relative to the calibration's.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def measure(name: str, rig: dict, root: Path) -> list[str]:
+    from friction_level_variants import CASES, _fdi, _record
+    from test_detect_friction_level import LOW_FREQUENCY_CALIBRATION
+
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.io.model_file import load_model
+    from fdi_daemon.io.recordings import write_recording
+    from hil_sim.scenarios import scenario_from_dict, simulate
+
+    recs = {n: _record(rig, n, root / f"{n}.npz") for n in
+            ("ident_chirp", "ident_chirp_long", "signature_calibration")
+            + tuple(c[0] for c in CASES)}
+    low = simulate(scenario_from_dict({**LOW_FREQUENCY_CALIBRATION, "rig": rig}))
+    write_recording(root / "low_frequency.npz", low)
+    _fdi("identify", root / "ident_chirp.npz", "-o", root / "plant.yaml",
+         "--validate", root / "ident_chirp_long.npz")
+    runs = (("shipped", recs["signature_calibration"], "11:40", 11.0),
+            ("four tones", low, "5:20", 5.0))
+    lines = []
+    for run, cal, window, fault_from in runs:
+        source = root / ("signature_calibration.npz" if run == "shipped" else
+                         "low_frequency.npz")
+        calibrated = np.mean(cal.columns["contact_force"][cal.t >= fault_from])
+        for choice, extra in (("auto", ()), ("highpass", ("--velocity-method", "highpass"))):
+            out = root / f"{run}-{choice}.yaml".replace(" ", "_")
+            _fdi("signature", source, "--model", root / "plant.yaml", "--fault-window", window,
+                 *extra, "-o", out)
+            model = load_model(out)
+            sig = model.provenance["signature"]
+            lines.append(f"{name} {run} {choice}: keeps {model.velocity.get('method', 'highpass')}"
+                         f", VAF by velocity {sig['vaf_percent_by_velocity']}, gamma_f "
+                         f"{model.fault_filter.gamma_f}")
+            for case, fault_t, after in CASES:
+                rec = recs[case]
+                events, trace = Monitor(model).run(rec)
+                truth = np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5]) / calibrated
+                decided = next((e["kind"] for e in events
+                                if e["kind"] in ("friction_isolated", "other_fault")), None)
+                level = trace.friction_level[(trace.t >= fault_t + after)
+                                             & np.isfinite(trace.friction_level)]
+                if level.size == 0:
+                    lines.append(f"  {case}: {decided}, no level")
+                    continue
+                med = np.median(level)
+                lo, hi = np.percentile(level, [5, 95])
+                lines.append(
+                    f"  {case}: {decided}, episodes "
+                    f"{sum(e['kind'] == 'fault_detected' for e in events)}, cleared "
+                    f"{sum(e['kind'] == 'cleared' for e in events)}, level {med:.3f} "
+                    f"({100 * (med / truth - 1):+.0f} % of {truth:.3f}), 5th/95th "
+                    f"{100 * (lo / med - 1):+.0f}/{100 * (hi / med - 1):+.0f} %")
+    return lines
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(REPO / "tests"))
+    from friction_level_variants import variants
+
+    rigs = variants()
+    for rig_name in sys.argv[1:] or list(rigs):
+        with tempfile.TemporaryDirectory() as tmp:
+            print("\n".join(measure(rig_name, rigs[rig_name], Path(tmp))), flush=True)

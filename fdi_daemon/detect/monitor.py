@@ -354,13 +354,16 @@ class Monitor:
                         ) -> list[dict[str, Any]]:
         """Samples with consecutive seq: good runs batched, bad samples through ``step``."""
         events: list[dict[str, Any]] = []
-        bad = ~np.isfinite(v_in) | ~np.isfinite(accel) | ~np.isfinite(t)
+        good = np.isfinite(v_in)
+        good &= np.isfinite(accel)
+        good &= np.isfinite(t)
         if self.pipeline.needs_position:
-            bad |= ~np.isfinite(position)
+            good &= np.isfinite(position)
         if self.accel_limit_mps2 is not None:
             with np.errstate(invalid="ignore"):
-                bad |= np.abs(accel) >= self.accel_limit_mps2
-        edges = (np.flatnonzero(np.diff(bad.astype(np.int8))) + 1 if bad.any()
+                good &= np.abs(accel) < self.accel_limit_mps2
+        bad = ~good
+        edges = (np.flatnonzero(np.diff(bad.astype(np.int8))) + 1 if not good.all()
                  else np.zeros(0, dtype=np.intp))
         bounds = np.concatenate([[0], edges, [len(t)]])
         for a, b in zip(bounds[:-1], bounds[1:]):

@@ -35,8 +35,8 @@ LEVEL_INTS = 6
 def level_tick(f, ii, lo, theta1, valid):  # pragma: no cover - jit
     """One tick: on a pick tick with a valid window, θ1 enters the ring and the median and
     the 25–75 % spread of the ring are recomputed (`_pick`); on every tick they are
-    reported if the window is valid, else NaN. Inlined into the monitor's tick (a call per
-    tick cost about a tenth of it); the pick stays a call, made four times a second."""
+    reported if the window is valid, else NaN. Inlined into the monitor's tick (as a call it
+    cost about 12 of its 155 ns); the pick stays a call, made four times a second."""
     cap = ii[lo + L_CAPACITY]
     ring = ii[lo + L_FLOATS]
     out = ring + 2 * cap

@@ -12,7 +12,7 @@ a level that cannot be measured is not shown, and the alarm lifecycle and the tr
 no reading), and NaN before the first pick. Its spread, the 25–75 % range of the same
 picks, is the level's uncertainty.
 
-``level_tick`` is compiled and called once per tick from `detect.kernel.monitor_tick`, so
+``level_tick`` is compiled and inlined into `detect.kernel.monitor_tick`, so
 ``Monitor.step`` and ``Monitor.run`` report the same level.
 """
 
@@ -31,11 +31,12 @@ L_PICK, L_CAPACITY, L_WAIT, L_COUNT, L_HEAD, L_FLOATS = range(6)
 LEVEL_INTS = 6
 
 
-@jit
+@jit(inline=True)
 def level_tick(f, ii, lo, theta1, valid):  # pragma: no cover - jit
     """One tick: on a pick tick with a valid window, θ1 enters the ring and the median and
-    the 25–75 % spread of the ring are recomputed (insertion sort of at most the capacity);
-    on every tick they are reported if the window is valid, else NaN."""
+    the 25–75 % spread of the ring are recomputed (`_pick`); on every tick they are
+    reported if the window is valid, else NaN. Inlined into the monitor's tick (as a call it
+    cost about 12 of its 155 ns); the pick stays a call, made four times a second."""
     cap = ii[lo + L_CAPACITY]
     ring = ii[lo + L_FLOATS]
     out = ring + 2 * cap
@@ -61,7 +62,7 @@ def level_restart(f, ii, lo):  # pragma: no cover - jit
     f[held + 1] = math.nan
 
 
-@jit(inline=True)
+@jit
 def _pick(f, ii, lo, ring, cap, held, theta1):  # pragma: no cover - jit
     """θ1 into the ring; its median and 25–75 % range into f[held], f[held + 1]."""
     head = ii[lo + L_HEAD]

@@ -200,10 +200,16 @@ def detector_pre(f, ii, io):  # pragma: no cover - jit
 
 
 @jit
-def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baseline, trusted,
-                  sliding):  # pragma: no cover - jit
-    """The detector's per-tick arithmetic and quiet decisions; returns the tick's code.
-    ``trusted``, ``sliding``: the chain window's flags (`chain_tick`)."""
+def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
+    """The detector's per-tick arithmetic and quiet decisions on this tick's signals (read
+    at the chain's C_OUT, `chain_tick`); returns the tick's code."""
+    out = ii[ii[io + D_CHAIN] + C_OUT]
+    xhat = f[out + O_XHAT]
+    r = f[out + O_R]
+    g1 = f[out + O_G1]
+    g2 = f[out + O_G2]
+    theta1 = f[out + O_T1]
+    theta2 = f[out + O_T2]
     fo = ii[io + D_FLOATS]
     res = ii[io + D_RES]
     cmd = ii[io + D_CMD]
@@ -239,7 +245,7 @@ def detector_tick(f, ii, io, v_in, xhat, r, g1, g2, theta1, theta2, over_baselin
     f[fo + E_OVER] = over
     if ii[io + D_EPISODE]:
         return _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over,
-                        trusted, sliding)
+                        f[out + O_TRUSTED] != 0.0, f[out + O_SLIDING] != 0.0)
     if tick < ii[io + D_HOLD_UNTIL]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
@@ -340,9 +346,7 @@ def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - 
                     b = k
             b = min(max(b, 0), nb - 1)
         over = (theta1 - f[edges + nb + 1 + b]) / f[edges + 2 * nb + 1 + b]
-    code = detector_tick(f, ii, io, v_in, f[out + O_XHAT], f[out + O_R], f[out + O_G1],
-                         f[out + O_G2], theta1, f[out + O_T2], over,
-                         f[out + O_TRUSTED] != 0.0, f[out + O_SLIDING] != 0.0)
+    code = detector_tick(f, ii, io, v_in, over)
     ii[io + D_CODE] = code
     return code
 
@@ -355,12 +359,12 @@ def monitor_run(f, ii, io, v_in, accel, position, xext, start, stat, state, thet
     chain = ii[io + D_CHAIN]
     out = ii[chain + C_OUT]
     fo = ii[io + D_FLOATS]
-    res = ii[io + D_RES]
+    stat_o = ii[ii[io + D_RES] + 22] + 2
     lo = ii[io + D_LEVEL]
     level_out = ii[lo + L_FLOATS] + 2 * ii[lo + L_CAPACITY]
     for k in range(start, v_in.shape[0]):
         code = monitor_tick(f, ii, io, v_in[k], accel[k], position[k], xext[k])
-        stat[k] = f[ii[res + 22] + 2]
+        stat[k] = f[stat_o]
         state[k] = ii[io + D_STATE]
         theta1[k] = f[fo + E_THETA1]
         theta2[k] = f[fo + E_THETA2]

@@ -306,20 +306,26 @@ class Monitor:
         if t.size == 0:
             return np.zeros(0, dtype=np.int64)
         with np.errstate(invalid="ignore"):
-            steps = np.rint(np.diff(t) * self.fs_hz)
-        steps = np.where(np.isfinite(steps), steps, 1).astype(np.int64)
+            steps = np.diff(t)
+            steps *= self.fs_hz
+            np.rint(steps, out=steps)
         if base is None:
             base = 0 if self._last_seq is None else self._last_seq + 1
+        if (steps == 1.0).all():  # a regular time column (the usual case)
+            return np.arange(base, base + t.size, dtype=np.int64)
+        steps = np.where(np.isfinite(steps), steps, 1).astype(np.int64)
         return base + np.concatenate([[0], np.cumsum(steps)])
 
     def _run_chunk(self, t, v_in, accel, position, seq, parts, trace_every
                    ) -> list[dict[str, Any]]:
         events: list[dict[str, Any]] = []
         # split where seq does not advance by exactly one: gaps and dropped samples
-        prev = np.concatenate([[self._last_seq if self._last_seq is not None else seq[0] - 1],
-                               seq[:-1]]) if seq.size else seq
-        step = seq - prev
-        cuts = np.flatnonzero(step != 1)
+        step = np.empty_like(seq)
+        if seq.size:
+            step[0] = seq[0] - self._last_seq if self._last_seq is not None else 1
+            np.subtract(seq[1:], seq[:-1], out=step[1:])
+        irregular = step != 1
+        cuts = np.flatnonzero(irregular) if irregular.any() else np.zeros(0, dtype=np.intp)
         bounds = np.concatenate([[0], cuts, [seq.size]])
         for a, b in zip(bounds[:-1], bounds[1:]):
             if a == b:
@@ -348,13 +354,17 @@ class Monitor:
                         ) -> list[dict[str, Any]]:
         """Samples with consecutive seq: good runs batched, bad samples through ``step``."""
         events: list[dict[str, Any]] = []
-        bad = ~np.isfinite(v_in) | ~np.isfinite(accel) | ~np.isfinite(t)
+        good = np.isfinite(v_in)
+        good &= np.isfinite(accel)
+        good &= np.isfinite(t)
         if self.pipeline.needs_position:
-            bad |= ~np.isfinite(position)
+            good &= np.isfinite(position)
         if self.accel_limit_mps2 is not None:
             with np.errstate(invalid="ignore"):
-                bad |= np.abs(accel) >= self.accel_limit_mps2
-        edges = np.flatnonzero(np.diff(bad.astype(np.int8))) + 1
+                good &= np.abs(accel) < self.accel_limit_mps2
+        bad = ~good
+        edges = (np.flatnonzero(np.diff(bad.astype(np.int8))) + 1 if not good.all()
+                 else np.zeros(0, dtype=np.intp))
         bounds = np.concatenate([[0], edges, [len(t)]])
         for a, b in zip(bounds[:-1], bounds[1:]):
             if bad[a] or self._bad_run:

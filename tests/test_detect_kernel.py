@@ -201,3 +201,21 @@ def test_a_bad_sample_uses_the_prediction_in_the_kernel():
     one = Pipeline(model, N)
     one.step(0.3, None)
     assert one.residual == 0.0 and math.isfinite(one.xhat)
+
+
+def test_a_full_calibration_buffer_is_not_written_past_when_its_code_is_ignored():
+    """`monitor_tick` returns CALIBRATED until `Detector.decide` takes the buffer; a caller
+    that ignores the code must not overwrite the state that follows it in the arena."""
+    from fdi_daemon.detect import kernel as K
+
+    model, rec = msd_system(duration_s=6.0)
+    monitor = Monitor(model)
+    det = monitor.detector
+    f, ii = monitor.arena.f, monitor.arena.i
+    end = det.fo + K.E_CAL + 2 * det.calibration_samples
+    after = f[end:det.epo + 64].copy()
+    codes = [K.monitor_tick(f, ii, det.io, float(u), float(a), math.nan, 0.0)
+             for u, a in zip(rec.v_in, rec.accel)]
+    assert codes.count(K.CALIBRATED) > 100  # ignored again and again
+    assert ii[det.io + K.D_CAL_COUNT] == det.calibration_samples
+    np.testing.assert_array_equal(f[end:det.epo + 64], after)

@@ -258,10 +258,12 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
         return LEVEL_ALARM
     if ii[io + D_STATE] == STATE_CALIBRATING:
         c = ii[io + D_CAL_COUNT]
-        f[fo + E_CAL + 2 * c] = theta1
-        f[fo + E_CAL + 2 * c + 1] = theta2
-        ii[io + D_CAL_COUNT] = c + 1
-        return CALIBRATED if c + 1 >= ii[io + D_CAL_SAMPLES] else QUIET
+        if c < ii[io + D_CAL_SAMPLES]:  # full until `Detector.decide` takes it: not past it
+            f[fo + E_CAL + 2 * c] = theta1
+            f[fo + E_CAL + 2 * c + 1] = theta2
+            c += 1
+            ii[io + D_CAL_COUNT] = c
+        return CALIBRATED if c >= ii[io + D_CAL_SAMPLES] else QUIET
     if ii[io + D_METHOD] == 1:
         alarm = ii[io + D_HAS_BAND] != 0 and (
             theta1 < f[fo + E_LO1] or theta1 > f[fo + E_HI1]

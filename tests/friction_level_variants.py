@@ -60,7 +60,6 @@ def _fdi(*argv):
 
 
 def measure(name: str, rig: dict, root: Path) -> list[str]:
-    from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.io.model_file import load_model
 
     names = ("ident_chirp", "ident_chirp_long", "signature_calibration",
@@ -87,26 +86,40 @@ def measure(name: str, rig: dict, root: Path) -> list[str]:
         lines.append(f"{name} {velocity}: gamma_f {model.fault_filter.gamma_f} "
                      f"interval {sig['cost_profile']['interval_99']} "
                      f"VAF {sig['fault_filter_vaf_percent_full_band']:.1f} %")
-        for case, fault_t, after in CASES:
-            rec = recs[case]
-            events, trace = Monitor(model).run(rec)
-            truth = np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5]) / calibrated
-            det = next((e for e in events if e["kind"] == "fault_detected"), None)
-            iso = next((e for e in events if e["kind"] in ("friction_isolated", "other_fault")),
-                       None)
-            level = trace.friction_level[(trace.t >= fault_t + after)
-                                         & np.isfinite(trace.friction_level)]
-            med = np.median(level)
-            lo, hi = np.percentile(level, [5, 95])
-            episodes = sum(e["kind"] == "fault_detected" for e in events)
-            cleared = sum(e["kind"] == "cleared" for e in events)
-            lines.append(
-                f"  {case}: detected {None if det is None else round(1000 * (det['t'] - fault_t))}"
-                f" ms, {None if iso is None else iso['kind']} "
+        lines.extend(case_lines(model, recs, calibrated))
+    return lines
+
+
+def case_lines(model, recs: dict, calibrated: float) -> list[str]:
+    """One line per case of CASES replayed with ``model``: detection, decision, episodes,
+    the reported level's median against the truth (contact force over ``calibrated``)
+    and its 5th/95th percentiles."""
+    from fdi_daemon.detect.monitor import Monitor
+
+    lines = []
+    for case, fault_t, after in CASES:
+        rec = recs[case]
+        events, trace = Monitor(model).run(rec)
+        truth = np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5]) / calibrated
+        det = next((e for e in events if e["kind"] == "fault_detected"), None)
+        iso = next((e for e in events if e["kind"] in ("friction_isolated", "other_fault")),
+                   None)
+        level = trace.friction_level[(trace.t >= fault_t + after)
+                                     & np.isfinite(trace.friction_level)]
+        head = (f"  {case}: detected "
+                f"{None if det is None else round(1000 * (det['t'] - fault_t))} ms, "
+                f"{None if iso is None else iso['kind']} "
                 f"{None if iso is None else round(iso['t'] - fault_t, 2)} s, episodes "
-                f"{episodes}, cleared {cleared}, level {med:.3f} (truth {truth:.3f}, "
-                f"{100 * (med / truth - 1):+.0f} %), 5th/95th {100 * (lo / med - 1):+.0f}/"
-                f"{100 * (hi / med - 1):+.0f} %")
+                f"{sum(e['kind'] == 'fault_detected' for e in events)}, cleared "
+                f"{sum(e['kind'] == 'cleared' for e in events)}")
+        if level.size == 0:
+            lines.append(f"{head}, no level")
+            continue
+        med = np.median(level)
+        lo, hi = np.percentile(level, [5, 95])
+        lines.append(f"{head}, level {med:.3f} (truth {truth:.3f}, "
+                     f"{100 * (med / truth - 1):+.0f} %), 5th/95th {100 * (lo / med - 1):+.0f}/"
+                     f"{100 * (hi / med - 1):+.0f} %")
     return lines
 
 

@@ -25,10 +25,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def measure(name: str, rig: dict, root: Path) -> list[str]:
-    from friction_level_variants import CASES, _fdi, _record
+    from friction_level_variants import CASES, _fdi, _record, case_lines
     from test_detect_friction_level import LOW_FREQUENCY_CALIBRATION
 
-    from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.io.model_file import load_model
     from fdi_daemon.io.recordings import write_recording
     from hil_sim.scenarios import scenario_from_dict, simulate
@@ -56,25 +55,7 @@ def measure(name: str, rig: dict, root: Path) -> list[str]:
             lines.append(f"{name} {run} {choice}: keeps {model.velocity.get('method', 'highpass')}"
                          f", VAF by velocity {sig['vaf_percent_by_velocity']}, gamma_f "
                          f"{model.fault_filter.gamma_f}")
-            for case, fault_t, after in CASES:
-                rec = recs[case]
-                events, trace = Monitor(model).run(rec)
-                truth = np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5]) / calibrated
-                decided = next((e["kind"] for e in events
-                                if e["kind"] in ("friction_isolated", "other_fault")), None)
-                level = trace.friction_level[(trace.t >= fault_t + after)
-                                             & np.isfinite(trace.friction_level)]
-                if level.size == 0:
-                    lines.append(f"  {case}: {decided}, no level")
-                    continue
-                med = np.median(level)
-                lo, hi = np.percentile(level, [5, 95])
-                lines.append(
-                    f"  {case}: {decided}, episodes "
-                    f"{sum(e['kind'] == 'fault_detected' for e in events)}, cleared "
-                    f"{sum(e['kind'] == 'cleared' for e in events)}, level {med:.3f} "
-                    f"({100 * (med / truth - 1):+.0f} % of {truth:.3f}), 5th/95th "
-                    f"{100 * (lo / med - 1):+.0f}/{100 * (hi / med - 1):+.0f} %")
+            lines.extend(case_lines(model, recs, calibrated))
     return lines
 
 

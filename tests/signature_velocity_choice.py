@@ -1,16 +1,17 @@
-"""Which velocity `fdi signature` keeps for a model without velocity settings, and what the
-levels are then (docs/identification.md, "The velocity when none is given"). Run:
-``python tests/signature_velocity_choice.py [default|v0|v1|velsrc ...]`` (about a minute
-per rig).
+"""Which velocity `fdi signature --velocity-method auto` keeps, and what the levels are then
+(docs/identification.md, "Choosing the velocity by the fit"). Run:
+``python tests/signature_velocity_choice.py [default|v0|v1|velsrc|variant0..variant7 ...]``
+(about two minutes per rig).
 
 Per rig (`tests/friction_level_variants.py`'s): `fdi identify` on its chirps, then
-`fdi signature` without ``--velocity-method`` (auto) and with ``--velocity-method
-highpass`` on two calibration runs: the shipped one (`signature_calibration.yaml`,
+`fdi signature` with ``--velocity-method auto`` and without it (the high-pass estimator
+for a plant-only model) on two calibration runs: the shipped one (`signature_calibration.yaml`,
 ``--fault-window 11:40``) and issue 12's procedure (four equal tones at 2, 3.3, 5 and 8 Hz,
 bearing supply 45 % from 4 s, ``--fault-window 5:20``; `test_detect_friction_level`'s
 ``LOW_FREQUENCY_CALIBRATION``). Each model replays test cases 1 and 2 and the steady fault;
 the level is the reported `friction_level`'s median against the simulator's contact force
-relative to the calibration's.
+relative to the calibration's. The four-tone models also replay the non-friction faults of
+`tests/test_detect_other_rig.py` (64 s each): the decisions they get.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ REPO = Path(__file__).resolve().parents[1]
 def measure(name: str, rig: dict, root: Path) -> list[str]:
     from friction_level_variants import CASES, _fdi, _record, case_lines
     from test_detect_friction_level import LOW_FREQUENCY_CALIBRATION
+    from test_detect_other_rig import NON_FRICTION, _kinds, record
 
     from fdi_daemon.io.model_file import load_model
     from fdi_daemon.io.recordings import write_recording
@@ -35,6 +37,7 @@ def measure(name: str, rig: dict, root: Path) -> list[str]:
     recs = {n: _record(rig, n, root / f"{n}.npz") for n in
             ("ident_chirp", "ident_chirp_long", "signature_calibration")
             + tuple(c[0] for c in CASES)}
+    non_friction = {fault: record(rig, fault, duration_s=64.0) for fault in NON_FRICTION}
     low = simulate(scenario_from_dict({**LOW_FREQUENCY_CALIBRATION, "rig": rig}))
     write_recording(root / "low_frequency.npz", low)
     _fdi("identify", root / "ident_chirp.npz", "-o", root / "plant.yaml",
@@ -46,7 +49,7 @@ def measure(name: str, rig: dict, root: Path) -> list[str]:
         source = root / ("signature_calibration.npz" if run == "shipped" else
                          "low_frequency.npz")
         calibrated = np.mean(cal.columns["contact_force"][cal.t >= fault_from])
-        for choice, extra in (("auto", ()), ("highpass", ("--velocity-method", "highpass"))):
+        for choice, extra in (("auto", ("--velocity-method", "auto")), ("default", ())):
             out = root / f"{run}-{choice}.yaml".replace(" ", "_")
             _fdi("signature", source, "--model", root / "plant.yaml", "--fault-window", window,
                  *extra, "-o", out)
@@ -56,14 +59,18 @@ def measure(name: str, rig: dict, root: Path) -> list[str]:
                          f", VAF by velocity {sig['vaf_percent_by_velocity']}, gamma_f "
                          f"{model.fault_filter.gamma_f}")
             lines.extend(case_lines(model, recs, calibrated))
+            if run == "four tones":
+                lines.extend(f"  {fault}: {[kind for kind, _ in _kinds(model, faulty)]}"
+                             for fault, faulty in non_friction.items())
     return lines
 
 
 if __name__ == "__main__":
     sys.path.insert(0, str(REPO / "tests"))
     from friction_level_variants import variants
+    from test_detect_other_rig import rig_variant
 
-    rigs = variants()
+    rigs = {**variants(), **{f"variant{i}": rig_variant(i) for i in range(8)}}
     for rig_name in sys.argv[1:] or list(rigs):
         with tempfile.TemporaryDirectory() as tmp:
             print("\n".join(measure(rig_name, rigs[rig_name], Path(tmp))), flush=True)

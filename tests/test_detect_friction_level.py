@@ -170,31 +170,53 @@ LOW_FREQUENCY_CALIBRATION = {
     "events": [{"t_s": 4.0, "bearing_supply": 0.45}]}
 
 
-def test_a_plant_only_model_gets_the_velocity_whose_signature_fits(tmp_path):
-    """`fdi signature` on a model from `fdi identify` (no velocity settings) tries the
-    high-pass estimator; where its signature explains less than half of the fault residual
-    (here its lead of 35-60° at 2-3.3 Hz), the model-based observer, kept because it
-    explains more. The steady fault's level is then nearer the simulator's truth than with
-    the high-pass model (measured: +10 % against +38 %)."""
+@pytest.fixture(scope="module")
+def low_frequency_models(tmp_path_factory):
+    """`fdi signature` on the four-tone run with a plant-only model: by default and with
+    ``--velocity-method auto``; (calibration recording, {"default": model, "auto": model})."""
     from hil_sim.scenarios import scenario_from_dict, simulate
 
+    root = tmp_path_factory.mktemp("low_frequency")
     cal = simulate(scenario_from_dict(LOW_FREQUENCY_CALIBRATION))
-    rec = write_recording(tmp_path / "cal.npz", cal)
-    save_model(tmp_path / "plant.yaml", model_copy(velocity=None, fault_filter=None))
+    rec = write_recording(root / "cal.npz", cal)
+    save_model(root / "plant.yaml", model_copy(velocity=None, fault_filter=None))
     models = {}
-    for name, extra in (("auto", []), ("highpass", ["--velocity-method", "highpass"])):
-        out = tmp_path / f"{name}.yaml"
-        assert main(["signature", str(rec), "--model", str(tmp_path / "plant.yaml"),
+    for name, extra in (("auto", ["--velocity-method", "auto"]), ("default", [])):
+        out = root / f"{name}.yaml"
+        assert main(["signature", str(rec), "--model", str(root / "plant.yaml"),
                      "--fault-window", "5:20", *extra, "-o", str(out)]) == 0
         models[name] = load_model(out)
+    return cal, models
+
+
+def test_auto_keeps_the_velocity_whose_signature_fits(low_frequency_models):
+    """``--velocity-method auto`` tries the high-pass estimator; where its signature explains
+    less than half of the fault residual (here its lead of 35-60° at 2-3.3 Hz), the
+    model-based observer, kept because it explains more. The steady fault's level is then
+    nearer the simulator's truth than with the high-pass model the default keeps (measured:
+    +10 % against +38 %)."""
+    cal, models = low_frequency_models
     sig = models["auto"].provenance["signature"]
     assert sig["velocity_method"] == "auto"
     explained = sig["vaf_percent_by_velocity"]
     assert explained["highpass"] < 50.0 < explained["model_observer"]
     assert models["auto"].velocity["method"] == "model_observer"
+    assert models["default"].velocity.get("method", "highpass") == "highpass"
     steady = _steady()
     truth = (np.mean(steady.columns["contact_force"][steady.t >= 20.5])
              / np.mean(cal.columns["contact_force"][cal.t >= 5.0]))
     error = {name: abs(np.median(_level(model, steady, 30.0)[1]) / truth - 1)
              for name, model in models.items()}
-    assert error["auto"] < error["highpass"]
+    assert error["auto"] < error["default"]
+
+
+@pytest.mark.xfail(strict=True, reason="measured on the default rig and rig variants 2 and 3 "
+                   "(their high-pass models: other_fault): the harmonics check calls the "
+                   "clipped 8 Hz peaks friction. Likely: the acceleration peaks where the "
+                   "velocity reverses, and the observer's sign(v̂) switches at the true "
+                   "reversals. Why auto is not the default")
+def test_with_the_auto_observer_accelerometer_saturation_is_not_friction(low_frequency_models):
+    _, models = low_frequency_models
+    events, _ = Monitor(models["auto"]).run(scenario_recording("fault_accel_saturation",
+                                                              duration_s=64.0))
+    assert "friction_isolated" not in [e["kind"] for e in events]

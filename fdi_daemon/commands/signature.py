@@ -41,8 +41,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "or position and acceleration fused (needs a position column; "
                              "docs/detector.md); auto: highpass, or model_observer where the "
                              "high-pass signature explains less than half of the fault "
-                             "residual and the observer's more. Default: the model's velocity "
-                             "settings, else auto. The monitor uses the same")
+                             "residual and the observer's more (docs/identification.md). "
+                             "Default: the model's velocity settings, else highpass. The "
+                             "monitor uses the same")
     parser.add_argument("--flat-fraction", type=float, default=0.2,
                         help="flag the profile flat when the 99 %% interval of γ covers more "
                              "than this fraction of the grid (default %(default)s)")
@@ -125,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
 
     method = args.velocity_method
     if method is None:
-        method = model.velocity.get("method", "highpass") if model.velocity else "auto"
+        method = model.velocity.get("method", "highpass") if model.velocity else "highpass"
     candidates = AUTO_METHODS if method == "auto" else (method,)
     prefilter = _prefilter(args, model.fs)
     radius = args.max_pole_radius
@@ -346,7 +347,7 @@ def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf,
         print(f"fdi signature: warning: G_e x_f explains only {full_band_vaf:.1f} % of the fault "
               f"residual's variance (< {LOW_VAF_PERCENT:g} %): the friction level will not be "
               "physical. Use " + ("" if velocity.get("method") == "model_observer" else
-                                  "--velocity-method model_observer and ")
+                                  "--velocity-method auto or model_observer and ")
               + "a calibration run with the rig's operating frequencies "
               "(docs/identification.md)", file=sys.stderr)
     if result.flat:

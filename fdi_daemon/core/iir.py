@@ -19,7 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.signal import lfilter
 
-__all__ = ["IIRFilter"]
+__all__ = ["IIRFilter", "frequency_response"]
 
 
 class IIRFilter:
@@ -113,3 +113,10 @@ class IIRFilter:
 
     def __repr__(self) -> str:
         return f"IIRFilter(b={self._b}, a={self._a})"
+
+
+def frequency_response(b, a, freq_hz, fs_hz: float):
+    """B(e^{jω})/A(e^{jω}) at ``freq_hz`` (Hz; a number or an array) for coefficients in
+    powers of z⁻¹."""
+    zinv = np.exp(-2j * np.pi * np.asarray(freq_hz) / fs_hz)
+    return np.polyval(np.asarray(b)[::-1], zinv) / np.polyval(np.asarray(a)[::-1], zinv)

@@ -34,9 +34,9 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter, freqz
+from scipy.signal import butter
 
-from fdi_daemon.core.iir import IIRFilter
+from fdi_daemon.core.iir import IIRFilter, frequency_response
 
 __all__ = ["VelocityEstimator", "DEFAULT_SETTINGS", "INTEGRATORS"]
 
@@ -146,7 +146,7 @@ class VelocityEstimator:
     def response(self, f_hz):
         """V(e^jω)·jω at ``f_hz`` (Hz; a number or an array): v̂ over the true velocity, 1 for
         an exact integral."""
-        return frequency_response(self.b, self.a, self.fs_hz, f_hz) * (2j * np.pi
+        return frequency_response(self.b, self.a, f_hz, self.fs_hz) * (2j * np.pi
                                                                       * np.asarray(f_hz))
 
     def phase_lead_deg(self, f_hz: float) -> float:
@@ -156,13 +156,6 @@ class VelocityEstimator:
     def gain_error(self, f_hz: float) -> float:
         """|V(e^jω)| · 2πf: 1 where the estimator integrates exactly."""
         return abs(self.response(f_hz))
-
-
-def frequency_response(b, a, fs_hz: float, f_hz):
-    """B/A at ``f_hz`` (Hz): a complex number for a number, an array for an array."""
-    f = np.asarray(f_hz, dtype=float)
-    h = freqz(b, a, worN=np.atleast_1d(f), fs=fs_hz)[1]
-    return complex(h[0]) if f.ndim == 0 else h
 
 
 def _design(fs_hz: float, highpass_hz: float, order: int, integrator: str
@@ -184,4 +177,4 @@ def _design(fs_hz: float, highpass_hz: float, order: int, integrator: str
 
 def _phase_lead_deg(b, a, fs_hz: float, f_hz: float) -> float:
     """Phase of B/A minus that of an ideal integrator 1/(jω), in degrees."""
-    return float(np.degrees(np.angle(frequency_response(b, a, fs_hz, float(f_hz)) * 1j)))
+    return float(np.degrees(np.angle(frequency_response(b, a, float(f_hz), fs_hz) * 1j)))

@@ -31,8 +31,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import bilinear
 
-from fdi_daemon.core.iir import IIRFilter
-from fdi_daemon.core.velocity import frequency_response
+from fdi_daemon.core.iir import IIRFilter, frequency_response
 
 __all__ = ["PositionVelocityObserver", "POSITION_DEFAULTS"]
 
@@ -119,7 +118,7 @@ class PositionVelocityObserver:
         """v̂/(jω x) at ``f_hz`` (Hz; a number or an array) for a consistent pair
         ẍ = (jω)² x: 1 up to the bilinear transform's warping (the weights add up to one
         exactly for its own derivative)."""
-        hx = frequency_response(self.position_path.b, self.position_path.a, self.fs_hz, f_hz)
-        ha = frequency_response(self.accel_path.b, self.accel_path.a, self.fs_hz, f_hz)
+        hx = frequency_response(self.position_path.b, self.position_path.a, f_hz, self.fs_hz)
+        ha = frequency_response(self.accel_path.b, self.accel_path.a, f_hz, self.fs_hz)
         jw = 2j * np.pi * np.asarray(f_hz)
         return (hx + ha * jw * jw) / jw

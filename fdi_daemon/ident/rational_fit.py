@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from fdi_daemon.core.iir import frequency_response
 from fdi_daemon.ident import stable_poly
 
 
@@ -45,13 +46,6 @@ class RationalFit:
     @property
     def zeros(self) -> np.ndarray:
         return np.roots(np.trim_zeros(self.b, "f"))
-
-
-def frequency_response(b: np.ndarray, a: np.ndarray, freq_hz: np.ndarray,
-                       fs_hz: float) -> np.ndarray:
-    """B(e^{jω})/A(e^{jω}) for coefficients in powers of z⁻¹."""
-    zinv = np.exp(-2j * np.pi * np.asarray(freq_hz) / fs_hz)
-    return np.polyval(np.asarray(b)[::-1], zinv) / np.polyval(np.asarray(a)[::-1], zinv)
 
 
 def _powers(zinv: np.ndarray, order: int) -> np.ndarray:

@@ -162,7 +162,6 @@ def _paced(monitor, rec, on_tick=None):
 
     import numpy as np
 
-    from fdi_daemon.detect.detector import STATES
     from fdi_daemon.detect.monitor import TRACE_NAMES, MonitorTrace
     from fdi_daemon.io.sample import Sample
 
@@ -190,11 +189,7 @@ def _paced(monitor, rec, on_tick=None):
             events.extend(new)
             if last_seq is None or seq[k] > last_seq:  # not dropped: a row, as Monitor.run
                 last_seq = int(seq[k])
-                pl, det = monitor.pipeline, monitor.detector
-                values = (float(t[k]), pl.residual + pl.xhat, pl.residual, det.theta1,
-                          det.theta2, det.statistic, STATES.index(det.state), pl.v_rms,
-                          det.level.level)
-                for name, value in zip(TRACE_NAMES, values):
+                for name, value in zip(TRACE_NAMES, monitor.trace_row(float(t[k]))):
                     out[name][rows] = value
                 rows += 1
             if on_tick is not None:

@@ -410,10 +410,8 @@ class Monitor:
         hist = np.arange((-self._samples) % every, n, every)[-HISTORY_POINTS:]
         self._history.extend(zip(t[hist].tolist(), theta1[hist].tolist(), theta2[hist].tolist()))
         keep = np.arange((-self._samples) % trace_every, n, trace_every)
-        for name, values in (("t", t), ("accel", accel), ("residual", residual),
-                             ("theta1", theta1), ("theta2", theta2),
-                             ("statistic", stat), ("state", state), ("v_rms", v_rms),
-                             ("friction_level", level)):
+        for name, values in zip(TRACE_NAMES, (t, accel, residual, theta1, theta2, stat, state,
+                                              v_rms, level)):
             parts[name].append(np.asarray(values)[keep])
         self._samples += n
         self._v_in = float(v_in[-1])
@@ -427,14 +425,14 @@ class Monitor:
     def _trace_one(self, parts, trace_every) -> None:
         if (self._samples - 1) % trace_every:
             return
-        pl = self.pipeline
-        values = {"t": self._last_t, "accel": pl.residual + pl.xhat, "residual": pl.residual,
-                  "theta1": self.detector.theta1, "theta2": self.detector.theta2,
-                  "statistic": self.detector.statistic,
-                  "state": STATES.index(self.detector.state), "v_rms": pl.v_rms,
-                  "friction_level": self.detector.level.level}
-        for name, value in values.items():
+        for name, value in zip(TRACE_NAMES, self.trace_row(self._last_t)):
             parts[name].append(np.array([value], dtype=np.int8 if name == "state" else float))
+
+    def trace_row(self, t: float) -> tuple:
+        """The newest tick's values in the order of TRACE_NAMES, its time given as ``t``."""
+        pl, det = self.pipeline, self.detector
+        return (t, pl.residual + pl.xhat, pl.residual, det.theta1, det.theta2, det.statistic,
+                STATES.index(det.state), pl.v_rms, det.level.level)
 
     # ------------------------------------------------------------------ status
     def snapshot(self) -> dict[str, Any]:

@@ -124,9 +124,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--fault-window {args.fault_window} holds {int(inside.sum())} "
                         f"samples; at least {needed} are needed")
 
-    method = args.velocity_method
-    if method is None:
-        method = model.velocity.get("method", "highpass") if model.velocity else "highpass"
+    method = args.velocity_method or (model.velocity or {}).get("method", "highpass")
     candidates = AUTO_METHODS if method == "auto" else (method,)
     prefilter = _prefilter(args, model.fs)
     radius = args.max_pole_radius

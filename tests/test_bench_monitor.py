@@ -18,6 +18,9 @@ def test_bench_monitor_reports_both_implementations():
     assert out["step_speedup_p50"] == out["baseline_step_us"]["p50"] / out["step_us"]["p50"]
     assert out["step_cpu_over_reference"] == (out["step_cpu_us_p50"]
                                               / out["reference_step_cpu_us_p50"])
+    shares = out["batch_cpu_share_by_pair"]
+    assert len(shares) == 5 and all(x > 0 for x in shares)
+    assert abs(out["batch_cpu_share_of_reference"] - sorted(shares)[2]) <= 1e-4
     incident = out["incident_replay"]
     assert incident["quiet"]["samples"] == incident["incident"]["samples"] == 60 * 256
     assert incident["quiet"]["alarm_episodes"] == 0

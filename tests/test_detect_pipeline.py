@@ -201,3 +201,57 @@ def test_a_missing_position_is_a_bad_sample_in_step_and_batch():
                                        float(cols["position"][k]))))
     stepped.extend(one.finish())
     assert [(e["kind"], e["t"]) for e in stepped] == [(e["kind"], e["t"]) for e in events]
+
+
+def _flat_tops(accel, run):
+    """(first, last) sample of every run of ``run`` or more equal, non-zero samples."""
+    edges = np.flatnonzero(np.diff(accel) != 0) + 1
+    starts = np.concatenate([[0], edges])
+    ends = np.concatenate([edges, [accel.size]]) - 1
+    keep = (ends - starts + 1 >= run) & (accel[starts] != 0)
+    return list(zip(starts[keep], ends[keep]))
+
+
+def _clipped_reference(accel, run, window):
+    """Independent of the kernel: a flat top at the value of the previous one of its sign,
+    which ended at most ``window`` samples before it reached ``run`` samples, clips from that
+    sample to its last; a sample is clipped while the last clipped sample is less than
+    ``window`` old."""
+    last_clip = np.full(accel.size, -np.inf)
+    previous = {}
+    for first, last in _flat_tops(accel, run):
+        found = first + run - 1
+        before = previous.get(accel[first] > 0)
+        if before is not None and accel[first] == accel[before] and found - before <= window:
+            last_clip[found:last + 1] = np.arange(found, last + 1)
+        previous[accel[first] > 0] = last
+    return np.arange(accel.size) - np.maximum.accumulate(last_clip) < window
+
+
+def test_a_recurring_flat_top_is_the_accelerometers_rail_not_a_quantised_peak(system):
+    """A slow ADC-quantised sine with noise has flat tops at scattered values, and at one
+    value only a cycle (longer than the window) apart: no clipping. A faster one clipped at
+    ±c sits at two rails: clipping from the second flat top of a sign on. Per tick as the
+    reference above."""
+    from fdi_daemon.detect.kernel import CLIP_RUN
+
+    model, _ = system
+    rng = np.random.default_rng(11)
+    t = np.arange(20 * 256) / 256.0
+    lsb = 2 ** -8
+    wave = 3.0 * np.sin(2 * np.pi * 0.7 * t) + 0.0005 * rng.standard_normal(t.size)
+    quantised = np.round(wave / lsb) * lsb
+    assert len(_flat_tops(quantised, CLIP_RUN)) >= 5  # the test has something to refuse
+    fast = 3.0 * np.sin(2 * np.pi * 3.0 * t) + 0.0005 * rng.standard_normal(t.size)
+    clipped = np.round(np.clip(fast, -2.5, 2.5) / lsb) * lsb
+    clipped[: 5 * 256] = quantised[: 5 * 256]  # clipping from 5 s on
+    for accel, expect_any in ((quantised, False), (clipped, True)):
+        pl = Pipeline(model, N)
+        flags = []
+        for v, a in zip(np.sin(t), accel):
+            pl.step(v, a)
+            flags.append(pl.clipped)
+        reference = _clipped_reference(accel, CLIP_RUN, N)
+        np.testing.assert_array_equal(flags, reference)
+        assert reference.any() == expect_any
+    assert not reference[: 5 * 256].any() and reference[6 * 256:].mean() > 0.9

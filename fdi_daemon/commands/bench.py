@@ -93,7 +93,8 @@ def _reference_table(m: dict):
                   f"{m['reference_step_cpu_us_p50']:.1f}",
                   f"{m['step_cpu_over_reference']:.1f}x",
                   f"<= {tg['step_cpu_over_reference_max']:g}x")
-    table.add_row("batch (samples/CPU-s)", f"{m['batch_samples_per_cpu_s']:,.0f}",
+    table.add_row(f"batch (samples/CPU-s; median of {len(m['batch_cpu_share_by_pair'])} "
+                  "pairs)", f"{m['batch_samples_per_cpu_s']:,.0f}",
                   f"{m['reference_samples_per_cpu_s']:,.0f}",
                   f"{m['batch_cpu_share_of_reference']:.2f}",
                   f">= {tg['batch_cpu_share_of_reference_min']:g}")

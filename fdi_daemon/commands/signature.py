@@ -42,7 +42,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "docs/detector.md); auto: highpass, or model_observer where the "
                              "high-pass signature explains less than half of the fault "
                              "residual and the observer's more (docs/identification.md). "
-                             "Default: the model's velocity settings, else highpass. The "
+                             "Default: the model's velocity settings, else auto. The "
                              "monitor uses the same")
     parser.add_argument("--flat-fraction", type=float, default=0.2,
                         help="flag the profile flat when the 99 %% interval of γ covers more "
@@ -124,7 +124,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--fault-window {args.fault_window} holds {int(inside.sum())} "
                         f"samples; at least {needed} are needed")
 
-    method = args.velocity_method or (model.velocity or {}).get("method", "highpass")
+    # a plant-only model (`fdi identify`'s) has no velocity yet: auto; a model with velocity
+    # settings keeps them (without a method: the high-pass estimator, as every model before)
+    method = args.velocity_method or (model.velocity.get("method", "highpass")
+                                      if model.velocity else "auto")
     candidates = AUTO_METHODS if method == "auto" else (method,)
     prefilter = _prefilter(args, model.fs)
     radius = args.max_pole_radius

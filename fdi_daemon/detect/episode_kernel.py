@@ -172,14 +172,15 @@ def _friction_kind(f, ii, eo, fmin):  # pragma: no cover - jit
 
 @jit
 def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, trusted,
-                 sliding, row, band, out):  # pragma: no cover - jit
+                 sliding, clipped, row, band, out):  # pragma: no cover - jit
     """One episode tick; θ as reported in out[0], out[1]; returns the transition.
 
     ``state``: 3 fault_detected, 4 friction_isolated, 5 other_fault (`detector.STATES`);
     ``row``: the residual fit's packed row of this tick; ``band``: the offset of the
     calibrated band (lo1, hi1, lo2, hi2), −1 without one; θ: the pipeline's window θ (NaN
-    at rest); ``trusted``, ``sliding``: the window's velocity lies where v̂ is right, the
-    load moves freely (`kernel.chain_tick`)."""
+    at rest); ``trusted``, ``sliding``, ``clipped``: the window's velocity lies where v̂ is
+    right, the load moves freely, the accelerometer sits at its rail (`kernel.chain_tick`;
+    a clipped window is no friction evidence)."""
     n = ii[eo + P_N]
     m = ii[eo + P_M]
     iso = ii[eo + P_ISO]
@@ -262,6 +263,8 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
                 kind = _friction_kind(f, ii, eo, fmin)
     if ii[eo + P_LEVEL]:
         kind = KIND_LEVEL if over > 1.0 else KIND_NONE
+    if clipped:
+        kind = KIND_NONE
     if state == 3 or state == 5:
         ii[eo + P_TRACK] = ii[eo + P_TRACK] + 1 if kind != KIND_NONE else 0
         if ii[eo + P_TRACK] >= ii[eo + P_TRACK_SAMPLES] and math.isnan(f[sc + S_EVIDENCE]):

@@ -12,7 +12,11 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
     trusted: Σ (LP v̂)² <= share · Σ v̂²   at most that share of the window's velocity energy
              below the frequency where v̂'s phase error exceeds its bound (`Pipeline`)
     sliding: Σ ẍ² >= ½ Σ x̂̈²               the load moves freely (friction holds it little)
-    level valid: moving and trusted: θ1 of the window measures friction
+    clipped: the window holds a flat top of ẍ (``CLIP_RUN`` equal samples) at the value of
+             the previous flat top of its sign, less than a window before: the
+             accelerometer sits at its rail, and its residual pulses are no evidence of
+             friction (clipping slower than one cycle per window is not seen)
+    level valid: moving, trusted and not clipped: θ1 of the window measures friction
 
 ``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
 of v_in (`core.kernels.itest_tick`, phase by phase; their reference fits are pushed and
@@ -54,10 +58,15 @@ C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = range(C_ORDER + CHAIN_FILT
 CHAIN_INTS = C_OUT + 1
 # --- chain floats at C_OUT
 (O_XHAT, O_R, O_V, O_G1, O_G2, O_T1, O_T2, O_WT1, O_WT2, O_WOK, O_WSSE, O_VRMS, O_MOVING,
- O_TRUSTED, O_SLIDING, O_LEVEL_VALID, O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11,
- O_MIN_S22, O_TRUST_SHARE) = range(22)
-CHAIN_OUT = 22
+ O_TRUSTED, O_SLIDING, O_LEVEL_VALID, O_CLIPPED, O_ACCEL_LAST, O_RUN, O_RAIL, O_RAIL_AGE,
+ O_CLIP_AGE, O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11, O_MIN_S22, O_TRUST_SHARE) = (
+    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 21, 23, 24, 25, 26,
+    27, 28, 29)
+CHAIN_OUT = 30  # O_RAIL, O_RAIL_AGE: a (positive, negative) pair each
 SUMS_WIDTH = 10  # S11, S12, S22, S1y, S2y, Syy, Σv̂², Σ(LP v̂)², Σẍ², Σx̂̈²
+#: a run of this many equal, non-zero ẍ samples is a flat top; two flat tops at one value
+#: within a window are the accelerometer's rail (clipping)
+CLIP_RUN = 3
 #: the load moves freely when Σẍ² over the window is at least this share of Σx̂̈² (a load that
 #: friction holds part of the time accelerates less than the model says)
 SLIDING_SHARE = 0.5
@@ -88,6 +97,7 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
         xhat = xext
     else:
         xhat = iir_step(f, bo, ao, zo, ii[od], v_in)
+    clipped = _clip_tick(f, out, accel, ii[io + C_N])
     if accel != accel:
         accel = xhat
     r = accel - xhat
@@ -152,7 +162,8 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     sliding = f[sl + 9] > 0.0 and f[sl + 8] >= SLIDING_SHARE * f[sl + 9]
     f[out + O_TRUSTED] = 1.0 if trusted else 0.0
     f[out + O_SLIDING] = 1.0 if sliding else 0.0
-    f[out + O_LEVEL_VALID] = 1.0 if moving and trusted else 0.0
+    f[out + O_CLIPPED] = 1.0 if clipped else 0.0
+    f[out + O_LEVEL_VALID] = 1.0 if moving and trusted and not clipped else 0.0
     f[out + O_VRMS] = math.sqrt((0.0 if v2 < 0.0 else v2) / n)
     f[out + O_T1] = t1 if moving else math.nan
     f[out + O_T2] = t2 if moving else math.nan
@@ -161,6 +172,31 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     f[out + O_V] = v
     f[out + O_G1] = g1
     f[out + O_G2] = g2
+
+
+@jit(inline=True)
+def _clip_tick(f, out, accel, n):  # pragma: no cover - jit
+    """Rail detection on the raw ẍ (module docstring, ``clipped``): a flat top at the value
+    of the previous one of its sign, which ended at most ``n`` ticks before, is clipping to
+    its last sample. True while the last clipped sample is less than ``n`` ticks old."""
+    run = f[out + O_RUN] + 1.0 if accel == f[out + O_ACCEL_LAST] and accel != 0.0 else 1.0
+    f[out + O_RUN] = run
+    f[out + O_ACCEL_LAST] = accel
+    f[out + O_RAIL_AGE] += 1.0
+    f[out + O_RAIL_AGE + 1] += 1.0
+    clip_age = f[out + O_CLIP_AGE] + 1.0
+    if run >= CLIP_RUN:
+        side = 0 if accel > 0.0 else 1
+        if run == CLIP_RUN:
+            at_rail = accel == f[out + O_RAIL + side] and f[out + O_RAIL_AGE + side] <= n
+        else:
+            at_rail = clip_age == 1.0  # this flat top was found at the rail
+        if at_rail:
+            clip_age = 0.0
+        f[out + O_RAIL + side] = accel
+        f[out + O_RAIL_AGE + side] = 0.0
+    f[out + O_CLIP_AGE] = clip_age
+    return clip_age < n
 
 
 @jit
@@ -245,7 +281,8 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
     f[fo + E_OVER] = over
     if ii[io + D_EPISODE]:
         return _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over,
-                        f[out + O_TRUSTED] != 0.0, f[out + O_SLIDING] != 0.0)
+                        f[out + O_TRUSTED] != 0.0, f[out + O_SLIDING] != 0.0,
+                        f[out + O_CLIPPED] != 0.0)
     if tick < ii[io + D_HOLD_UNTIL]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
@@ -292,13 +329,13 @@ def _start(f, ii, io, res, level):  # pragma: no cover - jit
 
 @jit
 def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over, trusted,
-             sliding):  # pragma: no cover - jit
+             sliding, clipped):  # pragma: no cover - jit
     """A tick of the running episode, and its transition applied to the detector."""
     ep = ii[io + D_EPI]
     band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
     packed_row_into(f, ii[res + 15], 4, ii[res + 16])  # this tick's row of the residual fit
     change = E.episode_tick(f, ii, ep, tick, ii[io + D_STATE], r, g1, g2, xhat, theta1,
-                            theta2, over, trusted, sliding, ii[res + 16], band,
+                            theta2, over, trusted, sliding, clipped, ii[res + 16], band,
                             f[fo + E_THETA1:fo + E_THETA2 + 1])
     if change == E.NO_CHANGE:
         return QUIET

@@ -217,6 +217,11 @@ class Pipeline:
         """The window's velocity lies mostly where v̂ is right (module docstring)."""
         return bool(self._out(K.O_TRUSTED))
 
+    @property
+    def clipped(self) -> bool:
+        """The window holds ẍ at the accelerometer's rail (`kernel.chain_tick`)."""
+        return bool(self._out(K.O_CLIPPED))
+
     def reset(self) -> None:
         """Zero every state (after a data gap)."""
         f, ii, io = self.arena.f, self.arena.i, self.io
@@ -225,6 +230,8 @@ class Pipeline:
         out = self._out_o
         f[out + K.O_T1] = f[out + K.O_T2] = f[out + K.O_WT1] = f[out + K.O_WT2] = math.nan
         f[out + K.O_WSSE] = f[out + K.O_LAST_POS] = math.nan
+        f[out + K.O_ACCEL_LAST] = f[out + K.O_RAIL] = f[out + K.O_RAIL + 1] = math.nan
+        f[out + K.O_RAIL_AGE] = f[out + K.O_RAIL_AGE + 1] = f[out + K.O_CLIP_AGE] = math.inf
         if self.external_plant:
             self.plant.reset()
 

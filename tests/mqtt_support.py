@@ -89,6 +89,10 @@ class Broker:
         return "\n--- mosquitto log\n" + "\n".join(text.splitlines()[-30:])
 
 
+#: how long a `Subscriber` waits for the broker to confirm its subscription
+SUBSCRIBE_TIMEOUT_S = 30.0
+
+
 class Subscriber:
     """A paho client that records every message of ``topic`` (persistent session, QoS 1)."""
 
@@ -105,11 +109,19 @@ class Subscriber:
             self.client.username_pw_set(connect["username"], connect.get("password"))
         if "ca_file" in connect:
             self.client.tls_set(ca_certs=connect["ca_file"])
+        subscribed = threading.Event()
         self.client.on_connect = lambda c, u, f, rc, p: c.subscribe(topic, qos=1)
+        self.client.on_subscribe = lambda c, u, mid, codes, p: subscribed.set()
         self.client.on_message = self._on_message
         self.client.reconnect_delay_set(0.2, 1.0)
         self.client.connect_async("127.0.0.1", port, 30)
         self.client.loop_start()
+        # listening once made: a message published before the broker's SUBACK would not
+        # reach this session (it had no subscription yet)
+        if not subscribed.wait(SUBSCRIBE_TIMEOUT_S):
+            self.close()
+            raise AssertionError(f"the subscriber to {topic} got no SUBACK within "
+                                 f"{SUBSCRIBE_TIMEOUT_S:g} s")
 
     def _on_message(self, client, userdata, msg) -> None:
         with self._lock:

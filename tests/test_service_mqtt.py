@@ -254,7 +254,6 @@ def test_an_alarm_sent_before_a_crash_is_sent_again_flagged_dup(tmp_path):
     box.mark_sent(1)  # the daemon died before the broker's acknowledgement was recorded
     box.close()
     sub = Subscriber(broker.port, "fdi/lab/rig7/event")
-    time.sleep(0.5)
     sink = MqttSink(sink_settings(broker.port), outbox)
     try:
         sub.wait(lambda s: len(alarm_ids(s)) >= 2, 30, "the alarms", broker.tail)

@@ -220,3 +220,7 @@ def test_with_the_observer_a_clipping_accelerometer_is_not_friction(low_frequenc
                                                                  duration_s=64.0))
     assert [e["kind"] for e in events if e["kind"] != "calibrated"] == ["fault_detected",
                                                                       "other_fault"]
+    assert events[-1]["accel_clipping"] is True  # the event says why
+    events, _ = Monitor(models["default"]).run(scenario_recording("fault_valve_gain",
+                                                                 duration_s=64.0))
+    assert events[-1]["kind"] == "other_fault" and "accel_clipping" not in events[-1]

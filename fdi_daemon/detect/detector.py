@@ -231,7 +231,11 @@ class Detector:
         ii, sc = self.arena.i, int(self.arena.i[self.epi + E.P_O_SCAL])
         change = float(self.arena.f[sc + E.S_LEVEL_CHANGE])
         if code == K.OTHER_FAULT:
-            return [self._event(t, "other_fault", theta1, theta2, coulomb_change=change)]
+            # a clipping accelerometer is no friction evidence (`kernel.chain_tick`): say so
+            out = int(ii[ii[self.io + K.D_CHAIN] + K.C_OUT])
+            clipping = {"accel_clipping": True} if self.arena.f[out + K.O_CLIPPED] else {}
+            return [self._event(t, "other_fault", theta1, theta2, coulomb_change=change,
+                                **clipping)]
         kind = _KINDS[int(ii[self.epi + E.P_KIND])]
         extra = {"friction_evidence": self.level_path if kind == "level" else kind} if kind \
             else {}

@@ -6,7 +6,8 @@ non-finite numbers are stored as None so that each line is strict JSON. Kinds:
 - ``calibrated``: the fault-free calibration period is over (band and baseline set);
 - ``fault_detected``: the sequential test (or the paper's band) raised an alarm;
 - ``friction_isolated``: (θ1, θ2) track the friction signature (1, γ_f);
-- ``other_fault``: an alarm whose estimates do not track the signature;
+- ``other_fault``: an alarm whose estimates do not track the signature (with
+  ``accel_clipping: true`` when the accelerometer sat at its rail then);
 - ``cleared``: the estimates and the test statistic are back to normal;
 - ``data_gap``: samples missing (``missing_samples``); the estimator restarts;
 - ``link_lost`` / ``link_restored``: emitted by the service's link layer, not the monitor;

@@ -114,8 +114,9 @@ def main() -> None:
             inside = (trace.t >= a) & (trace.t < b) & np.isfinite(trace.friction_level)
             cells.append(f"{np.median(trace.friction_level[inside]):.2f}" if inside.any()
                          else "  - ")
-        print(f"{a:3.0f}-{b:3.0f} s  {rec_stuck[seg].mean():5.1%}  {1e3 * np.std(truth[seg]):3.0f} "
-              f"mm/s  {np.sum(freq * power) / np.sum(power):4.1f} Hz | " + " | ".join(cells))
+        print(f"{a:3.0f}-{b:3.0f} s  {rec_stuck[seg].mean():5.1%}  "
+              f"{1e3 * np.std(truth[seg]):3.0f} mm/s  "
+              f"{np.sum(freq * power) / np.sum(power):4.1f} Hz | " + " | ".join(cells))
 
 
 if __name__ == "__main__":

@@ -58,11 +58,10 @@ C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = range(C_ORDER + CHAIN_FILT
 CHAIN_INTS = C_OUT + 1
 # --- chain floats at C_OUT
 (O_XHAT, O_R, O_V, O_G1, O_G2, O_T1, O_T2, O_WT1, O_WT2, O_WOK, O_WSSE, O_VRMS, O_MOVING,
- O_TRUSTED, O_SLIDING, O_LEVEL_VALID, O_CLIPPED, O_ACCEL_LAST, O_RUN, O_RAIL, O_RAIL_AGE,
- O_CLIP_AGE, O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11, O_MIN_S22, O_TRUST_SHARE) = (
-    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 21, 23, 24, 25, 26,
-    27, 28, 29)
-CHAIN_OUT = 30  # O_RAIL, O_RAIL_AGE: a (positive, negative) pair each
+ O_TRUSTED, O_SLIDING, O_LEVEL_VALID, O_CLIPPED, O_ACCEL_LAST, O_RUN, O_RAIL_POS, O_RAIL_NEG,
+ O_RAIL_AGE_POS, O_RAIL_AGE_NEG, O_CLIP_AGE, O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11,
+ O_MIN_S22, O_TRUST_SHARE) = range(30)
+CHAIN_OUT = 30
 SUMS_WIDTH = 10  # S11, S12, S22, S1y, S2y, Syy, Σv̂², Σ(LP v̂)², Σẍ², Σx̂̈²
 #: a run of this many equal, non-zero ẍ samples is a flat top; two flat tops at one value
 #: within a window are the accelerometer's rail (clipping)
@@ -182,19 +181,19 @@ def _clip_tick(f, out, accel, n):  # pragma: no cover - jit
     run = f[out + O_RUN] + 1.0 if accel == f[out + O_ACCEL_LAST] and accel != 0.0 else 1.0
     f[out + O_RUN] = run
     f[out + O_ACCEL_LAST] = accel
-    f[out + O_RAIL_AGE] += 1.0
-    f[out + O_RAIL_AGE + 1] += 1.0
+    f[out + O_RAIL_AGE_POS] += 1.0
+    f[out + O_RAIL_AGE_NEG] += 1.0
     clip_age = f[out + O_CLIP_AGE] + 1.0
     if run >= CLIP_RUN:
-        side = 0 if accel > 0.0 else 1
+        rail, age = (O_RAIL_POS, O_RAIL_AGE_POS) if accel > 0.0 else (O_RAIL_NEG, O_RAIL_AGE_NEG)
         if run == CLIP_RUN:
-            at_rail = accel == f[out + O_RAIL + side] and f[out + O_RAIL_AGE + side] <= n
+            at_rail = accel == f[out + rail] and f[out + age] <= n
         else:
             at_rail = clip_age == 1.0  # this flat top was found at the rail
         if at_rail:
             clip_age = 0.0
-        f[out + O_RAIL + side] = accel
-        f[out + O_RAIL_AGE + side] = 0.0
+        f[out + rail] = accel
+        f[out + age] = 0.0
     f[out + O_CLIP_AGE] = clip_age
     return clip_age < n
 

@@ -230,8 +230,8 @@ class Pipeline:
         out = self._out_o
         f[out + K.O_T1] = f[out + K.O_T2] = f[out + K.O_WT1] = f[out + K.O_WT2] = math.nan
         f[out + K.O_WSSE] = f[out + K.O_LAST_POS] = math.nan
-        f[out + K.O_ACCEL_LAST] = f[out + K.O_RAIL] = f[out + K.O_RAIL + 1] = math.nan
-        f[out + K.O_RAIL_AGE] = f[out + K.O_RAIL_AGE + 1] = f[out + K.O_CLIP_AGE] = math.inf
+        f[out + K.O_ACCEL_LAST] = f[out + K.O_RAIL_POS] = f[out + K.O_RAIL_NEG] = math.nan
+        f[out + K.O_RAIL_AGE_POS] = f[out + K.O_RAIL_AGE_NEG] = f[out + K.O_CLIP_AGE] = math.inf
         if self.external_plant:
             self.plant.reset()
 

@@ -231,9 +231,8 @@ class Detector:
         ii, sc = self.arena.i, int(self.arena.i[self.epi + E.P_O_SCAL])
         change = float(self.arena.f[sc + E.S_LEVEL_CHANGE])
         if code == K.OTHER_FAULT:
-            # a clipping accelerometer is no friction evidence (`kernel.chain_tick`): say so
-            out = int(ii[ii[self.io + K.D_CHAIN] + K.C_OUT])
-            clipping = {"accel_clipping": True} if self.arena.f[out + K.O_CLIPPED] else {}
+            # a clipping accelerometer is no friction evidence (`episode_tick`): say so
+            clipping = {"accel_clipping": True} if ii[self.epi + E.P_CLIPPED] else {}
             return [self._event(t, "other_fault", theta1, theta2, coulomb_change=change,
                                 **clipping)]
         kind = _KINDS[int(ii[self.epi + E.P_KIND])]

@@ -42,10 +42,10 @@ MIN_RCOND = 1e-6
 (P_TICKS, P_QUIET, P_TRACK, P_HOLD_UNTIL, P_PERSISTED, P_LEVEL, P_KIND, P_N, P_M, P_ISO,
  P_TIMEOUT, P_CLEAR, P_FRICTION_CLEAR, P_TRACK_SAMPLES, P_BAND, P_POST, P_SETTLED,
  P_BEYOND, P_FROZEN, P_MOTION, P_O_POST, P_O_SETTLED, P_O_BEYOND, P_O_FROZEN, P_O_MOTION,
- P_O_SCAL, P_O_ROW, P_O_SCR, P_O_TH, P_O_G, P_WARMUP) = (
+ P_O_SCAL, P_O_ROW, P_O_SCR, P_O_TH, P_O_G, P_WARMUP, P_CLIPPED) = (
     0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 17, 19, 21, 23, 25, 26, 27, 28,
-    29, 30, 31, 32, 33, 34, 35)
-EPISODE_INTS = 36
+    29, 30, 31, 32, 33, 34, 35, 36)
+EPISODE_INTS = 37
 # floats at P_O_SCAL
 (S_THETA_REF, S_COULOMB_BASE, S_SIGMA2_REF, S_XHAT_PAST, S_ACCEL_PAST, S_LEVEL_CHANGE,
  S_EVIDENCE, S_FMIN, S_THRESHOLD, S_TOL1, S_TOL2, S_GAMMA_F, S_Z, S_MOTION) = (
@@ -124,6 +124,7 @@ def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
     ii[eo + P_PERSISTED] = level
     ii[eo + P_LEVEL] = level
     ii[eo + P_KIND] = KIND_NONE
+    ii[eo + P_CLIPPED] = 0
     f[sc + S_LEVEL_CHANGE] = math.nan
     f[sc + S_EVIDENCE] = math.nan
 
@@ -180,7 +181,7 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
     calibrated band (lo1, hi1, lo2, hi2), −1 without one; θ: the pipeline's window θ (NaN
     at rest); ``trusted``, ``sliding``, ``clipped``: the window's velocity lies where v̂ is
     right, the load moves freely, the accelerometer sits at its rail (`kernel.chain_tick`;
-    a clipped window is no friction evidence)."""
+    a clipped window is no friction evidence; the episode remembers it saw one)."""
     n = ii[eo + P_N]
     m = ii[eo + P_M]
     iso = ii[eo + P_ISO]
@@ -265,6 +266,7 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
         kind = KIND_LEVEL if over > 1.0 else KIND_NONE
     if clipped:
         kind = KIND_NONE
+        ii[eo + P_CLIPPED] = 1
     if state == 3 or state == 5:
         ii[eo + P_TRACK] = ii[eo + P_TRACK] + 1 if kind != KIND_NONE else 0
         if ii[eo + P_TRACK] >= ii[eo + P_TRACK_SAMPLES] and math.isnan(f[sc + S_EVIDENCE]):

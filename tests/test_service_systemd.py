@@ -28,7 +28,7 @@ def test_unit_has_the_required_settings():
     assert int(d["WatchdogSec"][0]) > 0
     assert d["Restart"] == ["on-failure"]
     assert d["DynamicUser"] == ["yes"] and "dialout" in d["SupplementaryGroups"][0]
-    for key in ("StateDirectory", "LogsDirectory", "RuntimeDirectory"):
+    for key in ("StateDirectory", "LogsDirectory", "RuntimeDirectory", "CacheDirectory"):
         assert d[key] == ["fdi"]
     for key in ("NoNewPrivileges", "ProtectHome", "PrivateTmp"):
         assert d[key] == ["yes"], key
@@ -56,11 +56,11 @@ def test_template_unit_is_the_service_with_per_rig_config_and_directories():
     """fdi@.service: everything of fdi.service (hardening included), but per rig (%i)."""
     single, template = directives(), directives(TEMPLATE)
     per_rig = {"Description", "ExecStart", "StateDirectory", "LogsDirectory",
-               "RuntimeDirectory"}
+               "RuntimeDirectory", "CacheDirectory"}
     assert {k: v for k, v in template.items() if k not in per_rig} == \
         {k: v for k, v in single.items() if k not in per_rig}
     assert template["ExecStart"] == ["/usr/local/bin/fdi run --config /etc/fdi/%i.yaml"]
-    for key in ("StateDirectory", "LogsDirectory", "RuntimeDirectory"):
+    for key in ("StateDirectory", "LogsDirectory", "RuntimeDirectory", "CacheDirectory"):
         assert template[key] == ["fdi/%i"], key
     assert "%i" in template["Description"][0]
 

@@ -1,5 +1,5 @@
 """The one place that compiles: numba ``njit`` with ``cache=True`` (compiled once per
-install, then loaded from ``__pycache__``), and a plain-Python fallback.
+install, then loaded from numba's cache), and a plain-Python fallback.
 
 ``jit`` is used by every per-tick kernel (`core.kernels`, `detect.kernel`). The kernels
 work on arrays they are given and never allocate, so they are compiled without numba's
@@ -8,6 +8,11 @@ a monitor tick). A kernel that allocates asks for it (``jit(nrt=True)``). With
 ``NUMBA_DISABLE_JIT=1`` (or without numba) the kernels run as ordinary Python functions,
 the same arithmetic in the same order, so results do not depend on the setting.
 
+numba checks only a cached function's own source file, but the kernels call kernels and
+read constants of other modules: so the cache of a package's kernels is a folder named
+after the hash of all the package's ``.py`` files (`_package_cache_dir`), and a change to
+any of them compiles every kernel afresh.
+
 `Arena` holds the state of the compiled blocks: one float64 and one int64 array shared by
 the blocks of one monitor (each block owns a region and knows its offsets), so one kernel
 call per tick passes two arrays, not one per block.
@@ -15,7 +20,15 @@ call per tick passes two arrays, not one per block.
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import hashlib
+import logging
 import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
@@ -25,22 +38,98 @@ JIT_ENABLED = os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
 
 try:  # pragma: no cover - numba is a dependency; the fallback keeps the arithmetic usable
     from numba import njit as _njit
+    from numba.core import config as _numba_config
 except ImportError:  # pragma: no cover
     _njit = None
     JIT_ENABLED = False
 
+log = logging.getLogger("fdi.compiled")
+
 
 def jit(func=None, *, inline: bool = False, nrt: bool = False):
-    """``numba.njit(cache=True, nogil=True)``; ``inline``: inlined into its callers;
-    ``nrt``: with numba's runtime (needed to allocate arrays; see the module docstring)."""
+    """``numba.njit(cache=True, nogil=True)``, cached per version of the package's sources;
+    ``inline``: inlined into its callers; ``nrt``: with numba's runtime (needed to allocate
+    arrays; see the module docstring)."""
     def wrap(f):
         if not JIT_ENABLED or _njit is None:
             return f
-        options = {"cache": True, "nogil": True, "_nrt": nrt}
+        options = {"nogil": True, "_nrt": nrt}
         if inline:
             options["inline"] = "always"
-        return _njit(**options)(f)
+        package = _package_of(f)
+        cache_dir = _package_cache_dir(package) if package else None
+        if cache_dir is None:
+            return _njit(**options)(f)
+        with _numba_cache_dir(cache_dir):
+            return _njit(cache=True, **options)(f)
     return wrap(func) if func is not None else wrap
+
+
+def _package_of(func) -> Path | None:
+    """The folder of the top-level package ``func`` is defined in; None outside a package."""
+    top = sys.modules.get(func.__module__.partition(".")[0])
+    folders = list(getattr(top, "__path__", []))
+    return Path(folders[0]).resolve() if folders else None
+
+
+@functools.lru_cache(maxsize=None)
+def _package_cache_dir(package: Path) -> str | None:
+    """The writable folder for the compiled kernels of ``package``, named after its install
+    and the hash of its sources; the folders of the install's earlier sources are removed.
+    None (compiled at every start) if no folder is writable."""
+    prefix = f"numba-{_digest(str(package).encode())}-"
+    name = prefix + _sources_digest(package)
+    for root in _cache_roots(package):
+        if _writable(root / name):
+            for stale in root.glob(prefix + "*"):
+                if stale.name != name:
+                    shutil.rmtree(stale, ignore_errors=True)
+            return str(root / name)
+    log.warning("no writable folder to cache the compiled kernels of %s: they are compiled "
+                "at every start", package)
+    return None
+
+
+def _cache_roots(package: Path):
+    """Where the cache may go, in order: $NUMBA_CACHE_DIR if set, the package's __pycache__,
+    systemd's CacheDirectory, the user's cache folder."""
+    if _numba_config.CACHE_DIR:
+        yield Path(_numba_config.CACHE_DIR)
+    yield package / "__pycache__"
+    if os.environ.get("CACHE_DIRECTORY"):
+        yield Path(os.environ["CACHE_DIRECTORY"])
+    yield Path(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache")) / "fdi"
+
+
+def _sources_digest(package: Path) -> str:
+    """A hash of the names and contents of every ``.py`` file in ``package``."""
+    files = sorted(package.rglob("*.py"))
+    return _digest(b"".join(f.relative_to(package).as_posix().encode() + b"\0"
+                            + hashlib.sha256(f.read_bytes()).digest() for f in files))
+
+
+def _digest(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()[:16]
+
+
+def _writable(folder: Path) -> bool:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()
+    except OSError:
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def _numba_cache_dir(folder: str):
+    """numba's cache folder while a function is decorated (its cache is located then)."""
+    saved = _numba_config.CACHE_DIR
+    _numba_config.CACHE_DIR = folder
+    try:
+        yield
+    finally:
+        _numba_config.CACHE_DIR = saved
 
 
 class Arena:

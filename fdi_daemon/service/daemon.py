@@ -269,11 +269,11 @@ class Daemon:
         from fdi_daemon.detect.monitor import Monitor
 
         monitor = Monitor(model)
-        # numba compiles the kernels once after an install (about a minute) and caches them:
-        # say so when it takes long, so a first run does not look hung
+        # numba compiles the kernels once after an install or an update (about a minute) and
+        # caches them: say so when it takes long, so a first run does not look hung
         notice = threading.Timer(COMPILE_NOTICE_S, self.echo, ("compiling the monitor's kernels "
-                                 "(once after an install: about a minute; cached for later "
-                                 "runs) ...",))
+                                 "(once after an install or an update: about a minute; cached "
+                                 "for later runs) ...",))
         notice.daemon = True
         notice.start()
         try:

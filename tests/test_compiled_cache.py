@@ -1,0 +1,78 @@
+"""numba's cache of the compiled kernels (`core.compiled.jit`), with real caching in fresh
+processes: a kernel that calls a kernel and reads a constant of another module is compiled
+afresh when only that other module changes (numba alone would load the stale code)."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from fdi_daemon.core.compiled import JIT_ENABLED
+
+pytestmark = pytest.mark.skipif(not JIT_ENABLED, reason="the kernels are not compiled")
+
+REPO = Path(__file__).resolve().parents[1]
+
+CALLER = """\
+from fdi_daemon.core.compiled import jit
+from kpkg.callee import OFFSET, scaled
+
+
+@jit
+def kernel(x):
+    return scaled(x) + OFFSET
+"""
+
+CALLEE = """\
+from fdi_daemon.core.compiled import jit
+
+OFFSET = {offset}
+
+
+@jit
+def scaled(x):
+    return {factor} * x
+"""
+
+RUN = ("from kpkg.caller import kernel; "
+       "print(kernel(1.0), sum(kernel.stats.cache_hits.values()))")
+
+
+def _package(tmp_path: Path, factor: float, offset: float) -> Path:
+    package = tmp_path / "kpkg"
+    package.mkdir(exist_ok=True)
+    (package / "__init__.py").write_text("")
+    (package / "caller.py").write_text(CALLER)
+    (package / "callee.py").write_text(CALLEE.format(factor=factor, offset=offset))
+    return package
+
+
+def _run(tmp_path: Path, **env: str) -> tuple[float, int]:
+    """kernel(1.0) in a new process, and how many of its signatures came from the cache."""
+    environ = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+    environ.update(PYTHONPATH=f"{tmp_path}{os.pathsep}{REPO}", PYTHONDONTWRITEBYTECODE="1",
+                   **env)
+    out = subprocess.run([sys.executable, "-c", RUN], env=environ, capture_output=True,
+                         text=True, timeout=120, check=True).stdout.split()
+    return float(out[0]), int(out[1])
+
+
+def test_a_change_to_a_called_module_compiles_its_callers_afresh(tmp_path):
+    package = _package(tmp_path, factor=2.0, offset=0.5)
+    assert _run(tmp_path) == (2.5, 0)
+    assert _run(tmp_path) == (2.5, 1)  # loaded from the cache
+    _package(tmp_path, factor=3.0, offset=0.25)  # only callee.py changes
+    assert _run(tmp_path) == (3.25, 0)
+    assert _run(tmp_path) == (3.25, 1)
+    # the cache of the earlier sources is gone
+    assert len(list((package / "__pycache__").glob("numba-*"))) == 1
+
+
+def test_numba_cache_dir_is_honoured(tmp_path):
+    package = _package(tmp_path, factor=2.0, offset=0.5)
+    cache = tmp_path / "cache"
+    assert _run(tmp_path, NUMBA_CACHE_DIR=str(cache)) == (2.5, 0)
+    assert len(list(cache.glob("numba-*/*/*.nbi"))) == 2  # caller and callee
+    assert not (package / "__pycache__").exists()

@@ -10,10 +10,10 @@ Chamber pressure, polytropic with index n:  dp/dt = n/V · (R·T·ṁ - p·dV/dt
 
 import math
 
-from numba import njit
+from fdi_daemon.core.compiled import jit
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def orifice_flow(p_up, p_down, area_m2, flow_const, temperature_k, b, laminar_ratio, phi_laminar):
     """Mass flow (kg/s) from p_up to p_down, negative when the flow runs the other way."""
     sign = 1.0
@@ -33,7 +33,7 @@ def orifice_flow(p_up, p_down, area_m2, flow_const, temperature_k, b, laminar_ra
     return sign * flow_const * area_m2 * p_up * phi / math.sqrt(temperature_k)
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def chamber_volumes(x_m, area_m2, half_stroke_m, dead_volume_m3):
     """Volumes (m³) of chamber 1 (grows with x) and chamber 2, never below half the dead volume."""
     v1 = dead_volume_m3 + area_m2 * (half_stroke_m + x_m)
@@ -42,7 +42,7 @@ def chamber_volumes(x_m, area_m2, half_stroke_m, dead_volume_m3):
     return max(v1, floor), max(v2, floor)
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def pressure_rate(p_pa, volume_m3, dvolume_dt, mass_flow_in, gas_rt, polytropic_n):
     """dp/dt (Pa/s) of a chamber: n/V·(R·T·ṁ - p·dV/dt)."""
     return polytropic_n / volume_m3 * (gas_rt * mass_flow_in - p_pa * dvolume_dt)

@@ -9,23 +9,23 @@ Stick-slip uses an explicit stick state with a breakaway test (see `mechanics_st
 
 import math
 
-from numba import njit
+from fdi_daemon.core.compiled import jit
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def contact_force(bearing_pa, weight_n, lift_area_m2):
     """Normal force (N) of the block on the surface for a gauge pocket pressure."""
     return max(0.0, weight_n - bearing_pa * lift_area_m2)
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def stribeck_level(speed, coulomb, static, stribeck_velocity):
     """Magnitude of dry friction at |v| = speed: Coulomb plus an exponentially fading excess."""
     r = speed / stribeck_velocity
     return coulomb + (static - coulomb) * math.exp(-r * r)
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def mechanics_step(x, v, stuck, f_drive, mass, dt,
                    seal_fc, seal_fs, seal_vs, normal_n, mu_k, mu_s, bearing_vs, visc_per_n):
     """One semi-implicit Euler step of m·ẍ = F_drive - F_seal - F_bearing with stick-slip.
@@ -62,7 +62,7 @@ def mechanics_step(x, v, stuck, f_drive, mass, dt,
     return x + v_new * dt, v_new, False, a, f_seal, f_bear
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def end_stop_force(x, v, half_stroke, stiffness, damping):
     """Force (N) of the damped elastomer bumpers; pushes only, zero inside the stroke."""
     if x > half_stroke:

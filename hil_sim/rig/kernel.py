@@ -6,7 +6,7 @@ the valve voltage v_in[k] is held for ``substeps`` fixed internal steps (zero-or
 Set ``NUMBA_DISABLE_JIT=1`` to run the same code as pure Python.
 """
 
-from numba import njit
+from fdi_daemon.core.compiled import jit
 
 from hil_sim.rig.chambers import chamber_volumes, orifice_flow, pressure_rate
 from hil_sim.rig.friction import contact_force, end_stop_force, mechanics_step
@@ -65,7 +65,7 @@ N_ADC = 3
 N_NOISE = 4
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def substep(s, p, c, u_v, f_noise):
     """Advance the state vector ``s`` by one internal step with valve voltage ``u_v``."""
     dt = p[P_DT]
@@ -123,7 +123,7 @@ def substep(s, p, c, u_v, f_noise):
     s[S_ACC_YD] = yd
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def run_samples(s, p, c, u_exc, noise, out):
     """Advance over len(u_exc) samples; write one row of ``out`` (``O_*``) per sample.
 

@@ -176,8 +176,6 @@ def validate_params(params: RigParams) -> None:
 
 
 # ---------------------------------------------------------------- packed parameter vector
-# numba caches compiled kernels per source file: after changing an index here, touch
-# hil_sim/rig/kernel.py (or clear its __pycache__) so the cached kernel is rebuilt.
 P_DT = 0                 # internal step (s)
 P_SUBSTEPS = 1
 P_AREA = 2               # piston area (m²)

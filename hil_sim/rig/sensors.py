@@ -2,10 +2,10 @@
 
 import math
 
-from numba import njit
+from fdi_daemon.core.compiled import jit
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def adc(value, full_scale, levels):
     """Clip to ±full_scale and quantise to ``levels`` codes over the range (mid-tread)."""
     lsb = 2.0 * full_scale / levels
@@ -18,7 +18,7 @@ def adc(value, full_scale, levels):
     return code * lsb
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def accel_filter_step(y, yd, a_true, w_rad_s, dt):
     """One semi-implicit step of the accelerometer's 2nd-order Butterworth response."""
     ydd = w_rad_s * w_rad_s * (a_true - y) - 1.4142135623730951 * w_rad_s * yd
@@ -27,7 +27,7 @@ def accel_filter_step(y, yd, a_true, w_rad_s, dt):
     return y, yd
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def accel_reading(y, bias, noise, full_scale, range_fraction, dropout, levels):
     """Accelerometer sample: filtered acceleration + bias + noise, saturating at the
     (possibly reduced) sensor range, then the 16-bit ADC over the nominal range.

@@ -5,10 +5,10 @@ The flapper travel ``xf`` is normalised to the nozzle gap. Nozzle 1 sees the gap
 chamber 1's bleed to atmosphere, so its pressure rises.
 """
 
-from numba import njit
+from fdi_daemon.core.compiled import jit
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def flapper_step(xf, vf, u_v, gain_per_v, w_rad_s, zeta, travel_max, dt):
     """One semi-implicit Euler step of ẍf = ω²(K·u - xf) - 2ζω·ẋf with a hard travel stop.
 
@@ -28,7 +28,7 @@ def flapper_step(xf, vf, u_v, gain_per_v, w_rad_s, zeta, travel_max, dt):
     return xf, vf
 
 
-@njit(cache=True)
+@jit(nrt=True)
 def nozzle_areas(xf, nozzle_area_m2):
     """Curtain areas (m²) of the two exhaust nozzles for flapper travel ``xf``."""
     return nozzle_area_m2 * (1.0 - xf), nozzle_area_m2 * (1.0 + xf)

@@ -10,7 +10,9 @@ the fault window). Three signatures, each with the model observer's velocity:
 - G_e with the plant model's poles Â (the poles of the force path, eq. 6) and a free
   numerator, fitted by linear least squares on every sample of the fault window;
 - the same on the samples where the simulator's load slides (more than 4 samples from a
-  stuck one): an oracle, to see what the stick phases do to the signature.
+  stuck one): an oracle, to see what the stick phases do to the signature;
+- the same on the rows a quiet accelerometer keeps (`stick_window_oracle.quiet_rows`: what
+  the data give).
 
 Each replays the steady fault under changing operation (`steady_friction_changing_operation`;
 fault at 20 s, truth ≈ 1 relative to the calibration); printed: the median reported level
@@ -58,6 +60,7 @@ def _pole_signature(model, cal, residual, velocity, first, keep):
 
 def main() -> None:
     sys.path.insert(0, str(REPO / "tests"))
+    from stick_window_oracle import quiet_rows
     from test_detect_friction_level import LOW_FREQUENCY_CALIBRATION
 
     from fdi_daemon.cli import main as fdi
@@ -89,7 +92,8 @@ def main() -> None:
     every = np.ones(stuck.size, dtype=bool)
     models = {"fdi signature (auto)": (auto, auto.fault_filter.gamma_f, None)}
     for name, keep in (("G_e = B/Â, every sample", every),
-                       ("G_e = B/Â, sliding samples only", sliding)):
+                       ("G_e = B/Â, sliding samples only", sliding),
+                       ("G_e = B/Â, quiet-accelerometer rows left out", ~quiet_rows(cal.accel))):
         models[name] = _pole_signature(auto, cal, residual, velocity, first, keep)
 
     spec = yaml.safe_load((REPO / "configs" / "scenarios"

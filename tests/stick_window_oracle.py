@@ -12,7 +12,14 @@ of the air bearing after the fault over that of the calibration's fault window (
 - none: the monitor's θ1;
 - the simulator's ``stuck`` flag (an oracle);
 - the simulator's true velocity above a share of its window RMS (an oracle);
-- the model's own v̂ above the same share (what the data give).
+- the model's own v̂ above the same share (what the data give);
+- a quiet accelerometer: a row is left out when |ẍ| < 0.1 m/s² (5× the simulated
+  accelerometer's noise) on two samples in a row at it or up to two samples after it (what
+  the data give; the two samples after cover the accelerometer's lag into a stick).
+
+``--variants``: the same on rig variants 0–7 of `test_detect_other_rig` too, each with its
+own model from `fdi identify` and `fdi signature` (about a minute): one line per rig and
+case, error of the median θ1 against the truth.
 
 Printed: median θ1 from 1.5 s after the fault (10 s for the steady run), the 5–95 % range,
 θ1 before the fault (the rod seal's friction, which the truth leaves out), and the
@@ -32,6 +39,7 @@ WINDOW = 256
 CASES = (("test_case_1", 3.05, 1.5), ("test_case_2", 2.9, 1.5),
          ("steady_friction_changing_operation", 20.0, 10.0))
 SHARES = (0.1, 0.2, 0.3)
+QUIET_MPS2 = 0.1
 
 
 def _sliding_sum(x: np.ndarray) -> np.ndarray:
@@ -46,6 +54,62 @@ def masked_theta1(g1, g2, r, keep):
     with np.errstate(invalid="ignore", divide="ignore"):
         theta1 = (a22 * b1 - a12 * b2) / (a11 * a22 - a12 ** 2)
     return np.where(_sliding_sum(k) >= WINDOW / 4, theta1, np.nan)
+
+
+def quiet_rows(accel: np.ndarray, quiet_mps2: float = QUIET_MPS2) -> np.ndarray:
+    """Rows at or up to two samples before a pair of samples with |ẍ| < ``quiet_mps2``."""
+    quiet = np.abs(accel) < quiet_mps2
+    pair = quiet & np.r_[False, quiet[:-1]]
+    rows = pair.copy()
+    rows[:-1] |= pair[1:]
+    rows[:-2] |= pair[2:]
+    return rows
+
+
+def _truth(rec, fault_t, calibrated):
+    return np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5]) / calibrated
+
+
+def _theta1_after(batch, keep, after):
+    """θ1 with ``keep``'s rows, at the windows after the fault where the rig moves."""
+    theta1 = masked_theta1(batch.g1, batch.g2, batch.residual, keep)
+    return theta1[after & batch.moving & np.isfinite(theta1)]
+
+
+def _median_error(batch, keep, after, truth):
+    ok = _theta1_after(batch, keep, after)
+    return f"{100 * (np.median(ok) / truth - 1):+4.0f} %" if ok.size else "  n/a"
+
+
+def variants() -> None:
+    """One line per rig and case: the median θ1's error with no mask, the simulator's stick
+    flag and the quiet accelerometer."""
+    import contextlib
+    import io
+    import tempfile
+
+    from test_detect_other_rig import model_of, record, rig_variant
+
+    from fdi_daemon.detect.pipeline import Pipeline
+
+    print("rig      case          truth  stuck | none    oracle  quiet ẍ")
+    for index in (None, *range(8)):
+        rig = {} if index is None else rig_variant(index)
+        with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()), \
+                contextlib.redirect_stderr(io.StringIO()):
+            model = model_of(rig, Path(tmp))
+        cal = record(rig, "signature_calibration")
+        calibrated = np.mean(cal.columns["contact_force"][cal.t >= 11.0])
+        for name, fault_t, settle_s in CASES:
+            rec = record(rig, name)
+            truth = _truth(rec, fault_t, calibrated)
+            stuck = rec.columns["stuck"] > 0.5
+            after = rec.t >= fault_t + settle_s
+            batch = Pipeline(model, WINDOW).run(rec.v_in, rec.accel)
+            cells = [_median_error(batch, keep, after, truth) for keep in
+                     (np.ones(stuck.size, dtype=bool), ~stuck, ~quiet_rows(rec.accel))]
+            print(f"{'default' if index is None else f'variant {index}':8s} {name[:12]:12s} "
+                  f"{truth:6.2f} {stuck[after].mean():6.1%} | " + "  ".join(cells))
 
 
 def _window_rms(x: np.ndarray) -> np.ndarray:
@@ -64,7 +128,7 @@ def main() -> None:
     calibrated = np.mean(cal.columns["contact_force"][(cal.t >= 11.0) & (cal.t < 40.0)])
     for name, fault_t, settle_s in CASES:
         rec = scenario_recording(name)
-        truth = np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5]) / calibrated
+        truth = _truth(rec, fault_t, calibrated)
         stuck = rec.columns["stuck"] > 0.5
         after = rec.t >= fault_t + settle_s
         pipeline = Pipeline(model, WINDOW)
@@ -75,6 +139,7 @@ def main() -> None:
             masks[f"|v| > {share} RMS (oracle)"] = np.abs(v_true) > share * _window_rms(v_true)
             masks[f"|v̂| > {share} RMS"] = (np.abs(batch.velocity)
                                            > share * _window_rms(batch.velocity))
+        masks[f"quiet ẍ < {QUIET_MPS2} m/s²"] = ~quiet_rows(rec.accel)
         accel_rms3 = np.sqrt(np.convolve(rec.accel ** 2, np.ones(3) / 3)[:rec.t.size])
         print(f"{name}: truth {truth:.3f}; load stuck {stuck[after].mean():.1%}; accelerometer "
               f"3-sample RMS stuck p50 {np.median(accel_rms3[stuck & after]):.3f}, sliding "
@@ -84,8 +149,7 @@ def main() -> None:
         theta1_before = pipeline.thetas(batch)[0][before]
         print(f"  θ1 before the fault (the seal, no mask): {np.nanmedian(theta1_before):.3f}")
         for label, keep in masks.items():
-            theta1 = masked_theta1(batch.g1, batch.g2, batch.residual, keep)
-            ok = theta1[after & batch.moving & np.isfinite(theta1)]
+            ok = _theta1_after(batch, keep, after)
             if ok.size == 0:
                 print(f"  {label:26s} no window keeps a quarter of its rows")
                 continue
@@ -96,3 +160,5 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+    if "--variants" in sys.argv[1:]:
+        variants()

@@ -104,6 +104,15 @@ def test_bad_input_is_one_line_and_exit_2(files, tmp_path, capsys):
                            str(tmp_path / "broken.yaml")], capsys)
     assert "does not exist" in _bad([str(files / "coulomb.csv"), "--model", model, "--json",
                                    str(tmp_path / "missing_dir" / "r.json")], capsys)
+    # the report overwrote the recording; a plot's unknown ending was a traceback at the end
+    rec_before = (files / "coulomb.csv").read_bytes()
+    assert "is also an input" in _bad([str(files / "coulomb.csv"), "--model", model, "--json",
+                                       str(files / "coulomb.csv")], capsys)
+    assert "is also an input" in _bad([str(files / "coulomb.csv"), "--model", model, "-o",
+                                       str(files / "coulomb.csv")], capsys)
+    assert (files / "coulomb.csv").read_bytes() == rec_before
+    assert "cannot write a plot as .foo" in _bad([str(files / "coulomb.csv"), "--model", model,
+                                                  "--plot", str(tmp_path / "x.foo")], capsys)
 
 
 def test_any_column_names(tmp_path, capsys):

@@ -233,9 +233,11 @@ def test_finding_recordings(tmp_path):
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes the local"),
     (["--workers", "0"], "at least 1"),
     (["--out", "r.xlsx"], ".csv or .parquet"),
+    (["--out", "RECS/rig-a-00.csv"], "is also an input"),  # the table replaced a recording
 ])
 def test_user_mistakes_exit_2_with_one_line(fleet, capsys, extra, message):
     root, _, model_map = fleet
+    extra = [arg.replace("RECS", str(root / "recs")) for arg in extra]
     code = main(["fleet-replay", str(root / "recs"), "--model-map", str(model_map), *extra])
     err = capsys.readouterr().err
     assert code == 2 and message in err and err.count("\n") == 1, err

@@ -183,4 +183,31 @@ def test_trace_of_the_realtime_path_and_bad_arguments(files, tmp_path, capsys):
     assert main(["replay", str(short), "--model", str(model), "--trace",
                  str(tmp_path / "no" / "dir.csv")]) == 2
     err = capsys.readouterr().err
-    assert "--trace-every must be" in err and "cannot write the trace" in err
+    assert "--trace-every must be" in err and "directory" in err and "does not exist" in err
+
+
+@pytest.mark.parametrize("option, target, fragment", [
+    ("--trace", "rec", "is also an input"),        # it replaced the recording with the trace
+    ("--events", "rec", "is also an input"),
+    ("--summary", "model", "is also an input"),
+    ("--plot", "out.txt", "cannot write a plot as .txt"),   # a matplotlib traceback after the run
+    ("--summary", "events", "name the same file"),
+    ("--events", "no/dir.jsonl", "does not exist"),
+])
+def test_outputs_that_cannot_be_written_or_would_destroy_an_input(files, tmp_path, capsys,
+                                                                  option, target, fragment):
+    """Refused before the replay, with one line; the inputs stay as they were and nothing is
+    written."""
+    root, model, rec = files
+    before = {rec: rec.read_bytes(), model: model.read_bytes()}
+    events = tmp_path / "ev.jsonl"
+    path = {"rec": rec, "model": model, "events": events}.get(target, tmp_path / target)
+    argv = ["replay", str(rec), "--model", str(model), option, str(path)]
+    if option != "--events":
+        argv += ["--events", str(events)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"fdi replay: error: {option}") and err.count("\n") == 1
+    assert fragment in err
+    assert {p: p.read_bytes() for p in before} == before
+    assert not events.exists() and list(tmp_path.iterdir()) == []

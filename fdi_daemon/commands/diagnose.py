@@ -57,17 +57,13 @@ def run(args: argparse.Namespace) -> int:
 
     from fdi_daemon.errors import UserError
     from fdi_daemon.io.model_file import FdiModel, load_model, save_model
-    from fdi_daemon.io.outputs import write_json
+    from fdi_daemon.io.outputs import check_outputs, write_json
     from fdi_daemon.io.recordings import read_recording, same_rate
-
-    from pathlib import Path
 
     if args.order is not None and not 1 <= args.order <= 12:
         raise UserError(f"--order must be 1..12, got {args.order}")
-    for target in (args.json, args.plot, args.out):
-        if target and not Path(target).resolve().parent.is_dir():
-            raise UserError(f"{target}: cannot write there: directory "
-                            f"{Path(target).parent} does not exist")
+    check_outputs({"--json": args.json, "--plot": args.plot, "-o": args.out},
+                  (args.recording, args.model), plots=("--plot",), rewrites={"-o": args.model})
     out_col = args.output or OUTPUT_COLUMNS[args.output_kind]
     # only the time and the two columns used are required (real data name them freely)
     rec = read_recording(args.recording, required=("t",), columns=args.columns)

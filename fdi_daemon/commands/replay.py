@@ -43,12 +43,16 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.detect.summary import write_summary
     from fdi_daemon.errors import UserError
     from fdi_daemon.fleet.replay_one import replay_recording
+    from fdi_daemon.io.outputs import check_outputs
 
     if args.dashboard and not args.realtime:
         raise UserError("--dashboard needs --realtime (a batch replay is over before a "
                         "screen could show it)")
     if args.trace_every < 1:
         raise UserError("--trace-every must be a whole number >= 1")
+    check_outputs({"--events": args.events, "--summary": args.summary, "--plot": args.plot,
+                   "--trace": args.trace}, (args.recording, args.model, args.alarms),
+                  plots=("--plot",))
 
     settings, status_period_s = _alarm_settings(args.alarms)
     # rows the trace file or the plot shows (the batch path traces them and the readings')

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from fdi_daemon.errors import RecordingError
+from fdi_daemon.io.outputs import replaced_atomically
 
 REQUIRED_COLUMNS = ("t", "v_in", "accel")
 
@@ -356,6 +357,9 @@ def _as_counter(seq: np.ndarray, path: Path) -> np.ndarray:
 
 
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    if not zipfile.is_zipfile(path):  # else numpy takes it for a pickle and suggests loading it
+        raise RecordingError(f"{path}: cannot read recording: not an .npz file (a zip archive "
+                             f"of arrays, one per column): damaged, cut short or of another kind")
     with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
         meta = _meta_object(str(data["__meta__"])) if "__meta__" in data.files else {}
         columns = {}
@@ -407,24 +411,38 @@ def _column(arr: np.ndarray, name: str, path: Path) -> np.ndarray:
 # ----------------------------------------------------------------------------- writing
 
 
+def check_format(path: str | Path) -> None:
+    """A RecordingError unless the file's ending names a recording format."""
+    if not Path(path).name.lower().endswith((".csv", ".csv.gz", ".npz", ".mat")):
+        raise RecordingError(f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
+
+
 def write_recording(path: str | Path, rec: Recording) -> Path:
-    """Write ``rec`` in the format named by the file's ending; returns the path."""
+    """Write ``rec`` in the format named by the file's ending; returns the path.
+
+    The file appears whole or not at all (an error or Ctrl-C while writing leaves no
+    truncated recording, and the file there before intact); a path that cannot be written
+    is a RecordingError."""
     path = Path(path)
     name = path.name.lower()
     if path.parent and not path.parent.exists():
         raise RecordingError(f"{path}: directory {path.parent} does not exist")
+    check_format(path)
     meta = {str(k): str(v) for k, v in rec.meta.items()}
-    if name.endswith(".csv") or name.endswith(".csv.gz"):
-        _write_csv(path, rec.columns, meta)
-    elif name.endswith(".npz"):
-        np.savez_compressed(path, __meta__=np.array(json.dumps(meta)), **rec.columns)
-    elif name.endswith(".mat"):
-        from scipy.io import savemat
+    try:
+        with replaced_atomically(path) as target:
+            if name.endswith(".npz"):
+                np.savez_compressed(target, __meta__=np.array(json.dumps(meta)), **rec.columns)
+            elif name.endswith(".mat"):
+                from scipy.io import savemat
 
-        savemat(str(path), {**rec.columns, "meta_json": json.dumps(meta)},
-                do_compression=True, oned_as="column")
-    else:
-        raise RecordingError(f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
+                savemat(str(target), {**rec.columns, "meta_json": json.dumps(meta)},
+                        do_compression=True, oned_as="column")
+            else:
+                _write_csv(target, rec.columns, meta)
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot write the recording: "
+                             f"{exc.strerror or exc}") from None
     return path
 
 

@@ -211,3 +211,34 @@ def test_outputs_that_cannot_be_written_or_would_destroy_an_input(files, tmp_pat
     assert fragment in err
     assert {p: p.read_bytes() for p in before} == before
     assert not events.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_in_a_paced_replay_keeps_what_was_replayed(files, tmp_path, capsys,
+                                                          monkeypatch):
+    """Ctrl-C in `--realtime` lost every event already shown: no --events, --summary or
+    --trace was written. Now the replay stops there, the outputs hold the part replayed,
+    and the exit code is 130 with one line on stderr."""
+    import time
+
+    root, model, rec = files
+    calls = 0
+
+    def sleep(seconds):  # the pacing sleeps once per sample: Ctrl-C at the 1000th
+        nonlocal calls
+        calls += 1
+        if calls == 1000:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(time, "sleep", sleep)
+    out = {name: tmp_path / name for name in ("ev.jsonl", "sum.json", "trace.csv")}
+    assert main(["replay", str(rec), "--model", str(model), "--realtime",
+                 "--events", str(out["ev.jsonl"]), "--summary", str(out["sum.json"]),
+                 "--trace", str(out["trace.csv"])]) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("fdi replay: interrupted at t = ")
+    summary = json.loads(out["sum.json"].read_text())
+    assert 900 <= summary["samples"] < 1536
+    assert summary["interrupted_at_t"] == pytest.approx(summary["samples"] / 256.0, abs=0.01)
+    kinds = [e["kind"] for e in read_events(out["ev.jsonl"])]
+    assert kinds[:2] == ["calibrated", "fault_detected"]  # the fault comes at 2.9 s
+    assert len(_trace_rows(out["trace.csv"])[1]) == summary["samples"]

@@ -35,6 +35,20 @@ def test_missing_config_and_bad_duration(tmp_path):
     assert result.returncode == 2 and "--duration" in result.stderr
 
 
+def test_a_state_dir_that_is_a_file_is_one_line_naming_it(tmp_path):
+    """It logged a state-file ERROR, then 'cannot open an output: [Errno 17] File exists',
+    blaming the config."""
+    config = tmp_path / "rig.yaml"
+    config.write_text("link: {kind: replay, path: missing.csv}\nmodel: {path: m.yaml}\n")
+    (tmp_path / "state").write_text("a file")
+    result = fdi("run", "--config", str(config), "--state-dir", str(tmp_path / "state"))
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.strip().splitlines() == [
+        f"fdi run: error: state directory {tmp_path / 'state'} (--state-dir or "
+        f"service.state_dir) is a file, not a directory"]
+    assert (tmp_path / "state").read_text() == "a file"
+
+
 @pytest.mark.parametrize("state_dir_option", [False, True])
 def test_outputs_go_to_the_xdg_state_dir_or_state_dir_never_the_working_directory(
         tmp_path, monkeypatch, state_dir_option):

@@ -308,6 +308,10 @@ class Daemon:
         config = load_config(self.config_path)
         if self.state_dir is not None:
             config.service["state_dir"] = str(self.state_dir)
+        if config.state_dir.exists() and not config.state_dir.is_dir():
+            # it was "cannot open an output: [Errno 17] File exists", blaming the config
+            raise ConfigError(f"state directory {config.state_dir} (--state-dir or "
+                              f"service.state_dir) is a file, not a directory")
         return config
 
     def alarm_keeper(self, config: RigConfig, model: FdiModel) -> AlarmKeeper:

@@ -76,8 +76,10 @@ def _bad(args, capsys):
 def test_bad_input_is_one_line_and_exit_2(files, tmp_path, capsys):
     model = str(files / "nominal.yaml")
     assert "no such file" in _bad([str(tmp_path / "none.csv"), "--model", model], capsys)
-    assert "no column" in _bad([str(files / "coulomb.csv"), "--model", model,
-                                "--output", "torque"], capsys)
+    assert "--output torque: no column" in _bad([str(files / "coulomb.csv"), "--model", model,
+                                                "--output", "torque"], capsys)
+    assert "--input u: no column" in _bad([str(files / "coulomb.csv"), "--model", model,
+                                           "--input", "u"], capsys)
     save_model(tmp_path / "m128.yaml", FdiModel(fs=128.0, plant_b=np.array([0.0, 1.0]),
                                                 plant_a=np.array([1.0, -0.5])))
     assert "fs" in _bad([str(files / "coulomb.csv"), "--model", str(tmp_path / "m128.yaml")],

@@ -231,6 +231,26 @@ def test_corrupt_binary_files_and_absurd_counters_are_clear_errors(tmp_path, nam
         read_recording(path)
 
 
+def test_a_spreadsheet_csv_with_a_byte_order_mark_is_read(tmp_path):
+    """The mark was read into the first name: "missing column(s) t (found: \ufefft, ...)"."""
+    path = tmp_path / "excel.csv"
+    path.write_bytes(b"\xef\xbb\xbft,v_in,accel\r\n0,1,2\r\n0.00390625,1,2\r\n")
+    assert list(read_recording(path).columns) == ["t", "v_in", "accel"]
+
+
+@pytest.mark.parametrize("write, message", [
+    (lambda p: np.savez(p, t=np.arange(5) / FS, v_in=np.zeros(4), accel=np.zeros(5)),
+     "columns differ in length"),
+    (lambda p: p.write_text("t,v_in,accel\n0,0,0\n0,0,0\n0,0,0\n"), "never increases"),
+])
+def test_errors_found_after_reading_name_the_file(tmp_path, write, message):
+    path = tmp_path / ("r.npz" if "length" in message else "r.csv")
+    write(path)
+    with pytest.raises(RecordingError, match=message) as info:
+        read_recording(path)
+    assert str(info.value).startswith(f"{path}: ")
+
+
 def test_writing_onto_a_directory_is_a_recording_error(tmp_path):
     (tmp_path / "r.csv").mkdir()  # it was an IsADirectoryError traceback from `fdi sim record`
     with pytest.raises(RecordingError, match="cannot write the recording"):

@@ -39,11 +39,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="write the model with the added effects")
 
 
-def _column(rec, name: str, path: str):
+def _column(rec, name: str, path: str, option: str):
     import numpy as np
 
     from fdi_daemon.errors import RecordingError
 
+    if name not in rec.columns:
+        raise RecordingError(f"{path}: {option} {name}: no column of that name "
+                             f"(columns: {', '.join(rec.columns)})")
     values = rec[name]
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
@@ -68,8 +71,8 @@ def run(args: argparse.Namespace) -> int:
     # only the time and the two columns used are required (real data name them freely)
     rec = read_recording(args.recording, required=("t",), columns=args.columns)
     fs = rec.fs
-    u = _column(rec, args.input, args.recording)
-    y = _column(rec, out_col, args.recording)
+    u = _column(rec, args.input, args.recording, "--input")
+    y = _column(rec, out_col, args.recording, "--output")
     min_samples = max(256, 40 * ((args.order or 8) + 2))
     if len(u) < min_samples:
         raise UserError(f"{args.recording}: {len(u)} samples; diagnose needs at least "

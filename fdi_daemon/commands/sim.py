@@ -109,11 +109,13 @@ def run_serve(args: argparse.Namespace) -> int:
     import sys
 
     from fdi_daemon.errors import UserError
+    from fdi_daemon.io.outputs import check_outputs
     from hil_sim.devices import SimulatedDevice, realtime_rig
     from hil_sim.devices.serve import parse_host_port, serve_until_signalled
 
     if args.seed is not None and args.seed < 0:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
+    check_outputs({"--link": args.link})
     host, port = "127.0.0.1", 0
     if args.modbus_tcp is not None:
         try:

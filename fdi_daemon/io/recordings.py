@@ -228,11 +228,17 @@ def read_recording(path: str | Path, strict: bool = True,
     if "t" in columns and not np.all(np.isfinite(columns["t"])):
         bad = int(np.flatnonzero(~np.isfinite(columns["t"]))[0])
         raise RecordingError(f"{path}: time column t is not finite at row {bad}")
-    rec = Recording(columns, meta)
+    try:
+        rec = Recording(columns, meta)
+    except RecordingError as exc:  # the message names no file
+        raise RecordingError(f"{path}: {exc}") from None
     if len(rec) < 2:
         raise RecordingError(f"{path}: holds {len(rec)} sample(s); at least 2 are needed")
     fs_meta = _meta_fs(meta, path)
-    rec.sampling = check_sampling(rec.t, columns.get("seq"), fs_meta)
+    try:
+        rec.sampling = check_sampling(rec.t, columns.get("seq"), fs_meta)
+    except RecordingError as exc:  # no rate to be found: the message names no file
+        raise RecordingError(f"{path}: {exc}") from None
     if strict and not rec.sampling.ok:
         raise RecordingError(f"{path}: irregular sampling, {rec.sampling.summary()}")
     return rec
@@ -269,9 +275,11 @@ def _one_line(exc: BaseException) -> str:
 
 
 def _open_text(path: Path):
+    # utf-8-sig: a spreadsheet's CSV starts with a byte order mark, which was read as part
+    # of the first column's name ("missing column t (found: \ufefft, ...)")
     if path.name.lower().endswith(".gz"):
-        return gzip.open(path, "rt", encoding="utf-8", newline="")
-    return open(path, "r", encoding="utf-8", newline="")
+        return gzip.open(path, "rt", encoding="utf-8-sig", newline="")
+    return open(path, "r", encoding="utf-8-sig", newline="")
 
 
 def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:

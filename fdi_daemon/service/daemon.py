@@ -287,7 +287,7 @@ class Daemon:
         """Open the sinks and make the link and the loop of a prepared config."""
         from fdi_daemon.io.links.base import make_reconnecting_link
 
-        link = make_reconnecting_link(link_config)
+        link = make_reconnecting_link(link_config, fs_hz=model.fs)
         keeper = self.alarm_keeper(config, model)
         sinks = Sinks(config, model.fs, link_config["kind"], self.board, keeper)
         model_info = {"path": str(config.model_path), "provenance": model.provenance}

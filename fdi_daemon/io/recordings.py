@@ -473,11 +473,17 @@ def format_csv_rows(columns: dict[str, np.ndarray]) -> str:
     return buf.getvalue()
 
 
+#: characters written per call: Ctrl-C is handled between calls, and compressing an hour's
+#: CSV in one call kept it waiting some 20 s
+WRITE_CHUNK = 1 << 20
+
+
 def _write_csv(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str]) -> None:
     text = csv_header_lines(list(columns), meta) + format_csv_rows(columns)
     if path.name.lower().endswith(".gz"):
-        with gzip.open(path, "wt", encoding="utf-8", newline="") as fh:
-            fh.write(text)
+        opened = gzip.open(path, "wt", encoding="utf-8", newline="")
     else:
-        with open(path, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
+        opened = open(path, "w", encoding="utf-8", newline="")
+    with opened as fh:
+        for start in range(0, len(text), WRITE_CHUNK):
+            fh.write(text[start:start + WRITE_CHUNK])

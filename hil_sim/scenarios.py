@@ -22,6 +22,7 @@ Schema (unknown keys are errors naming the key; see docs/sim_rig.md):
 from __future__ import annotations
 
 import json
+import os
 import math
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -289,6 +290,18 @@ def _window(value, where: str) -> tuple[float, float]:
 # ----------------------------------------------------------------------------- simulating
 
 
+#: memory a simulation holds per sample at its peak (the columns while they are joined)
+BYTES_PER_SAMPLE = 400
+
+
+def _memory_bytes() -> int | None:
+    """This machine's physical memory, where the system tells it."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
 def simulate(scenario: Scenario, seed: int | None = None, duration_s: float | None = None,
              progress: Callable[[int, int], None] | None = None) -> Recording:
     """Run the scenario on a fresh `Rig`; returns the recording with ground truth.
@@ -302,6 +315,11 @@ def simulate(scenario: Scenario, seed: int | None = None, duration_s: float | No
     n = int(round(duration * fs))
     if n < 2:
         raise ConfigError(f"duration {duration:g} s gives fewer than 2 samples")
+    memory = _memory_bytes()
+    if memory is not None and n * BYTES_PER_SAMPLE > memory:
+        raise ConfigError(f"duration {duration:g} s: the recording would need about "
+                          f"{n * BYTES_PER_SAMPLE / 1e9:.3g} GB of memory, more than this "
+                          f"machine has ({memory / 1e9:.3g} GB); simulate shorter pieces")
     excitation = build_program(scenario.excitation, fs, n,
                                np.random.default_rng([seed, 0x5EED]))
     rig = Rig(scenario.rig, seed=seed)

@@ -154,3 +154,14 @@ def test_the_trend_shows_the_wear_the_steps_and_the_rests(weeks, tmp_path, capsy
     assert lines[-1].split()[5] == "3"  # the last day's highest priority
     assert (tmp_path / "trend.png").stat().st_size > 10_000
     assert len((tmp_path / "trend.csv").read_text().splitlines()) == minutes + 1
+
+
+def test_trend_outputs_that_would_destroy_the_trend_are_refused(tmp_path, capsys):
+    db = tmp_path / "trend.sqlite"
+    db.write_bytes(b"the trend of months")
+    assert main(["trend", "--db", str(db), "--csv", str(db)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is also an input" in err
+    assert main(["trend", "--db", str(db), "--plot", str(tmp_path / "t.xyz")]) == 2
+    assert "cannot write a plot as .xyz" in capsys.readouterr().err
+    assert db.read_bytes() == b"the trend of months"

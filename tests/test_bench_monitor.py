@@ -54,3 +54,17 @@ def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
     assert data["monitor"] == small and {"sim", "ident", "machine"} <= set(data)
     out = capsys.readouterr().out
     assert "per-tick step p50" in out and "compiled chain without detector" in out
+
+
+def test_a_json_path_that_cannot_be_written_is_refused_before_measuring(tmp_path,
+                                                                        monkeypatch, capsys):
+    """--json in a missing directory failed after the minutes of measuring."""
+    import fdi_daemon.bench.monitor as bm
+
+    def measured(**kw):
+        raise AssertionError("measured before the output was checked")
+
+    monkeypatch.setattr(bm, "bench_monitor", measured)
+    assert main(["bench", "--quick", "--json", str(tmp_path / "no" / "b.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "does not exist" in err

@@ -205,3 +205,19 @@ def test_the_status_snapshot_carries_the_baseline_of_the_operating_condition(bas
     expect = base.median[int(base.bin_index(mon.pipeline.v_rms))]
     assert snap["baseline_level"] == pytest.approx(expect, rel=1e-12)
     assert Monitor(load_model(MODEL)).snapshot()["baseline_level"] is None
+
+
+def test_bad_options_and_an_output_naming_the_recording_are_one_line(tmp_path, capsys):
+    """--min-seconds inf was an OverflowError traceback; -o naming the recording replaced
+    it with the model."""
+    rec = write_recording(tmp_path / "short.csv", _friction_from_start(SINE, 1.0))
+    before = rec.read_bytes()
+    for extra in (["--min-seconds", "inf"], ["--min-seconds", "nan"], ["--max-bins", "0"]):
+        assert main(["baseline", str(rec), "--model", str(MODEL), "-o",
+                     str(tmp_path / "m.yaml"), *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--min-seconds must be" in err
+    assert main(["baseline", str(rec), "--model", str(MODEL), "-o", str(rec)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is also an input" in err
+    assert rec.read_bytes() == before and not (tmp_path / "m.yaml").exists()

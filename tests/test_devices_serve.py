@@ -135,6 +135,18 @@ def test_serve_rejects_a_bad_address_in_one_line():
     assert proc.stderr.count("\n") == 1 and "HOST:PORT" in proc.stderr
 
 
+def test_serve_names_a_link_in_a_missing_directory(tmp_path):
+    """It said "[Errno 2] No such file or directory: '/dev/pts/3' -> '.../link.tmp123'"."""
+    link = tmp_path / "no" / "rig"
+    proc = subprocess.run([sys.executable, "-m", "fdi_daemon", "sim", "serve", "--serial",
+                           "--link", str(link)], capture_output=True, text=True, timeout=60,
+                          stdin=subprocess.DEVNULL)
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines() == [
+        f"fdi sim: error: --link {link}: cannot write there: directory {link.parent} does "
+        f"not exist"]
+
+
 @pytest.mark.slow
 def test_link_measurement_tool_reports_every_transport(tmp_path):
     from hil_sim.devices import measure

@@ -76,8 +76,10 @@ def _bad(args, capsys):
 def test_bad_input_is_one_line_and_exit_2(files, tmp_path, capsys):
     model = str(files / "nominal.yaml")
     assert "no such file" in _bad([str(tmp_path / "none.csv"), "--model", model], capsys)
-    assert "no column" in _bad([str(files / "coulomb.csv"), "--model", model,
-                                "--output", "torque"], capsys)
+    assert "--output torque: no column" in _bad([str(files / "coulomb.csv"), "--model", model,
+                                                "--output", "torque"], capsys)
+    assert "--input u: no column" in _bad([str(files / "coulomb.csv"), "--model", model,
+                                           "--input", "u"], capsys)
     save_model(tmp_path / "m128.yaml", FdiModel(fs=128.0, plant_b=np.array([0.0, 1.0]),
                                                 plant_a=np.array([1.0, -0.5])))
     assert "fs" in _bad([str(files / "coulomb.csv"), "--model", str(tmp_path / "m128.yaml")],
@@ -104,6 +106,15 @@ def test_bad_input_is_one_line_and_exit_2(files, tmp_path, capsys):
                            str(tmp_path / "broken.yaml")], capsys)
     assert "does not exist" in _bad([str(files / "coulomb.csv"), "--model", model, "--json",
                                    str(tmp_path / "missing_dir" / "r.json")], capsys)
+    # the report overwrote the recording; a plot's unknown ending was a traceback at the end
+    rec_before = (files / "coulomb.csv").read_bytes()
+    assert "is also an input" in _bad([str(files / "coulomb.csv"), "--model", model, "--json",
+                                       str(files / "coulomb.csv")], capsys)
+    assert "is also an input" in _bad([str(files / "coulomb.csv"), "--model", model, "-o",
+                                       str(files / "coulomb.csv")], capsys)
+    assert (files / "coulomb.csv").read_bytes() == rec_before
+    assert "cannot write a plot as .foo" in _bad([str(files / "coulomb.csv"), "--model", model,
+                                                  "--plot", str(tmp_path / "x.foo")], capsys)
 
 
 def test_any_column_names(tmp_path, capsys):

@@ -233,9 +233,11 @@ def test_finding_recordings(tmp_path):
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes the local"),
     (["--workers", "0"], "at least 1"),
     (["--out", "r.xlsx"], ".csv or .parquet"),
+    (["--out", "RECS/rig-a-00.csv"], "is also an input"),  # the table replaced a recording
 ])
 def test_user_mistakes_exit_2_with_one_line(fleet, capsys, extra, message):
     root, _, model_map = fleet
+    extra = [arg.replace("RECS", str(root / "recs")) for arg in extra]
     code = main(["fleet-replay", str(root / "recs"), "--model-map", str(model_map), *extra])
     err = capsys.readouterr().err
     assert code == 2 and message in err and err.count("\n") == 1, err
@@ -331,3 +333,35 @@ def test_a_worker_that_dies_on_a_file_is_that_files_row(fleet, tmp_path):
     assert rows[1]["file"] == str(killer) and rows[1]["samples"] is None
     error = rows[1]["error"]
     assert error.startswith("worker failed: KilledWorker") and "\n" not in error
+
+
+def test_ctrl_c_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_path):
+    """Ctrl-C reaches the whole foreground process group: each Dask worker process printed
+    a KeyboardInterrupt traceback while `fdi fleet-replay` itself stopped cleanly."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    root, _, model_map = fleet
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "fdi_daemon", "fleet-replay", str(root / "recs"), "--model-map",
+         str(model_map), "--workers", "2", "--out", str(tmp_path / "rows.csv")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    parent = psutil.Process(proc.pid)
+    seen: set[psutil.Process] = set()
+    deadline = time.monotonic() + 60
+    while proc.poll() is None and time.monotonic() < deadline:
+        children = parent.children(recursive=True)
+        seen.update(children)
+        if len(children) >= 2:  # the workers run: press Ctrl-C (again, until it stops)
+            os.killpg(proc.pid, signal.SIGINT)
+        time.sleep(0.5)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, (proc.returncode, err)
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    assert err.strip().splitlines() == ["fdi fleet-replay: interrupted"]
+    time.sleep(1)
+    assert [p.pid for p in seen if p.is_running() and p.status() != psutil.STATUS_ZOMBIE] == []

@@ -272,3 +272,35 @@ def test_out_of_band_residual_input_correlation_gets_a_verdict(chirps, tmp_path,
     assert f"fdi diagnose {chirps[1]} --model {tmp_path / 'm2.yaml'}" in verdict
     assert xcorr_verdict({"max_abs": 0.05, "bound": 0.057}, 4, "r.csv", "m.yaml") == []
     assert len(xcorr_verdict({"max_abs": 0.06, "bound": 0.057}, 4, "r.csv", "m.yaml")) == 1
+
+
+def test_outputs_that_would_destroy_an_input_and_out_of_range_options(identified, chirps,
+                                                                      tmp_path, capsys):
+    """`-o` naming the recording replaced it with the model; a plot's unknown ending was a
+    matplotlib traceback after the fit; an unstable plant, a huge γ grid or G_e order were
+    a LinAlgError / MemoryError: one line each, before any work, the inputs untouched."""
+    model, _ = identified
+    rec = str(chirps[0])
+    before = {p: p.read_bytes() for p in (chirps[0], chirps[1], model)}
+    out = str(tmp_path / "o.yaml")
+    assert "is also an input" in _bad(["identify", rec, "-o", rec], capsys)
+    assert "is also an input" in _bad(["identify", rec, "-o", out, "--validate",
+                                       str(chirps[1]), "--plot", str(chirps[1])], capsys)
+    assert "cannot write a plot as .txt" in _bad(["identify", rec, "-o", out, "--plot",
+                                                  str(tmp_path / "bode.txt")], capsys)
+    for value in ("nan", "2", "-1"):
+        assert "--min-coherence" in _bad(["identify", rec, "-o", out, "--min-coherence",
+                                          value], capsys)
+    sig = ["signature", rec, "--model", str(model), "--fault-window", "1:3"]
+    assert "is also an input" in _bad([*sig, "-o", rec], capsys)
+    assert "is also an input" in _bad([*sig, "-o", out, "--plot", str(model)], capsys)
+    assert "name the same file" in _bad([*sig, "-o", out, "--plot", out], capsys)
+    assert "more than 2001" in _bad([*sig, "-o", out, "--gamma-grid", "0:1e9:1e-9"], capsys)
+    assert "--orders" in _bad([*sig, "-o", out, "--orders", "400:300:0"], capsys)
+    unstable = yaml.safe_load(model.read_text())
+    unstable["plant"]["a"] = [1.0, -3.0, 3.0]
+    (tmp_path / "unstable.yaml").write_text(yaml.safe_dump(unstable))
+    assert "not stable" in _bad(["signature", rec, "--model", str(tmp_path / "unstable.yaml"),
+                                 "--fault-window", "1:3", "-o", out], capsys)
+    assert {p: p.read_bytes() for p in before} == before
+    assert not (tmp_path / "o.yaml").exists()

@@ -167,6 +167,9 @@ def test_make_link_validates_and_names_the_key():
         link_settings({"kind": "modbus-tcp", "word_order": "middle"})
     with pytest.raises(ConfigError, match="link.port: expected int"):
         link_settings({"kind": "modbus-tcp", "port": "502"})
+    for port in (99999, 0, -1):  # they were LINK LOST events, "cannot connect", for ever
+        with pytest.raises(ConfigError, match=f"link.port: {port} is not a TCP port"):
+            link_settings({"kind": "modbus-tcp", "port": port})
     with pytest.raises(ConfigError, match="link.reconnect.backoff_max_s"):
         link_settings({"kind": "sim", "reconnect": {"backoff_max_s": "soon"}})
     with pytest.raises(ConfigError, match="link.realtime: expected bool"):

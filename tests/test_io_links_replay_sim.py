@@ -105,3 +105,16 @@ def test_sim_link_in_real_time():
         out += link.read(0.05)
     seqs = [s.seq for s in out]
     assert seqs == list(range(len(seqs))) and 64 <= len(seqs) <= 256
+
+
+def test_a_recording_at_another_rate_than_the_monitors_is_refused_on_open(tmp_path):
+    """`fdi run` with a replay link ran a 128 Hz file through a 256 Hz model as if it were
+    256 Hz (`fdi replay` refuses it): every time and rate came out wrong, silently."""
+    slow = write_recording(tmp_path / "slow.csv", recording(fs=128.0))
+    config = {"kind": "replay", "path": str(slow), "realtime": False}
+    with pytest.raises(RecordingError, match="sampled at 128 Hz but the model is for 256 Hz"):
+        make_link(config, fs_hz=256.0).open()
+    link = make_link(config, fs_hz=128.0)  # the right rate, or no rate given: as before
+    link.open()
+    assert len(drain(link)) == 600
+    make_link(config).open()

@@ -103,3 +103,22 @@ def test_unknown_keys_of_other_tools_are_kept_with_a_warning(tmp_path, caplog):
         f"{path}: keeping key 'our_lab_notes', which this version does not know"]
     back = load_model(save_model(tmp_path / "again.yaml", model))
     assert back.extra == model.extra
+
+
+def test_a_failed_write_keeps_the_model_there_before(tmp_path, monkeypatch):
+    """`fdi signature -o M --model M` rewrites the model it read: a write that fails half-way
+    (disk full, Ctrl-C) must leave M as it was, not truncated."""
+    import yaml
+
+    path = save_model(tmp_path / "m.yaml", sample_model())
+    before = path.read_bytes()
+
+    def full_disk(data, fh, **kwargs):
+        fh.write("fs: 2")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(yaml, "safe_dump", full_disk)
+    with pytest.raises(ConfigError, match="No space left"):
+        save_model(path, sample_model())
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["m.yaml"]

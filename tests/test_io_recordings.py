@@ -1,8 +1,10 @@
 """The recording contract: formats round-trip, sampling checks, clear errors."""
 
 import gzip
+import io
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -195,6 +197,12 @@ def test_cli_never_shows_a_traceback_for_a_bad_subcommand():
     assert "Traceback" not in proc.stderr
 
 
+def _npz_bytes() -> bytes:
+    buf = io.BytesIO()
+    np.savez(buf, t=np.arange(500) / FS, v_in=np.zeros(500), accel=np.zeros(500))
+    return buf.getvalue()
+
+
 def _npz_with_meta(path, meta_text):
     np.savez(path, t=np.arange(5) / FS, v_in=np.zeros(5), accel=np.zeros(5),
              __meta__=np.array(meta_text))
@@ -203,7 +211,10 @@ def _npz_with_meta(path, meta_text):
 @pytest.mark.parametrize(
     "name, write, message",
     [
-        ("bad.npz", lambda p: p.write_bytes(b"PK\x03\x04 not really a zip"), "cannot read"),
+        ("bad.npz", lambda p: p.write_bytes(b"PK\x03\x04 not really a zip"), "not an .npz file"),
+        # numpy took these for a pickle and suggested allow_pickle=True
+        ("noise.npz", lambda p: p.write_bytes(bytes(range(256)) * 8), "not an .npz file"),
+        ("cut.npz", lambda p: p.write_bytes(_npz_bytes()[:300]), "not an .npz file"),
         ("empty.mat", lambda p: p.write_bytes(b""), "not a MATLAB v5 file"),
         ("zeros.mat", lambda p: p.write_bytes(bytes(200)), "not a MATLAB v5 file"),
         ("list.npz", lambda p: _npz_with_meta(p, "[1, 2]"), "must be a JSON object"),
@@ -218,3 +229,51 @@ def test_corrupt_binary_files_and_absurd_counters_are_clear_errors(tmp_path, nam
     write(path)
     with pytest.raises(RecordingError, match=message):
         read_recording(path)
+
+
+def test_a_spreadsheet_csv_with_a_byte_order_mark_is_read(tmp_path):
+    """The mark was read into the first name: "missing column(s) t (found: \ufefft, ...)"."""
+    path = tmp_path / "excel.csv"
+    path.write_bytes(b"\xef\xbb\xbft,v_in,accel\r\n0,1,2\r\n0.00390625,1,2\r\n")
+    assert list(read_recording(path).columns) == ["t", "v_in", "accel"]
+
+
+@pytest.mark.parametrize("write, message", [
+    (lambda p: np.savez(p, t=np.arange(5) / FS, v_in=np.zeros(4), accel=np.zeros(5)),
+     "columns differ in length"),
+    (lambda p: p.write_text("t,v_in,accel\n0,0,0\n0,0,0\n0,0,0\n"), "never increases"),
+])
+def test_errors_found_after_reading_name_the_file(tmp_path, write, message):
+    path = tmp_path / ("r.npz" if "length" in message else "r.csv")
+    write(path)
+    with pytest.raises(RecordingError, match=message) as info:
+        read_recording(path)
+    assert str(info.value).startswith(f"{path}: ")
+
+
+def test_writing_onto_a_directory_is_a_recording_error(tmp_path):
+    (tmp_path / "r.csv").mkdir()  # it was an IsADirectoryError traceback from `fdi sim record`
+    with pytest.raises(RecordingError, match="cannot write the recording"):
+        write_recording(tmp_path / "r.csv", make_recording(n=4))
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".csv.gz", ".npz", ".mat"])
+def test_an_interrupted_write_leaves_the_old_file_and_no_partial_one(tmp_path, monkeypatch,
+                                                                      suffix):
+    """Ctrl-C while a long recording was written left a truncated file under its name."""
+    import fdi_daemon.io.recordings as recordings
+
+    path = write_recording(tmp_path / f"r{suffix}", make_recording(n=4))
+    before = path.read_bytes()
+
+    def cut(target, *args, **kwargs):
+        Path(target).write_bytes(b"half a file")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(recordings, "_write_csv", cut)
+    monkeypatch.setattr(recordings.np, "savez_compressed", cut)
+    monkeypatch.setattr("scipy.io.savemat", cut)
+    with pytest.raises(KeyboardInterrupt):
+        write_recording(path, make_recording(n=8))
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]

@@ -183,4 +183,62 @@ def test_trace_of_the_realtime_path_and_bad_arguments(files, tmp_path, capsys):
     assert main(["replay", str(short), "--model", str(model), "--trace",
                  str(tmp_path / "no" / "dir.csv")]) == 2
     err = capsys.readouterr().err
-    assert "--trace-every must be" in err and "cannot write the trace" in err
+    assert "--trace-every must be" in err and "directory" in err and "does not exist" in err
+
+
+@pytest.mark.parametrize("option, target, fragment", [
+    ("--trace", "rec", "is also an input"),        # it replaced the recording with the trace
+    ("--events", "rec", "is also an input"),
+    ("--summary", "model", "is also an input"),
+    ("--plot", "out.txt", "cannot write a plot as .txt"),   # a matplotlib traceback after the run
+    ("--summary", "events", "name the same file"),
+    ("--events", "no/dir.jsonl", "does not exist"),
+])
+def test_outputs_that_cannot_be_written_or_would_destroy_an_input(files, tmp_path, capsys,
+                                                                  option, target, fragment):
+    """Refused before the replay, with one line; the inputs stay as they were and nothing is
+    written."""
+    root, model, rec = files
+    before = {rec: rec.read_bytes(), model: model.read_bytes()}
+    events = tmp_path / "ev.jsonl"
+    path = {"rec": rec, "model": model, "events": events}.get(target, tmp_path / target)
+    argv = ["replay", str(rec), "--model", str(model), option, str(path)]
+    if option != "--events":
+        argv += ["--events", str(events)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"fdi replay: error: {option}") and err.count("\n") == 1
+    assert fragment in err
+    assert {p: p.read_bytes() for p in before} == before
+    assert not events.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_in_a_paced_replay_keeps_what_was_replayed(files, tmp_path, capsys,
+                                                          monkeypatch):
+    """Ctrl-C in `--realtime` lost every event already shown: no --events, --summary or
+    --trace was written. Now the replay stops there, the outputs hold the part replayed,
+    and the exit code is 130 with one line on stderr."""
+    import time
+
+    root, model, rec = files
+    calls = 0
+
+    def sleep(seconds):  # the pacing sleeps once per sample: Ctrl-C at the 1000th
+        nonlocal calls
+        calls += 1
+        if calls == 1000:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(time, "sleep", sleep)
+    out = {name: tmp_path / name for name in ("ev.jsonl", "sum.json", "trace.csv")}
+    assert main(["replay", str(rec), "--model", str(model), "--realtime",
+                 "--events", str(out["ev.jsonl"]), "--summary", str(out["sum.json"]),
+                 "--trace", str(out["trace.csv"])]) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("fdi replay: interrupted at t = ")
+    summary = json.loads(out["sum.json"].read_text())
+    assert 900 <= summary["samples"] < 1536
+    assert summary["interrupted_at_t"] == pytest.approx(summary["samples"] / 256.0, abs=0.01)
+    kinds = [e["kind"] for e in read_events(out["ev.jsonl"])]
+    assert kinds[:2] == ["calibrated", "fault_detected"]  # the fault comes at 2.9 s
+    assert len(_trace_rows(out["trace.csv"])[1]) == summary["samples"]

@@ -51,6 +51,8 @@ def test_unknown_keys_are_errors_naming_the_path(data, key):
     ({"service": {"queue_size": 1.5}}, "service.queue_size"),
     ({"service": {"deadline_s": None}}, "service.deadline_s"),
     ({"sinks": "all"}, "sinks"),
+    ({"alarms": {"steps": "x"}}, "alarms.steps"),  # a KeyError naming the type list
+    ({"alarms": {"steps": [3, 1]}}, "alarms.steps"),
 ])
 def test_bad_values_are_errors_naming_the_key(data, key):
     with pytest.raises(ConfigError) as info:

@@ -155,9 +155,13 @@ def test_cli_record_npz(tmp_path):
     ([str(scenario_path("ident_chirp")), "-o", "X.txt"], "unknown recording format"),
     ([str(scenario_path("ident_chirp")), "-o", "X.csv", "--duration", "-1"], "--duration"),
     ([str(scenario_path("ident_chirp")), "-o", "X.dir/x.csv"], "does not exist"),
+    # an IsADirectoryError and a MemoryError traceback, after the simulation / before it
+    ([str(scenario_path("ident_chirp")), "-o", "X.made_dir"], "is a directory"),
+    ([str(scenario_path("ident_chirp")), "-o", "X.csv", "--duration", "1e12"], "memory"),
 ])
 def test_cli_record_bad_input_exits_2_with_one_line(tmp_path, capsys, argv_tail, fragment):
     argv_tail = [str(tmp_path / a) if a.startswith("X.") else a for a in argv_tail]
+    (tmp_path / "X.made_dir").mkdir()
     assert main(["sim", "record", *argv_tail]) == 2
     err = capsys.readouterr().err.strip()
     assert fragment in err

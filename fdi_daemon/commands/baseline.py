@@ -23,6 +23,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import math
+
     import numpy as np
 
     from fdi_daemon.commands.identify import load_io
@@ -31,10 +33,13 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.errors import UserError
     from fdi_daemon.ident import provenance
     from fdi_daemon.io.model_file import load_model, save_model
+    from fdi_daemon.io.outputs import check_outputs
     from fdi_daemon.io.recordings import same_rate
 
-    if not args.min_seconds > 0 or args.max_bins < 1:
-        raise UserError("--min-seconds must be > 0 and --max-bins >= 1")
+    if not (math.isfinite(args.min_seconds) and args.min_seconds > 0) or args.max_bins < 1:
+        raise UserError("--min-seconds must be a finite number > 0 and --max-bins >= 1")
+    check_outputs({"--output": args.output}, (args.recording, args.model),
+                  rewrites={"--output": args.model})
     model = load_model(args.model)
     rec, v_in, accel = load_io(args.recording)
     if not same_rate(rec.fs, model.fs):

@@ -26,8 +26,9 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.bench.ident import bench_ident
     from fdi_daemon.bench.monitor import bench_monitor
     from fdi_daemon.bench.sim import bench_sim
-    from fdi_daemon.io.outputs import write_json
+    from fdi_daemon.io.outputs import check_outputs, write_json
 
+    check_outputs({"--json": args.json})  # it failed after minutes of measuring
     console = Console()
     results: dict = {"machine": {"python": platform.python_version(),
                                  "processor": platform.processor() or platform.machine(),

@@ -39,11 +39,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="write the model with the added effects")
 
 
-def _column(rec, name: str, path: str):
+def _column(rec, name: str, path: str, option: str):
     import numpy as np
 
     from fdi_daemon.errors import RecordingError
 
+    if name not in rec.columns:
+        raise RecordingError(f"{path}: {option} {name}: no column of that name "
+                             f"(columns: {', '.join(rec.columns)})")
     values = rec[name]
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
@@ -57,23 +60,19 @@ def run(args: argparse.Namespace) -> int:
 
     from fdi_daemon.errors import UserError
     from fdi_daemon.io.model_file import FdiModel, load_model, save_model
-    from fdi_daemon.io.outputs import write_json
+    from fdi_daemon.io.outputs import check_outputs, write_json
     from fdi_daemon.io.recordings import read_recording, same_rate
-
-    from pathlib import Path
 
     if args.order is not None and not 1 <= args.order <= 12:
         raise UserError(f"--order must be 1..12, got {args.order}")
-    for target in (args.json, args.plot, args.out):
-        if target and not Path(target).resolve().parent.is_dir():
-            raise UserError(f"{target}: cannot write there: directory "
-                            f"{Path(target).parent} does not exist")
+    check_outputs({"--json": args.json, "--plot": args.plot, "-o": args.out},
+                  (args.recording, args.model), plots=("--plot",), rewrites={"-o": args.model})
     out_col = args.output or OUTPUT_COLUMNS[args.output_kind]
     # only the time and the two columns used are required (real data name them freely)
     rec = read_recording(args.recording, required=("t",), columns=args.columns)
     fs = rec.fs
-    u = _column(rec, args.input, args.recording)
-    y = _column(rec, out_col, args.recording)
+    u = _column(rec, args.input, args.recording, "--input")
+    y = _column(rec, out_col, args.recording, "--output")
     min_samples = max(256, 40 * ((args.order or 8) + 2))
     if len(u) < min_samples:
         raise UserError(f"{args.recording}: {len(u)} samples; diagnose needs at least "

@@ -32,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.fleet.cluster import dask_client, replay_fleet
     from fdi_daemon.fleet.inputs import ModelMap, find_recordings
     from fdi_daemon.fleet.table import write_table
+    from fdi_daemon.io.outputs import check_outputs
 
     if args.scheduler is not None and args.workers is not None:
         raise UserError("--workers sizes the local cluster; a --scheduler has its own workers")
@@ -42,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--out {args.out}: the results table is written as .csv or .parquet")
     models = ModelMap.single(args.model) if args.model else ModelMap.load(args.model_map)
     files = find_recordings(args.recordings)
+    check_outputs({"--out": args.out}, files)
     jobs = [(file, models.model_for(file)) for file in files]
 
     progress, task = _progress(len(jobs))

@@ -84,10 +84,15 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.errors import UserError
     from fdi_daemon.ident import plant, provenance
     from fdi_daemon.io.model_file import FdiModel, save_model
+    from fdi_daemon.io.outputs import check_outputs
     from fdi_daemon.io.recordings import same_rate
 
     if args.order < 1 or args.order > 12:
         raise UserError(f"--order must be 1..12, got {args.order}")
+    if not 0 <= args.min_coherence <= 1:
+        raise UserError(f"--min-coherence must lie in [0, 1], got {args.min_coherence}")
+    check_outputs({"--output": args.output, "--plot": args.plot},
+                  (args.recording, args.validate), plots=("--plot",))
     band = None
     if args.band is not None:
         band = parse_range(args.band, "--band")

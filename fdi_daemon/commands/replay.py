@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 
 from fdi_daemon.io.columns import add_columns_option
 
@@ -43,16 +44,21 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.detect.summary import write_summary
     from fdi_daemon.errors import UserError
     from fdi_daemon.fleet.replay_one import replay_recording
+    from fdi_daemon.io.outputs import check_outputs
 
     if args.dashboard and not args.realtime:
         raise UserError("--dashboard needs --realtime (a batch replay is over before a "
                         "screen could show it)")
     if args.trace_every < 1:
         raise UserError("--trace-every must be a whole number >= 1")
+    check_outputs({"--events": args.events, "--summary": args.summary, "--plot": args.plot,
+                   "--trace": args.trace}, (args.recording, args.model, args.alarms),
+                  plots=("--plot",))
 
     settings, status_period_s = _alarm_settings(args.alarms)
     # rows the trace file or the plot shows (the batch path traces them and the readings')
     shown = 1
+    stopped: dict = {}  # a paced replay stopped by Ctrl-C: where
 
     def runner(monitor, rec, stride):
         nonlocal shown
@@ -65,13 +71,15 @@ def run(args: argparse.Namespace) -> int:
             return replay_with_dashboard(lambda on_tick: _paced(monitor, rec, on_tick),
                                          monitor, str(args.recording), args.model, n)
         if args.realtime:
-            return _paced(monitor, rec)
+            return _paced(monitor, rec, stopped=stopped)
         return _batch(monitor, rec, math.gcd(shown, stride))
 
     replay = replay_recording(args.recording, args.model, runner, columns=args.columns,
                               alarm_settings=settings, status_period_s=status_period_s)
     rec, monitor, events, trace, summary = (replay.recording, replay.monitor, replay.events,
                                             replay.trace, replay.summary)
+    if stopped:  # the outputs hold what was replayed
+        summary.update(samples=stopped["samples"], interrupted_at_t=stopped["t"])
     if args.events:
         from fdi_daemon.detect.events import write_events
 
@@ -95,6 +103,12 @@ def run(args: argparse.Namespace) -> int:
     _report(events, summary)
     if monitor.baseline_note:
         print(f"note: {monitor.baseline_note}")
+    if stopped:
+        import sys
+
+        print(f"fdi replay: interrupted at t = {stopped['t']:.4f} s; the outputs hold the "
+              f"{stopped['samples']} sample(s) replayed", file=sys.stderr)
+        return 130
     return 0
 
 
@@ -151,13 +165,14 @@ def _batch(monitor, rec, trace_every: int):
                            progress=lambda done, total: progress.update(task, completed=done))
 
 
-def _paced(monitor, rec, on_tick=None):
+def _paced(monitor, rec, on_tick=None, stopped: dict | None = None):
     """Samples at fs through Monitor.step (the daemon's path).
 
     Without ``on_tick``: a progress bar and the events printed as they come. With it, a live
     view takes the screen: ``on_tick(monitor, t, new_events)`` is called after every sample.
+    With ``stopped``, Ctrl-C ends the replay there (``stopped`` gets its "t" and "samples")
+    and the events and trace so far are returned, so that the outputs keep them.
     """
-    import contextlib
     import time
 
     import numpy as np
@@ -179,7 +194,9 @@ def _paced(monitor, rec, on_tick=None):
     rows, last_seq = 0, None
     progress, task = (None, None) if on_tick is not None else _progress(n, "replay (real time)")
     start = time.monotonic()
-    with progress if progress is not None else contextlib.nullcontext():
+    k = 0
+    with (progress if progress is not None else contextlib.nullcontext(),
+          _stop_on_interrupt(stopped, lambda: (float(t[k]), k))):
         for k in range(n):
             delay = start + k * period - time.monotonic()
             if delay > 0:
@@ -203,6 +220,18 @@ def _paced(monitor, rec, on_tick=None):
     out = {name: values[:rows] for name, values in out.items()}
     trace = MonitorTrace(every=1, state=out.pop("state").astype(np.int8), **out)
     return events, trace
+
+
+@contextlib.contextmanager
+def _stop_on_interrupt(stopped: dict | None, where):
+    """Ctrl-C inside ends the block quietly when ``stopped`` is given, noting ``where()``
+    (t, samples done) in it; without ``stopped`` it propagates as usual."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        if stopped is None:
+            raise
+        stopped["t"], stopped["samples"] = where()
 
 
 def _line(event: dict) -> str:

@@ -14,6 +14,8 @@ HELP = "identify the friction signature (G_e, gamma_f) from a window with a fric
 #: computed from the valve voltage and the accelerometer alone (the position observer needs
 #: a position sensor on every sample, a choice the user makes).
 AUTO_METHODS = ("highpass", "model_observer")
+#: highest G_e order (NB, NF) accepted, as `fdi identify --order`
+MAX_ORDER = 12
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -74,8 +76,10 @@ def _orders(text: str) -> tuple[int, int, int]:
 
     values = parse_range(text, "--orders", 3)
     nb, nf, nk = (int(v) for v in values)
-    if any(v != int(v) for v in values) or nb < 1 or nf < 0 or nk < 0:
-        raise UserError(f"--orders must be whole numbers NB>=1:NF>=0:NK>=0, got {text!r}")
+    if (any(v != int(v) for v in values) or not 1 <= nb <= MAX_ORDER
+            or not 0 <= nf <= MAX_ORDER or nk < 0):
+        raise UserError(f"--orders must be whole numbers 1<=NB<={MAX_ORDER}:0<=NF<={MAX_ORDER}"
+                        f":NK>=0, got {text!r}")
     return nb, nf, nk
 
 
@@ -85,12 +89,14 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.commands.identify import load_io, parse_range
     from fdi_daemon.core.velocity import DEFAULT_SETTINGS
     from fdi_daemon.core.velocity_observer import velocity_from_settings
+    from fdi_daemon.detect.monitor import check_stable
     from fdi_daemon.detect.settings import velocity_settings
     from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.errors import ConfigError, UserError
     from fdi_daemon.ident import provenance
     from fdi_daemon.ident import signature as sig
     from fdi_daemon.io.model_file import FaultFilter, load_model, save_model
+    from fdi_daemon.io.outputs import check_outputs
     from fdi_daemon.io.recordings import same_rate
 
     t0, t1 = parse_range(args.fault_window, "--fault-window")
@@ -108,8 +114,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--flat-fraction must lie in (0, 1]")
     if not args.min_depth >= 0:
         raise UserError("--min-depth must be >= 0")
+    check_outputs({"--output": args.output, "--plot": args.plot}, (args.recording, args.model),
+                  plots=("--plot",), rewrites={"--output": args.model})
 
     model = load_model(args.model)
+    check_stable(model.plant_a, "plant.a")  # an unstable Ĝ gives no residual to fit
     rec, v_in, accel = load_io(args.recording, args.columns)
     if not same_rate(rec.fs, model.fs):
         raise UserError(f"{args.recording}: fs = {rec.fs:g} Hz but the model has "

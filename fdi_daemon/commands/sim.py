@@ -42,10 +42,10 @@ def run(args: argparse.Namespace) -> int:
 def run_record(args: argparse.Namespace) -> int:
     import sys
     import time
-    from pathlib import Path
 
     from fdi_daemon.errors import UserError
-    from fdi_daemon.io.recordings import write_recording
+    from fdi_daemon.io.outputs import check_outputs
+    from fdi_daemon.io.recordings import check_format, write_recording
     from hil_sim.scenarios import load_scenario, simulate
 
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
@@ -53,9 +53,8 @@ def run_record(args: argparse.Namespace) -> int:
     if args.seed is not None and args.seed < 0:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
     scenario = load_scenario(args.scenario)
-    out_dir = Path(args.output).parent
-    if not out_dir.is_dir():  # fail before a long simulation, not after it
-        raise UserError(f"{args.output}: directory {out_dir} does not exist")
+    check_outputs({"-o": args.output}, (args.scenario,))  # before a long simulation
+    check_format(args.output)
     duration = scenario.duration_s if args.duration is None else args.duration
     start = time.perf_counter()
     if args.quiet or duration < PROGRESS_MIN_S:
@@ -110,11 +109,13 @@ def run_serve(args: argparse.Namespace) -> int:
     import sys
 
     from fdi_daemon.errors import UserError
+    from fdi_daemon.io.outputs import check_outputs
     from hil_sim.devices import SimulatedDevice, realtime_rig
     from hil_sim.devices.serve import parse_host_port, serve_until_signalled
 
     if args.seed is not None and args.seed < 0:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
+    check_outputs({"--link": args.link})
     host, port = "127.0.0.1", 0
     if args.modbus_tcp is not None:
         try:

@@ -28,6 +28,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from fdi_daemon.errors import UserError
+    from fdi_daemon.io.outputs import check_outputs
     from fdi_daemon.service.config import default_state_dir
     from fdi_daemon.service.trend import TREND_FILE, read_trend, trend_meta
 
@@ -35,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     if not path.is_file():
         raise UserError(f"{path}: no trend file (`fdi run` writes one row a minute to "
                         f"alarms.trend in its state directory)")
+    check_outputs({"--csv": args.csv, "--plot": args.plot}, (path,), plots=("--plot",))
     since = _since(args.since)
     try:
         data = read_trend(path, since)

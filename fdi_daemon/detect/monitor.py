@@ -82,8 +82,8 @@ class Monitor:
                 or not isinstance(self.accel_limit_mps2, (int, float))
                 or not self.accel_limit_mps2 > 0):
             raise ConfigError("detector.accel_limit_mps2 must be a positive number")
-        _check_stable(model.fault_filter.f, "fault_filter.f")
-        _check_stable(model.plant_a, "plant.a")
+        check_stable(model.fault_filter.f, "fault_filter.f")
+        check_stable(model.plant_a, "plant.a")
         self.model = model
         self.settings = DetectorSettings.from_mapping(detector_map)
         self.fs_hz = float(model.fs)
@@ -463,7 +463,7 @@ def _finite(value: float) -> float | None:
     return float(value) if value is not None and math.isfinite(value) else None
 
 
-def _check_stable(a: np.ndarray, name: str) -> None:
+def check_stable(a: np.ndarray, name: str) -> None:
     """A monitor built on an unstable (or marginally stable) filter would drift: refuse it."""
     a = np.asarray(a, dtype=float)
     if a.size > 1:

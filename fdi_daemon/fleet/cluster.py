@@ -39,10 +39,41 @@ def dask_client(scheduler: str | None, workers: int):
         with client:
             yield client
         return
-    with dd.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                         host="127.0.0.1", dashboard_address=None,
-                         silence_logs=logging.ERROR) as cluster, dd.Client(cluster) as client:
-        yield client
+    with _sigint_ignored():  # the worker processes inherit it: Ctrl-C is the parent's job
+        cluster = dd.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=None,
+                                  # no dashboard, yet the scheduler's HTTP server took port
+                                  # 8787 (and warned "already in use" beside another run)
+                                  scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                                  silence_logs=logging.ERROR)
+    try:
+        with dd.Client(cluster) as client:
+            yield client
+    finally:
+        with _sigint_ignored():  # a second Ctrl-C must not cut the workers' shutdown short
+            cluster.close()
+
+
+@contextlib.contextmanager
+def _sigint_ignored():
+    """SIGINT ignored while the local cluster starts (or stops) its worker processes.
+
+    Ctrl-C reaches every process of the terminal's foreground group: each worker printed
+    its own KeyboardInterrupt traceback while `fdi fleet-replay` stopped cleanly. An ignored
+    signal stays ignored in a spawned process (and Python then installs no handler), so the
+    workers leave Ctrl-C to the parent, which closes the cluster and stops them.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def replay_fleet(jobs: Sequence[tuple[str, str | None]], client,

@@ -61,11 +61,18 @@ EDGE_RECOMMENDATION = (
 LOW_VAF_PERCENT = 50.0
 
 
+#: most points of a γ grid (each is one output-error fit)
+MAX_GRID_POINTS = 2001
+
+
 def gamma_grid(lo: float = 0.0, hi: float = 10.0, step: float = 0.2) -> np.ndarray:
     """The γ grid lo, lo+step, .., hi (inclusive, as in the paper: 51 points by default)."""
     if not (step > 0 and hi > lo):
         raise ValueError(f"gamma grid needs hi > lo and step > 0 (got {lo}:{hi}:{step})")
     count = int(np.floor((hi - lo) / step + 1e-9)) + 1
+    if count > MAX_GRID_POINTS:
+        raise ValueError(f"{lo:g}:{hi:g}:{step:g} has {count:.3g} points, more than "
+                         f"{MAX_GRID_POINTS} (one fit each): use a larger step")
     return lo + step * np.arange(count)
 
 

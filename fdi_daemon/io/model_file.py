@@ -27,6 +27,7 @@ import yaml
 
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.known_keys import split_known
+from fdi_daemon.io.outputs import replaced_atomically
 from fdi_daemon.io.plain import plain_data
 from fdi_daemon.io.yaml_file import read_yaml
 
@@ -81,8 +82,8 @@ def _floats(values: np.ndarray) -> list[float]:
 def save_model(path: str | Path, model: FdiModel) -> Path:
     """Write the model as YAML (keys in the documented order)."""
     path = Path(path)
-    try:
-        with open(path, "w", encoding="utf-8") as fh:
+    try:  # whole or not at all: -o may name the model read, which a failed write must keep
+        with replaced_atomically(path) as target, open(target, "w", encoding="utf-8") as fh:
             yaml.safe_dump(model.to_dict(), fh, sort_keys=False, default_flow_style=None)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot write model: {exc.strerror or exc}") from None

@@ -1,8 +1,15 @@
-"""Writing what a command produces: PNG figures and JSON reports, with one-line errors."""
+"""Writing what a command produces: PNG figures and JSON reports, with one-line errors.
+
+`check_outputs` vets a command's output paths before the work starts, `replaced_atomically`
+writes a file so that a failed or interrupted write leaves the old one (or none) in place.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -19,10 +26,86 @@ def pyplot():
     return plt
 
 
+def check_outputs(outputs: Mapping[str, str | Path | None],
+                  inputs: Iterable[str | Path | None] = (), plots: Iterable[str] = (),
+                  rewrites: Mapping[str, str | Path | None] | None = None) -> None:
+    """Refuse, before any work, output paths that cannot be written or would destroy an input.
+
+    outputs: option -> path (None: not asked for); inputs: files the command reads; plots:
+    the options of ``outputs`` that are figures (their ending must name a format matplotlib
+    writes); rewrites: option -> the one input it may replace (``-o`` = ``--model``). Each
+    output's directory must exist, no output may be a directory, another input, or another
+    output. A UserError names the option.
+    """
+    given = {option: Path(path) for option, path in outputs.items() if path is not None}
+    read = [Path(path) for path in inputs if path is not None]
+    rewrites = rewrites or {}
+    seen: dict[Path, str] = {}
+    for option, path in given.items():
+        if path.is_dir():
+            raise UserError(f"{option} {path}: is a directory, not a file")
+        if path.exists() and not path.is_file():
+            continue  # a device or a pipe (/dev/null, /dev/stdout): written, never read back
+        if not path.resolve().parent.is_dir():
+            raise UserError(f"{option} {path}: cannot write there: directory {path.parent} "
+                            f"does not exist")
+        allowed = rewrites.get(option)
+        for source in read:
+            if _same_file(path, source) and not (allowed and _same_file(source, Path(allowed))):
+                also = "" if str(source) == str(path) else f" ({source})"
+                raise UserError(f"{option} {path}: is also an input of this command{also}; "
+                                f"writing it would destroy it")
+        key = path.resolve()
+        if key in seen:
+            raise UserError(f"{option} and {seen[key]} name the same file {path}")
+        seen[key] = option
+        if option in plots:
+            _check_plot_format(path, option)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
+    except OSError:
+        return False
+
+
+def _check_plot_format(path: Path, what: str) -> None:
+    """A figure file's ending must name a format matplotlib can write (png, pdf, svg, ...)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    suffix = path.suffix.lower().lstrip(".")
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if suffix and suffix not in formats:
+        raise UserError(f"{what} {path}: cannot write a plot as .{suffix} "
+                        f"(use e.g. .png, .pdf or .svg)")
+
+
+@contextlib.contextmanager
+def replaced_atomically(path: str | Path) -> Iterator[Path]:
+    """A temporary path next to ``path`` to write; renamed onto ``path`` when the block ends
+    normally, removed when it raises (an error, Ctrl-C): a failed or interrupted write never
+    leaves a truncated file nor spoils the one there before. A path that is there but no
+    regular file (a device, a pipe) is written in place; a symlink's target is replaced."""
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        yield path
+        return
+    path = Path(os.path.realpath(path))
+    tmp = path.with_name(f".tmp{os.getpid()}.{path.name}")  # same ending: same format
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+
+
 def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
     """Write ``fig`` as PNG and close it; an unwritable path is a UserError."""
     path = Path(path)
     try:
+        _check_plot_format(path, "plot")
         fig.savefig(path, dpi=dpi)
     except OSError as exc:
         raise UserError(f"{path}: cannot write the plot: {exc.strerror or exc}") from None

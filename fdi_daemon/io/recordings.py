@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from fdi_daemon.errors import RecordingError
+from fdi_daemon.io.outputs import replaced_atomically
 
 REQUIRED_COLUMNS = ("t", "v_in", "accel")
 
@@ -227,11 +228,17 @@ def read_recording(path: str | Path, strict: bool = True,
     if "t" in columns and not np.all(np.isfinite(columns["t"])):
         bad = int(np.flatnonzero(~np.isfinite(columns["t"]))[0])
         raise RecordingError(f"{path}: time column t is not finite at row {bad}")
-    rec = Recording(columns, meta)
+    try:
+        rec = Recording(columns, meta)
+    except RecordingError as exc:  # the message names no file
+        raise RecordingError(f"{path}: {exc}") from None
     if len(rec) < 2:
         raise RecordingError(f"{path}: holds {len(rec)} sample(s); at least 2 are needed")
     fs_meta = _meta_fs(meta, path)
-    rec.sampling = check_sampling(rec.t, columns.get("seq"), fs_meta)
+    try:
+        rec.sampling = check_sampling(rec.t, columns.get("seq"), fs_meta)
+    except RecordingError as exc:  # no rate to be found: the message names no file
+        raise RecordingError(f"{path}: {exc}") from None
     if strict and not rec.sampling.ok:
         raise RecordingError(f"{path}: irregular sampling, {rec.sampling.summary()}")
     return rec
@@ -268,9 +275,11 @@ def _one_line(exc: BaseException) -> str:
 
 
 def _open_text(path: Path):
+    # utf-8-sig: a spreadsheet's CSV starts with a byte order mark, which was read as part
+    # of the first column's name ("missing column t (found: \ufefft, ...)")
     if path.name.lower().endswith(".gz"):
-        return gzip.open(path, "rt", encoding="utf-8", newline="")
-    return open(path, "r", encoding="utf-8", newline="")
+        return gzip.open(path, "rt", encoding="utf-8-sig", newline="")
+    return open(path, "r", encoding="utf-8-sig", newline="")
 
 
 def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
@@ -356,6 +365,9 @@ def _as_counter(seq: np.ndarray, path: Path) -> np.ndarray:
 
 
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    if not zipfile.is_zipfile(path):  # else numpy takes it for a pickle and suggests loading it
+        raise RecordingError(f"{path}: cannot read recording: not an .npz file (a zip archive "
+                             f"of arrays, one per column): damaged, cut short or of another kind")
     with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
         meta = _meta_object(str(data["__meta__"])) if "__meta__" in data.files else {}
         columns = {}
@@ -407,24 +419,38 @@ def _column(arr: np.ndarray, name: str, path: Path) -> np.ndarray:
 # ----------------------------------------------------------------------------- writing
 
 
+def check_format(path: str | Path) -> None:
+    """A RecordingError unless the file's ending names a recording format."""
+    if not Path(path).name.lower().endswith((".csv", ".csv.gz", ".npz", ".mat")):
+        raise RecordingError(f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
+
+
 def write_recording(path: str | Path, rec: Recording) -> Path:
-    """Write ``rec`` in the format named by the file's ending; returns the path."""
+    """Write ``rec`` in the format named by the file's ending; returns the path.
+
+    The file appears whole or not at all (an error or Ctrl-C while writing leaves no
+    truncated recording, and the file there before intact); a path that cannot be written
+    is a RecordingError."""
     path = Path(path)
     name = path.name.lower()
     if path.parent and not path.parent.exists():
         raise RecordingError(f"{path}: directory {path.parent} does not exist")
+    check_format(path)
     meta = {str(k): str(v) for k, v in rec.meta.items()}
-    if name.endswith(".csv") or name.endswith(".csv.gz"):
-        _write_csv(path, rec.columns, meta)
-    elif name.endswith(".npz"):
-        np.savez_compressed(path, __meta__=np.array(json.dumps(meta)), **rec.columns)
-    elif name.endswith(".mat"):
-        from scipy.io import savemat
+    try:
+        with replaced_atomically(path) as target:
+            if name.endswith(".npz"):
+                np.savez_compressed(target, __meta__=np.array(json.dumps(meta)), **rec.columns)
+            elif name.endswith(".mat"):
+                from scipy.io import savemat
 
-        savemat(str(path), {**rec.columns, "meta_json": json.dumps(meta)},
-                do_compression=True, oned_as="column")
-    else:
-        raise RecordingError(f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
+                savemat(str(target), {**rec.columns, "meta_json": json.dumps(meta)},
+                        do_compression=True, oned_as="column")
+            else:
+                _write_csv(target, rec.columns, meta)
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot write the recording: "
+                             f"{exc.strerror or exc}") from None
     return path
 
 
@@ -447,11 +473,17 @@ def format_csv_rows(columns: dict[str, np.ndarray]) -> str:
     return buf.getvalue()
 
 
+#: characters written per call: Ctrl-C is handled between calls, and compressing an hour's
+#: CSV in one call kept it waiting some 20 s
+WRITE_CHUNK = 1 << 20
+
+
 def _write_csv(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str]) -> None:
     text = csv_header_lines(list(columns), meta) + format_csv_rows(columns)
     if path.name.lower().endswith(".gz"):
-        with gzip.open(path, "wt", encoding="utf-8", newline="") as fh:
-            fh.write(text)
+        opened = gzip.open(path, "wt", encoding="utf-8", newline="")
     else:
-        with open(path, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
+        opened = open(path, "w", encoding="utf-8", newline="")
+    with opened as fh:
+        for start in range(0, len(text), WRITE_CHUNK):
+            fh.write(text[start:start + WRITE_CHUNK])

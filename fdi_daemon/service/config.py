@@ -422,7 +422,8 @@ def _scalar(value: Any, spec: Field, path: str, source: str, present: bool) -> A
 
 
 def _type_names(types: tuple[type, ...]) -> str:
-    names = {int: "a whole number", float: "a number", str: "a string", bool: "true or false"}
+    names = {int: "a whole number", float: "a number", str: "a string", bool: "true or false",
+             list: "a list", dict: "a mapping"}
     if types == NUM:
         return "a number"
     return " or ".join(names[t] for t in types)

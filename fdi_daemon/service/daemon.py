@@ -287,7 +287,7 @@ class Daemon:
         """Open the sinks and make the link and the loop of a prepared config."""
         from fdi_daemon.io.links.base import make_reconnecting_link
 
-        link = make_reconnecting_link(link_config)
+        link = make_reconnecting_link(link_config, fs_hz=model.fs)
         keeper = self.alarm_keeper(config, model)
         sinks = Sinks(config, model.fs, link_config["kind"], self.board, keeper)
         model_info = {"path": str(config.model_path), "provenance": model.provenance}
@@ -308,6 +308,10 @@ class Daemon:
         config = load_config(self.config_path)
         if self.state_dir is not None:
             config.service["state_dir"] = str(self.state_dir)
+        if config.state_dir.exists() and not config.state_dir.is_dir():
+            # it was "cannot open an output: [Errno 17] File exists", blaming the config
+            raise ConfigError(f"state directory {config.state_dir} (--state-dir or "
+                              f"service.state_dir) is a file, not a directory")
         return config
 
     def alarm_keeper(self, config: RigConfig, model: FdiModel) -> AlarmKeeper:

@@ -313,6 +313,8 @@ def link_settings(config: Mapping[str, Any], where: str = "link") -> tuple[str, 
     reconnect = _validated(config.get("reconnect") or {}, RECONNECT_KEYS, f"{where}.reconnect")
     if "word_order" in settings and settings["word_order"] not in _WORD_ORDERS:
         raise ConfigError(f"{where}.word_order: {settings['word_order']!r} is not big or little")
+    if kind == "modbus-tcp" and not 0 < settings["port"] <= 65535:
+        raise ConfigError(f"{where}.port: {settings['port']} is not a TCP port (1..65535)")
     if "device_id" in settings and not 0 <= settings["device_id"] <= 247:
         raise ConfigError(f"{where}.device_id: {settings['device_id']} is not in 0..247")
     for key in ("poll_interval_s", "timeout_s", "speed", "fs_hz"):
@@ -323,8 +325,10 @@ def link_settings(config: Mapping[str, Any], where: str = "link") -> tuple[str, 
     return kind, settings, reconnect
 
 
-def make_link(config: Mapping[str, Any], where: str = "link") -> Link:
-    """Build one (unopened) link from a config mapping with ``kind`` and its settings."""
+def make_link(config: Mapping[str, Any], where: str = "link",
+              fs_hz: float | None = None) -> Link:
+    """Build one (unopened) link from a config mapping with ``kind`` and its settings;
+    ``fs_hz``: the rate the monitor runs at, which a replayed recording must have."""
     kind, s, _ = link_settings(config, where)
     if kind == "serial":
         from fdi_daemon.io.links.serial_link import SerialLink
@@ -343,13 +347,15 @@ def make_link(config: Mapping[str, Any], where: str = "link") -> Link:
         from fdi_daemon.io.links.replay_link import ReplayLink
 
         return ReplayLink(s["path"], realtime=s["realtime"], speed=float(s["speed"]),
-                          loop=s["loop"])
+                          loop=s["loop"], fs_hz=fs_hz)
     from fdi_daemon.io.links.sim_link import SimLink
 
     return SimLink(scenario=s["scenario"], seed=s["seed"], realtime=s["realtime"])
 
 
-def make_reconnecting_link(config: Mapping[str, Any], where: str = "link") -> ReconnectingLink:
-    """``ReconnectingLink`` around ``make_link(config)``, backoff from ``config["reconnect"]``."""
+def make_reconnecting_link(config: Mapping[str, Any], where: str = "link",
+                           fs_hz: float | None = None) -> ReconnectingLink:
+    """``ReconnectingLink`` around ``make_link(config, where, fs_hz)``, backoff from
+    ``config["reconnect"]``."""
     kind, _, reconnect = link_settings(config, where)
-    return ReconnectingLink(lambda: make_link(config, where), kind=kind, **reconnect)
+    return ReconnectingLink(lambda: make_link(config, where, fs_hz), kind=kind, **reconnect)

@@ -6,7 +6,8 @@
 gaps and duplicates are delivered as recorded, for the service to report), else the row
 index. With ``loop`` the file starts over and ``seq`` and ``t`` keep counting; without it,
 ``finished`` turns True after the last sample and ``read`` returns [] from then on.
-A file that cannot be read raises ``RecordingError`` (a user mistake) from ``open``.
+A file that cannot be read, or (with ``fs_hz``) is sampled at another rate than the
+monitor's, raises ``RecordingError`` (a user mistake) from ``open``.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from fdi_daemon.io.links.base import Link
-from fdi_daemon.io.recordings import read_recording
+from fdi_daemon.errors import RecordingError
+from fdi_daemon.io.recordings import read_recording, same_rate
 from fdi_daemon.io.sample import Sample
 
 
@@ -26,7 +28,8 @@ class ReplayLink(Link):
     kind = "replay"
 
     def __init__(self, path: str | Path, realtime: bool = True, speed: float = 1.0,
-                 loop: bool = False, chunk_samples: int = 256) -> None:
+                 loop: bool = False, chunk_samples: int = 256,
+                 fs_hz: float | None = None) -> None:
         if not speed > 0:
             raise ValueError("speed must be > 0")
         self.path = Path(path)
@@ -34,6 +37,7 @@ class ReplayLink(Link):
         self.speed = float(speed)
         self.loop = loop
         self.chunk_samples = int(chunk_samples)
+        self.fs_hz = fs_hz
         self.finished = False
         self._cols: tuple[np.ndarray, ...] | None = None
         self._pos = 0
@@ -49,6 +53,10 @@ class ReplayLink(Link):
 
     def open(self) -> None:
         rec = read_recording(self.path, strict=False)
+        if self.fs_hz is not None and not same_rate(rec.fs, self.fs_hz):
+            # as `fdi replay`: run at the model's rate, its times would be wrong throughout
+            raise RecordingError(f"{self.path}: sampled at {rec.fs:g} Hz but the model is for "
+                                 f"{self.fs_hz:g} Hz")
         n = len(rec)
         seq = rec.columns.get("seq")
         seq = np.arange(n, dtype=np.int64) if seq is None else seq.astype(np.int64)

@@ -221,3 +221,19 @@ def test_bad_options_and_an_output_naming_the_recording_are_one_line(tmp_path, c
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "is also an input" in err
     assert rec.read_bytes() == before and not (tmp_path / "m.yaml").exists()
+
+
+def test_a_recording_with_its_own_column_names_via_columns(tmp_path, fault_free,
+                                                           baseline_model):
+    """`--columns` as in the other commands: the same recording under other column names
+    gives the same bins."""
+    from fdi_daemon.io.recordings import Recording, read_recording
+
+    rec = read_recording(fault_free)
+    names = {"v_in": "valve_v", "accel": "acc_mps2"}
+    renamed = write_recording(tmp_path / "ff_named.npz", Recording(
+        {names.get(k, k): v for k, v in rec.columns.items()}, dict(rec.meta)))
+    out = tmp_path / "m.yaml"
+    assert main(["baseline", str(renamed), "--model", str(MODEL), "-o", str(out),
+                 "--columns", "v_in=valve_v,accel=acc_mps2"]) == 0
+    assert load_model(out).extra["baseline"]["bins"] == baseline_model.extra["baseline"]["bins"]

@@ -122,3 +122,12 @@ def test_a_failed_write_keeps_the_model_there_before(tmp_path, monkeypatch):
         save_model(path, sample_model())
     assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ["m.yaml"]
+
+
+def test_a_rewritten_model_keeps_its_permissions(tmp_path):
+    """The model is written to a new file and renamed over the old one: the old one's mode
+    (a model kept readable to its group only) stays."""
+    path = save_model(tmp_path / "m.yaml", sample_model())
+    path.chmod(0o640)
+    save_model(path, sample_model())
+    assert path.stat().st_mode & 0o777 == 0o640

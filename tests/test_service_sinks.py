@@ -9,6 +9,8 @@ import stat
 import threading
 from pathlib import Path
 
+import pytest
+
 from fdi_daemon.dashboard.client import fetch_snapshot
 from fdi_daemon.service.sinks import (STATUS_REGISTER_COUNT, STATUS_REGISTERS, EventLog,
                                       ModbusStatusServer, StatusBoard, StatusSocketServer,
@@ -163,3 +165,12 @@ def test_modbus_status_server_with_a_real_client():
     finally:
         client.close()
         server.close()
+
+
+def test_a_file_where_the_status_socket_goes_is_named_and_kept(tmp_path):
+    """A regular file at the socket's path was reported as "Address already in use"."""
+    path = tmp_path / "status.sock"
+    path.write_text("notes")
+    with pytest.raises(FileExistsError, match="a file of that name is there, not a socket"):
+        StatusSocketServer(path, StatusBoard())
+    assert path.read_text() == "notes"

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from fdi_daemon.io.columns import add_columns_option
+
 HELP = "store the fault-free friction level per operating condition in the model (commissioning)"
 
 
@@ -20,6 +22,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(default %(default)s)")
     parser.add_argument("--max-bins", type=int, default=8,
                         help="at most this many velocity-RMS bins (default %(default)s)")
+    add_columns_option(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -41,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     check_outputs({"--output": args.output}, (args.recording, args.model),
                   rewrites={"--output": args.model})
     model = load_model(args.model)
-    rec, v_in, accel = load_io(args.recording)
+    rec, v_in, accel = load_io(args.recording, args.columns)
     if not same_rate(rec.fs, model.fs):
         raise UserError(f"{args.recording}: fs = {rec.fs:g} Hz but the model has "
                         f"fs = {model.fs:g} Hz")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import stat
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -85,8 +86,9 @@ def _check_plot_format(path: Path, what: str) -> None:
 def replaced_atomically(path: str | Path) -> Iterator[Path]:
     """A temporary path next to ``path`` to write; renamed onto ``path`` when the block ends
     normally, removed when it raises (an error, Ctrl-C): a failed or interrupted write never
-    leaves a truncated file nor spoils the one there before. A path that is there but no
-    regular file (a device, a pipe) is written in place; a symlink's target is replaced."""
+    leaves a truncated file nor spoils the one there before, whose permissions the new one
+    keeps. A path that is there but no regular file (a device, a pipe) is written in place;
+    a symlink's target is replaced."""
     path = Path(path)
     if path.exists() and not path.is_file():
         yield path
@@ -95,6 +97,8 @@ def replaced_atomically(path: str | Path) -> Iterator[Path]:
     tmp = path.with_name(f".tmp{os.getpid()}.{path.name}")  # same ending: same format
     try:
         yield tmp
+        if path.exists():  # the file replaced keeps its permissions
+            os.chmod(tmp, stat.S_IMODE(path.stat().st_mode))
         os.replace(tmp, path)
     finally:
         with contextlib.suppress(FileNotFoundError):

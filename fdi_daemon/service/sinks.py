@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import errno
 import json
 import logging
 import math
@@ -330,6 +331,9 @@ class StatusSocketServer:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.is_socket():
             self.path.unlink()  # a stale socket from a previous run
+        elif self.path.exists():  # bind would say "Address already in use"
+            raise FileExistsError(errno.EEXIST, "a file of that name is there, not a socket "
+                                  "(left as it is)", str(self.path))
         self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
         self._sock.bind(str(self.path))
         os.chmod(self.path, mode)

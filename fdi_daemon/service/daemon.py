@@ -464,7 +464,8 @@ class Daemon:
                 f"{late['p99'] / 1e3:.1f} ms; deadline misses {loop.deadline_misses} "
                 f"(> {loop.deadline_s * 1e3:g} ms; {loop.late_arrivals} arrived late); "
                 f"dropped outputs "
-                f"{self.sinks.dropped() if self.sinks else 0}; events: {counts}")
+                f"{self.sinks.dropped() if self.sinks else 0}; events since the alarm state "
+                f"began (kept across restarts): {counts}")
 
     # ------------------------------------------------------------------ signals
     def _install_signals(self) -> dict:

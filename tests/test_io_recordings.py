@@ -62,9 +62,13 @@ def test_csv_is_plain_text_with_metadata_comments(tmp_path):
 
 
 def test_gz_is_really_gzip(tmp_path):
+    """... whose header names the file (`gunzip -N`), not the temporary one it was written as."""
     path = write_recording(tmp_path / "rec.csv.gz", make_recording(n=8))
     with gzip.open(path, "rt") as fh:
         assert fh.readline().startswith("# fs:")
+    header = path.read_bytes()
+    assert header[3] & 0x08  # FNAME: a zero-terminated name follows the 10-byte header
+    assert header[10:header.index(b"\0", 10)] == b"rec.csv"
 
 
 def test_nan_samples_are_kept_not_refused(tmp_path):

@@ -18,6 +18,7 @@ in ``Recording.sampling`` so that replay can turn them into ``data_gap`` events.
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import io
 import json
@@ -447,7 +448,7 @@ def write_recording(path: str | Path, rec: Recording) -> Path:
                 savemat(str(target), {**rec.columns, "meta_json": json.dumps(meta)},
                         do_compression=True, oned_as="column")
             else:
-                _write_csv(target, rec.columns, meta)
+                _write_csv(target, rec.columns, meta, path.name)
     except OSError as exc:
         raise RecordingError(f"{path}: cannot write the recording: "
                              f"{exc.strerror or exc}") from None
@@ -478,12 +479,15 @@ def format_csv_rows(columns: dict[str, np.ndarray]) -> str:
 WRITE_CHUNK = 1 << 20
 
 
-def _write_csv(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str]) -> None:
+def _write_csv(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str],
+               name: str) -> None:
+    """The CSV text into ``path`` (gzip-compressed for a .gz ending); ``name``: the file's
+    final name, which a .gz header holds (not that of the temporary file written)."""
     text = csv_header_lines(list(columns), meta) + format_csv_rows(columns)
-    if path.name.lower().endswith(".gz"):
-        opened = gzip.open(path, "wt", encoding="utf-8", newline="")
-    else:
-        opened = open(path, "w", encoding="utf-8", newline="")
-    with opened as fh:
+    with contextlib.ExitStack() as stack:
+        fh = stack.enter_context(open(path, "wb"))
+        if path.name.lower().endswith(".gz"):
+            fh = stack.enter_context(gzip.GzipFile(filename=name, mode="wb", fileobj=fh))
+        out = stack.enter_context(io.TextIOWrapper(fh, encoding="utf-8", newline=""))
         for start in range(0, len(text), WRITE_CHUNK):
-            fh.write(text[start:start + WRITE_CHUNK])
+            out.write(text[start:start + WRITE_CHUNK])

@@ -409,7 +409,7 @@ class Monitor:
         every = self._history_every
         hist = np.arange((-self._samples) % every, n, every)[-HISTORY_POINTS:]
         self._history.extend(zip(t[hist].tolist(), theta1[hist].tolist(), theta2[hist].tolist()))
-        keep = np.arange((-self._samples) % trace_every, n, trace_every)
+        keep = slice((-self._samples) % trace_every, n, trace_every)  # views, not copies
         for name, values in zip(TRACE_NAMES, (t, accel, residual, theta1, theta2, stat, state,
                                               v_rms, level)):
             parts[name].append(np.asarray(values)[keep])

@@ -182,7 +182,9 @@ def test_trace_of_the_realtime_path_and_bad_arguments(files, tmp_path, capsys):
                  "--trace-every", "0"]) == 2
     assert main(["replay", str(short), "--model", str(model), "--trace",
                  str(tmp_path / "no" / "dir.csv")]) == 2
+    assert main(["replay", str(short), "--model", str(model), "--trace-every", "4"]) == 2
     err = capsys.readouterr().err
+    assert "--trace-every thins the trace file: it needs --trace FILE" in err
     assert "--trace-every must be" in err and "directory" in err and "does not exist" in err
 
 

@@ -51,6 +51,8 @@ def run(args: argparse.Namespace) -> int:
                         "screen could show it)")
     if args.trace_every < 1:
         raise UserError("--trace-every must be a whole number >= 1")
+    if args.trace_every != 1 and not args.trace:
+        raise UserError("--trace-every thins the trace file: it needs --trace FILE")
     check_outputs({"--events": args.events, "--summary": args.summary, "--plot": args.plot,
                    "--trace": args.trace}, (args.recording, args.model, args.alarms),
                   plots=("--plot",))

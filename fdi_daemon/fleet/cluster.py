@@ -44,7 +44,8 @@ def dask_client(scheduler: str | None, workers: int):
                                   host="127.0.0.1", dashboard_address=None,
                                   # no dashboard, yet the scheduler's HTTP server took port
                                   # 8787 (and warned "already in use" beside another run)
-                                  scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                                  scheduler_kwargs={"dashboard": False,
+                                                    "dashboard_address": "127.0.0.1:0"},
                                   silence_logs=logging.ERROR)
     try:
         with dd.Client(cluster) as client:

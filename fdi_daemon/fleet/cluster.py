@@ -47,12 +47,22 @@ def dask_client(scheduler: str | None, workers: int):
                                   scheduler_kwargs={"dashboard": False,
                                                     "dashboard_address": "127.0.0.1:0"},
                                   silence_logs=logging.ERROR)
+    interrupted = False
     try:
         with dd.Client(cluster) as client:
-            yield client
+            try:
+                yield client
+            except KeyboardInterrupt:
+                # the scheduler's errors about the work dropped ("Couldn't gather keys ...
+                # forgotten") are the interrupt's doing: the user sees one line
+                interrupted = True
+                logging.disable(logging.ERROR)
+                raise
     finally:
         with _sigint_ignored():  # a second Ctrl-C must not cut the workers' shutdown short
             cluster.close()
+        if interrupted:
+            logging.disable(logging.NOTSET)
 
 
 @contextlib.contextmanager

@@ -22,8 +22,8 @@ Schema (unknown keys are errors naming the key; see docs/sim_rig.md):
 from __future__ import annotations
 
 import json
-import os
 import math
+import os
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Callable

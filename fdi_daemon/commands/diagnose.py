@@ -44,10 +44,10 @@ def _column(rec, name: str, path: str, option: str):
 
     from fdi_daemon.errors import RecordingError
 
-    if name not in rec.columns:
-        raise RecordingError(f"{path}: {option} {name}: no column of that name "
-                             f"(columns: {', '.join(rec.columns)})")
-    values = rec[name]
+    try:
+        values = rec[name]
+    except RecordingError as exc:  # "no column ..." names neither the file nor the option
+        raise RecordingError(f"{path}: {option} {name}: {exc}") from None
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
         raise RecordingError(f"{path}: column {name} is not finite at row {int(bad[0])} "
@@ -58,13 +58,14 @@ def _column(rec, name: str, path: str, option: str):
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from fdi_daemon.commands.identify import MAX_ORDER
     from fdi_daemon.errors import UserError
     from fdi_daemon.io.model_file import FdiModel, load_model, save_model
     from fdi_daemon.io.outputs import check_outputs, write_json
     from fdi_daemon.io.recordings import read_recording, same_rate
 
-    if args.order is not None and not 1 <= args.order <= 12:
-        raise UserError(f"--order must be 1..12, got {args.order}")
+    if args.order is not None and not 1 <= args.order <= MAX_ORDER:
+        raise UserError(f"--order must be 1..{MAX_ORDER}, got {args.order}")
     check_outputs({"--json": args.json, "--plot": args.plot, "-o": args.out},
                   (args.recording, args.model), plots=("--plot",), rewrites={"-o": args.model})
     out_col = args.output or OUTPUT_COLUMNS[args.output_kind]

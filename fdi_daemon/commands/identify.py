@@ -7,6 +7,8 @@ import argparse
 from fdi_daemon.io.columns import add_columns_option
 
 HELP = "identify the plant model G from a friction-free recording (v_in -> accel)"
+#: highest model order accepted (`--order` of identify and diagnose, G_e's NB and NF)
+MAX_ORDER = 12
 
 
 
@@ -87,8 +89,8 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.io.outputs import check_outputs
     from fdi_daemon.io.recordings import same_rate
 
-    if args.order < 1 or args.order > 12:
-        raise UserError(f"--order must be 1..12, got {args.order}")
+    if not 1 <= args.order <= MAX_ORDER:
+        raise UserError(f"--order must be 1..{MAX_ORDER}, got {args.order}")
     if not 0 <= args.min_coherence <= 1:
         raise UserError(f"--min-coherence must lie in [0, 1], got {args.min_coherence}")
     check_outputs({"--output": args.output, "--plot": args.plot},

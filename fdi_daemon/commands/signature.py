@@ -14,8 +14,6 @@ HELP = "identify the friction signature (G_e, gamma_f) from a window with a fric
 #: computed from the valve voltage and the accelerometer alone (the position observer needs
 #: a position sensor on every sample, a choice the user makes).
 AUTO_METHODS = ("highpass", "model_observer")
-#: highest G_e order (NB, NF) accepted, as `fdi identify --order`
-MAX_ORDER = 12
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -71,7 +69,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _orders(text: str) -> tuple[int, int, int]:
-    from fdi_daemon.commands.identify import parse_range
+    from fdi_daemon.commands.identify import MAX_ORDER, parse_range
     from fdi_daemon.errors import UserError
 
     values = parse_range(text, "--orders", 3)

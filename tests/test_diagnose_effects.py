@@ -10,11 +10,13 @@ import pytest
 from hil_sim.msd import MsdParams, simulate_recording
 from fdi_daemon.diagnose.effects import EFFECT_NAMES
 from fdi_daemon.diagnose.workflow import run_diagnose
-from tests.diagnose_cases import FS, HIDDEN, gain_fault_recording, nominal_model, recording
+from tests.diagnose_cases import (FS, HIDDEN, gain_fault_recording, nominal_model, recording,
+                                  spring_recording)
 
 #: effects the §V simulator cannot hide, with the test that hides them
 ELSEWHERE = {"gain_fault": "test_a_gain_fault_is_named_with_its_ratio",
-             "force_offset": "test_diagnose_machines.py::test_closed_loop_stage"}
+             "force_offset": "test_diagnose_machines.py::test_closed_loop_stage",
+             "stiffness_change": "test_a_changed_spring_is_named_with_its_ratio"}
 
 
 def test_every_library_effect_has_a_case():
@@ -51,6 +53,41 @@ def test_a_gain_fault_is_named_with_its_ratio():
     assert result.selection.linear["named"] == "gain_fault"
     assert abs(result.selection.named[0].physical["gain_ratio"] - 1.2) < 0.01
     assert result.gap_after <= 0.5 * result.gap_before
+
+
+@pytest.mark.parametrize("ratio", [0.8, 1.2])
+def test_a_changed_spring_is_named_with_its_ratio(ratio):
+    # every force effect brings the loop's free spring, so each would close this gap; a
+    # linear change of the mechanics is named after the parameter of the mode that moved
+    rec = spring_recording(ratio)
+    b, a = nominal_model()
+    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    assert result.named == ["stiffness_change"]
+    params = result.selection.named[0].physical
+    assert params["mode_change"] == "stiffness"
+    assert params["stiffness_ratio"] == pytest.approx(ratio, abs=0.02)
+    f0 = MsdParams().stiffness_n_per_m ** 0.5 / (2 * np.pi)  # 1 kg
+    assert params["resonance_hz_nominal"] == pytest.approx(f0, rel=1e-6)
+    assert params["resonance_hz"] == pytest.approx(f0 * ratio ** 0.5, abs=0.05)
+    assert result.gap_after <= 0.5 * result.gap_before
+
+
+def test_added_damping_is_viscous_friction_with_its_coefficient():
+    # the loop's spring alone fits this case as well as viscous friction does (it holds a
+    # damper too): the mode says which parameter changed (ζ 0.1 -> 0.1 + Δc/(2 m ω))
+    rec = recording("viscous_friction")
+    b, a = nominal_model()
+    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    spring = next(c for c in result.selection.rounds[0] if c.name == "stiffness_change")
+    assert spring.effect.physical["mode_change"] == "damping"
+    p = MsdParams()  # ζ = c / (2 √(k m)), 1 kg
+    true_zeta = ((p.damping_n_s_per_m + HIDDEN["viscous_friction"]["coefficient_n_s_per_m"])
+                 / (2 * p.stiffness_n_per_m ** 0.5))
+    assert spring.effect.physical["damping_ratio"] == pytest.approx(true_zeta, abs=0.005)
+    assert result.named == ["viscous_friction"]
+    # input equivalent: c_v / gain = 2 N·s/m / 10 N/V
+    assert result.selection.named[0].physical[
+        "viscous_coefficient_input_equivalent"] == pytest.approx(0.2, rel=0.1)
 
 
 def test_a_dead_time_is_named_with_its_value_not_absorbed_by_the_refit():

@@ -139,7 +139,8 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
     split = signals.make_split(len(u), warmup)
     # a DC block removes an offset; a baseline fitted here already holds the linear effects
     skip = ({"sensor_offset"} if n_kind else set()) | (
-        {"viscous_friction", "dead_time"} if info["baseline"] != "model file" else set())
+        {"viscous_friction", "dead_time", "stiffness_change"}
+        if info["baseline"] != "model file" else set())
     candidates = tuple(e for e in EFFECT_NAMES if e not in skip)
     ref_hz = band_centre_hz(u, fs_hz)
     # a dead time beyond a quarter period at the band centre (> 90° of phase there) is a

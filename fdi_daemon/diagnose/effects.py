@@ -16,6 +16,7 @@ by search) and linear coefficients (least squares). Where it enters (``source``)
 | stribeck_friction  | state  | sign(v), sign(v)·exp(−(v/v_s)²)       | Stribeck velocity v_s |
 | cubic_stiffness    | state  | x³                                   | —                     |
 | force_offset       | state  | 1                                    | —                     |
+| stiffness_change   | state  | x (free B_F: the mode's ω and ζ move) | —                    |
 | input_saturation   | input  | sat_L(u − u_c) − (u − u_c)           | level L               |
 | dead_zone          | input  | dz_w(u − u_c) − (u − u_c)            | half-width w          |
 | backlash           | input  | play_g(u) − u                        | gap g                 |
@@ -46,7 +47,7 @@ from fdi_daemon.diagnose.regressors import Regressor, Static
 
 EFFECT_NAMES = ("coulomb_friction", "viscous_friction", "stribeck_friction", "cubic_stiffness",
                 "dead_time", "input_saturation", "output_saturation", "dead_zone", "backlash",
-                "sensor_offset", "force_offset", "gain_fault")
+                "sensor_offset", "force_offset", "gain_fault", "stiffness_change")
 
 
 # regressor blocks: `regressors` (base), `input_effects`, `output_effects`; force effects'
@@ -124,6 +125,9 @@ SPECS: dict[str, EffectSpec] = {
                                lambda p, c: Static(lambda u, v, x, y0: [np.ones_like(u)])),
     "sensor_offset": EffectSpec("sensor_offset", "output", False, None, "",
                                 lambda p, c: Static(lambda u, v, x, y0: [np.ones_like(u)])),
+    # the loop's spring alone (`force.mode_shift` says what it changes)
+    "stiffness_change": EffectSpec("stiffness_change", "state", True, None, "",
+                                   lambda p, c: Static(lambda u, v, x, y0: [x])),
     # not a candidate: corrections of the inverse-dynamics form's mass, damping [, stiffness]
     # refitted with every candidate (columns from `Context.base_columns`)
     "force_balance": EffectSpec("force_balance", "state", False, None, "", lambda p, c: None),

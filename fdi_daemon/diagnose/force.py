@@ -44,9 +44,11 @@ from fdi_daemon.core.compiled import jit
 
 #: effects that are forces on the moving mass
 FORCE_EFFECTS = ("coulomb_friction", "viscous_friction", "stribeck_friction",
-                 "cubic_stiffness", "force_offset")
+                 "cubic_stiffness", "force_offset", "stiffness_change")
 #: everything in the loop: the force effects and the loop's linear spring correction
 LOOPED = FORCE_EFFECTS + ("loop_stiffness",)
+#: the loop's linear force of x (a free B_F): the base's spring, or the candidate itself
+SPRINGS = ("loop_stiffness", "stiffness_change")
 
 # regressor kinds of the kernel
 _SIGN, _VEL, _STRIBECK, _CUBE, _ONE, _X = 0, 1, 2, 3, 4, 5
@@ -64,7 +66,7 @@ def kinds(name: str, param: float | None) -> list[tuple[int, float]]:
         return [(_CUBE, 0.0)]
     if name == "force_offset":
         return [(_ONE, 0.0)]
-    if name == "loop_stiffness":
+    if name in SPRINGS:
         return [(_X, 0.0)]
     raise ValueError(f"{name} is not a force effect")
 
@@ -261,13 +263,21 @@ def _padded(b: np.ndarray, width: int) -> np.ndarray:
     return out
 
 
+def _held(eff, before: dict) -> np.ndarray:
+    """The coefficients of ``eff`` as fitted before (``before``: by name), else zeros."""
+    if eff.name in before:
+        return np.concatenate([np.ravel(c) for c in before[eff.name].coefficients])
+    return np.zeros(sum(np.size(c) for c in eff.coefficients))
+
+
 def _shifts(w: np.ndarray, width: int) -> np.ndarray:
     return np.column_stack([np.concatenate([np.zeros(i), w[:len(w) - i]]) for i in range(width)])
 
 
-def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
+def in_the_loop(ctx, effects: list, previous: list | None = None) -> tuple[list, np.ndarray]:
     """Refit ``effects`` with the force effects in the loop; returns the refitted effects
-    (``loop_stiffness`` added when absent) and their contribution y − ŷ₀ over the record.
+    (``loop_stiffness`` added when no spring is among them, `SPRINGS`) and their
+    contribution y − ŷ₀ over the record.
 
     The force path G_F = B_F/Â is identified on the training part in three steps:
     1. feed-forward start: B_F = θ B̂ (a force enters where the input does), θ and the
@@ -278,14 +288,18 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
        force path, B_F's zeros cancel its poles) by passes of least squares on the states of
        the last loop run, each pass kept only if the loop's training error falls
        (backtracking: a full step may destabilise the loop).
+    Step 3 also starts from ``previous`` (the effects named so far, as fitted in their
+    loop), the rest at zero, when they hold a loop.
     ``loop_stiffness`` (x through its own B_F) lets the loop move the nominal poles, as a
     spring that the nominal model mis-sized would; it is part of the base, never named.
+    Alone it is the candidate ``stiffness_change`` (`select`: every other force effect must
+    do significantly better than it).
     """
     from fdi_daemon.diagnose.effects import SPECS, FittedEffect, columns, least_squares, \
         physical_report
 
     width = len(ctx.a_dom)
-    if not any(e.name == "loop_stiffness" for e in effects):
+    if not any(e.name in SPRINGS for e in effects):
         effects = [FittedEffect("loop_stiffness", None, [np.zeros(width)], n_linear=width,
                                 n_free=width)] + list(effects)
     ff = [e for e in effects if e.name not in LOOPED]
@@ -326,7 +340,10 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
                                    max_nfev=30 * theta.size)
         if float(sol.fun @ sol.fun) < float(r0 @ r0):
             theta = sol.x
-        best_ff, best_nums = theta[:n_ff], np.outer(theta[n_ff:], b_path)
+        return refine(theta[:n_ff], np.outer(theta[n_ff:], b_path))
+
+    def refine(best_ff, best_nums):
+        """Step 3 from the given fed-forward coefficients and numerators."""
         (y, phi, v), best = run(best_ff, best_nums)
         # 3. free numerators, passes on the regressors the loop applied (its own motion;
         #    the stick value while the mass is held)
@@ -354,14 +371,21 @@ def in_the_loop(ctx, effects: list) -> tuple[list, np.ndarray]:
     if ctx.chain[0] != 0:  # velocity or position output: in its domain G_F = θ Â is not
         starts = starts[:1]  # a force on the mass; only the input's path
     fits = [from_start(b) for b in starts]
+    before = {e.name: e for e in previous or []}
+    if any(e.name in LOOPED for e in before.values()):
+        # the loop fitted before (the effects named so far, as they were fitted), anything
+        # new at zero: the fit never starts further from the data than the model it extends
+        fits.append(refine(np.concatenate([_held(e, before) for e in ff] + [np.zeros(0)]),
+                           np.concatenate([_held(e, before) for e in fb]).reshape(-1, width)))
     best, best_ff, best_nums, y, phi, v = min(fits, key=lambda f: f[0])
+    viscous = next((best_nums[j] for j, (kind, _) in enumerate(cols) if kind == _VEL), None)
     out, pos, row = [], 0, 0
     for e in effects:
         if e.name in LOOPED:
             k = len(kinds(e.name, e.param))
             new = FittedEffect(e.name, e.param, list(best_nums[row:row + k]),
                                n_linear=k * width, centre=e.centre, n_free=k * width)
-            new.physical = force_report(new, ctx, y, phi[:, row:row + k], v)
+            new.physical = force_report(new, ctx, y, phi[:, row:row + k], v, viscous)
             row += k
         else:
             k = e.n_linear
@@ -379,14 +403,16 @@ _FORCE_LABELS = {"coulomb_friction": ["coulomb_level"],
                  "viscous_friction": ["viscous_coefficient"],
                  "stribeck_friction": ["coulomb_level", "stribeck_excess"],
                  "cubic_stiffness": ["cubic_coefficient"], "force_offset": ["offset"],
-                 "loop_stiffness": ["stiffness"]}
+                 "loop_stiffness": ["stiffness"], "stiffness_change": ["stiffness"]}
 _FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 
 
-def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray) -> dict:
+def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
+                 b_v: np.ndarray | None = None) -> dict:
     """Size and physical check of a force effect, from the augmented motion: output ``y``,
     the regressors ``phi`` (samples × the effect's columns) and the velocity ``v`` of the
-    loop (`ForceLoop.trace`).
+    loop (`ForceLoop.trace`); b_v: the numerator of a viscous friction in the same loop
+    (a spring's mode is that of the loop's linear forces together, `mode_shift`).
 
     ``<label>_input_equivalent``: the input per unit of φ that the force takes away,
     c = −⟨Ĝφ, G_Fφ⟩/⟨Ĝφ, Ĝφ⟩ on the training part (v, x the augmented motion): the friction
@@ -423,8 +449,54 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray) -> dic
             power = float(w[fit] @ v[fit]) / vv
             out[f"{label}_power_ratio"] = power
             plausible = plausible and power < 0.0
+    if eff.name in SPRINGS:  # the base's spring is reported too (`report`: loop_spring)
+        out.update(mode_shift(ctx, eff.coefficients[0], b_v))
+        plausible = plausible and (eff.name != "stiffness_change"
+                                   or out["mode_change"] != "damping")
     out["plausible"] = plausible
     return out
+
+
+def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
+    """What the loop's linear forces, x through B_x/Â (and v through B_v/Â, a viscous
+    friction in the same loop), do to the mechanics: the lightly damped pole pair of Â (the
+    nominal mode, eq. 6's m ẍ + c ẋ + k x) against the nearest pole pair of the loop, whose
+    denominator is Â·D − B_x·N_x − B_v·N_v (x = (N_x/D) y, v = (N_v/D) y: the state chain).
+
+    Per unit mass a mode s² + 2ζω s + ω² changes its stiffness by Δ(ω²) and its damping by
+    Δ(2ζω); at the mode's frequency their forces compare as |Δ(ω²)| against ω₀·|Δ(2ζω)|.
+    ``mode_change``: "stiffness" when the first is the larger (the spring changed:
+    ``stiffness_ratio`` = ω₁²/ω₀² at the same mass), "damping" otherwise
+    (``damping_change_per_s`` = Δ(c/m); added damping is viscous friction, `select`),
+    "unknown" when Â has no pole pair."""
+    n, vb, va, fs = ctx.chain
+    den, num_x, num_v = {0: (np.polymul(va, va), np.polymul(vb, vb), np.polymul(vb, va)),
+                         1: (va, vb, va)}.get(n, ([1.0], [1.0], [fs, -fs]))
+    a = np.asarray(ctx.a_dom, float)
+    loop = np.polysub(np.polymul(a, den), np.polymul(b_x, num_x))
+    if b_v is not None:
+        loop = np.polysub(loop, np.polymul(b_v, num_v))
+    nominal = [s for s in _s_poles(a, fs) if s.imag > 0]
+    if not nominal:
+        return {"mode_change": "unknown"}
+    s0 = min(nominal, key=lambda s: -s.real / abs(s))  # the least damped pair
+    s1 = min((s for s in _s_poles(loop, fs) if s.imag > 0), key=lambda s: abs(s - s0),
+             default=None)
+    if s1 is None:
+        return {"mode_change": "unknown"}
+    w0, w1 = abs(s0), abs(s1)
+    stiffness = w1 ** 2 - w0 ** 2
+    damping = -2.0 * (s1.real - s0.real)  # Δ(2ζω)
+    return {"resonance_hz_nominal": w0 / (2 * math.pi), "resonance_hz": w1 / (2 * math.pi),
+            "damping_ratio_nominal": -s0.real / w0, "damping_ratio": -s1.real / w1,
+            "stiffness_ratio": (w1 / w0) ** 2, "damping_change_per_s": damping,
+            "mode_change": "stiffness" if abs(stiffness) >= w0 * abs(damping) else "damping"}
+
+
+def _s_poles(poly: np.ndarray, fs: float) -> np.ndarray:
+    """Roots of a polynomial in z⁻¹ as continuous-time poles (1/s)."""
+    z = np.roots(poly).astype(complex)
+    return np.log(z[z != 0]) * fs
 
 
 def _phi(kind: int, par: float, v: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -66,6 +66,9 @@ def build_report(result, source: str = "") -> dict[str, Any]:
                              if e.name == "dead_time"), None)},
         "linear_check": result.selection.linear,
     }
+    spring = [e.physical for e in result.selection.chosen if e.name == "loop_stiffness"]
+    if spring:  # the force loop's spring in the base: what it does to the mode (§4.3)
+        report["loop_spring"] = spring[0]
     if "inverse_baseline" in result.info:  # mass, damping [, stiffness]: refitted if named
         refit = [e.physical for e in result.selection.chosen if e.name == "force_balance"]
         report["force_balance"] = refit[0] if refit else dict(result.info["inverse_baseline"])
@@ -110,6 +113,13 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
                 for k, v in e["params"].items()
                 if isinstance(v, (int, float)) and not isinstance(v, bool))
             lines.append(f"missing effect: {e['effect']}  ({params})")
+    spring = report.get("loop_spring", {})
+    if "resonance_hz" in spring:
+        lines.append(f"the force loop's linear part (its spring, in the base) moves the mode "
+                     f"{spring['resonance_hz_nominal']:.3g} -> {spring['resonance_hz']:.3g} Hz, "
+                     f"damping ratio {spring['damping_ratio_nominal']:.2g} -> "
+                     f"{spring['damping_ratio']:.2g} (stiffness x "
+                     f"{spring['stiffness_ratio']:.3g})")
     lines.append(f"gap (NRMSE, held out): {report['gap_before']:.4g} -> "
                  f"{report['gap_after']:.4g}"
                  + (f"  ({report['gap_before_to_floor']:.3g} -> "

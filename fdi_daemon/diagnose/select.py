@@ -15,10 +15,16 @@ A candidate is accepted when p < ALPHA, Δ score < 0, it removes at least MIN_RE
 the held-out error energy (statistically significant but practically void improvements —
 a discretisation mismatch of a few per cent, say — are not a missing effect) and its
 physical coefficients are plausible (`effects.physical_report`); the best accepted (lowest
-score) is named — unless it is one of a nested pair (Stribeck contains Coulomb, a force
-offset a sensor offset) and the nested F-test at ALPHA says otherwise: the larger only when
-it is significantly better than the smaller. Then every remaining candidate is tried on top of it (jointly
-refitted) for a second effect, with the same test. No accepted candidate: "no significant missing effect".
+score) is named — unless it is one of a nested pair and the nested F-test at ALPHA says
+otherwise: the larger only when it is significantly better than the smaller (`_choose`).
+Nested pairs: Stribeck contains Coulomb, a force offset a sensor offset, and every force
+effect contains ``stiffness_change``, the loop's free linear force of x that comes with it
+(`force.in_the_loop`): a friction, a cubic spring or a constant force is named only where
+it does more than a linear change of the mechanics would. That change is named after what
+it does to the mechanical mode (`force.mode_shift`): ``stiffness_change`` when the spring
+moved, ``viscous_friction`` (its own fit) when damping was added. Then every remaining
+candidate is tried on top of it (jointly refitted) for a second effect, with the same test.
+No accepted candidate: "no significant missing effect".
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ from scipy import stats
 
 from fdi_daemon.diagnose.effects import (BASE_TERMS, SPECS, Context, FittedEffect,
                                          NotApplicable, columns, fit_effect)
-from fdi_daemon.diagnose.force import FORCE_EFFECTS, in_the_loop
+from fdi_daemon.diagnose.force import FORCE_EFFECTS, SPRINGS, in_the_loop
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
 #: effect in pure noise near 2 %
@@ -58,6 +64,8 @@ class Candidate:
     p_value: float
     accepted: bool
     prediction: np.ndarray = field(repr=False, default=None)  # contribution of all effects
+    k: int = 0  # parameters it adds to the round's reference (its own and new base terms)
+    k_total: int = 0  # parameters of the whole fit
 
     def ranking_entry(self, gap_after: float) -> dict:
         return {"effect": self.name, "gap_after": gap_after, "score": self.score,
@@ -92,7 +100,7 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
         if SPECS[name].param is not None and name in FORCE_EFFECTS:
             eff = _search_in_the_loop(ctx, effects)
             effects = refitted + [eff]
-        effects, prediction = in_the_loop(ctx, effects)
+        effects, prediction = in_the_loop(ctx, effects, base)
         refitted, eff = effects[:-1], effects[-1]
     else:
         x_new = columns(SPECS[name], eff.param, ctx, ctx.regressors(SPECS[name], eff.param))
@@ -123,7 +131,8 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
     plausible = all(e.physical.get("plausible", True) for e in refitted + [eff])
     return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, float(score), p,
                      bool(p < ALPHA and score < 0.0 and plausible
-                          and sse1 <= (1.0 - MIN_REDUCTION) * sse_reference), prediction)
+                          and sse1 <= (1.0 - MIN_REDUCTION) * sse_reference), prediction,
+                     k, k_total)
 
 
 #: input maps whose φ = N(u) − u must enter with the gain of the input itself
@@ -178,25 +187,52 @@ def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffe
 
 def nested_p_value(larger: Candidate, smaller: Candidate, n_eff: float) -> float:
     """F-test of a candidate against one it contains: do its extra parameters pay?"""
-    extra = larger.effect.n_params - smaller.effect.n_params
-    dof = n_eff - larger.effect.n_params - sum(b.n_params for b in larger.base)
+    extra = larger.k - smaller.k
+    dof = n_eff - larger.k_total
     if extra <= 0 or dof <= 1 or larger.sse_test >= smaller.sse_test:
         return 1.0
     f_stat = ((smaller.sse_test - larger.sse_test) / extra) / (larger.sse_test / dof)
     return float(stats.f.sf(f_stat, extra, dof))
 
 
-def _prefer_nesting(best: Candidate, accepted: list[Candidate], n_eff: float) -> Candidate:
-    """Of a nested pair (`NESTS`), the larger only when it is significantly better than the
-    smaller (nested F-test at ALPHA), whichever of the two scored best: BIC alone
+def nested_in(name: str) -> tuple[str, ...]:
+    """The candidates that ``name`` contains (`NESTS`; a force effect: the loop's spring)."""
+    inner = (NESTS[name],) if name in NESTS else ()
+    return inner + (("stiffness_change",) if name in FORCE_EFFECTS
+                    and name != "stiffness_change" else ())
+
+
+def _choose(results: list[Candidate], n_eff: float) -> Candidate | None:
+    """The candidate named in a round (``results`` sorted by score), or None.
+
+    From the best accepted, nested pairs are walked: down to a contained candidate that
+    the larger does not beat significantly (nested F-test at ALPHA; BIC alone
     under-rewards extra parameters when n_eff is small, and a larger effect that only
-    scores level with the smaller one explains nothing more."""
-    for c in accepted:
-        if NESTS.get(best.name) == c.name and nested_p_value(best, c, n_eff) >= ALPHA:
-            return c
-        if NESTS.get(c.name) == best.name and nested_p_value(c, best, n_eff) < ALPHA:
-            return c
-    return best
+    scores level with the smaller one explains nothing more), up to an accepted one that
+    significantly beats it. A linear change of the mechanics that adds damping is viscous
+    friction (`force.mode_shift`), whose own fit is named. When the walk ends at a
+    candidate that is not accepted, the next best accepted is tried."""
+    by_name = {c.name: c for c in results}
+    pool = [c for c in results if c.accepted]
+    while pool:
+        best = pool[0]
+        for _ in range(len(results)):
+            down = next((by_name[s] for s in nested_in(best.name) if s in by_name
+                         and nested_p_value(best, by_name[s], n_eff) >= ALPHA), None)
+            up = None if down else next(
+                (c for c in pool if best.name in nested_in(c.name)
+                 and nested_p_value(c, best, n_eff) < ALPHA), None)
+            if down is None and up is None:
+                break
+            best = down or up
+        if (best.name == "stiffness_change"
+                and best.effect.physical.get("mode_change") == "damping"
+                and best.effect.physical.get("damping_change_per_s", 0.0) > 0.0):
+            best = by_name.get("viscous_friction", best)
+        if best.accepted:
+            return best
+        pool.pop(0)
+    return None
 
 
 @dataclass
@@ -327,8 +363,10 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         if rounds and floor_sse is not None and sse0 <= floor_sse:
             break  # what is left is noise
         n_eff = effective_samples(e0)
+        has_spring = any(e.name in SPRINGS for e in chosen)  # the loop's spring is in
         remaining = [c for c in ctx.candidates
-                     if c not in {e.name for e in chosen} and c not in skip]
+                     if c not in {e.name for e in chosen} and c not in skip
+                     and not (has_spring and c == "stiffness_change")]
         results = []
         for name in remaining:
             try:
@@ -339,10 +377,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 progress(name)
         results.sort(key=lambda c: c.score)
         rounds.append(results)
-        accepted = [c for c in results if c.accepted]
-        if not accepted:
+        best = _choose(results, n_eff)
+        if best is None:
             break
-        best = _prefer_nesting(accepted[0], accepted, n_eff)
         chosen = best.base + [best.effect]
         cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
                 for e in chosen]

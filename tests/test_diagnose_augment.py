@@ -25,11 +25,14 @@ def _plant(kind: str = "acceleration") -> AugmentedPlant:
     path = AugmentedPlant(FS, b_force, a, kind, 0.2)
     b_path = np.zeros(len(path.a_dom))
     b_path[:len(path.b_dom)] = path.b_dom
-    #: forces in the loop: friction that opposes motion, a hardening spring (input units)
-    force = {"coulomb_friction": 0.05, "stribeck_friction": 0.05, "cubic_stiffness": 1e4}
+    #: forces in the loop: friction that opposes motion, a hardening spring, a stiffer
+    #: linear spring (input units)
+    force = {"coulomb_friction": 0.05, "stribeck_friction": 0.05, "cubic_stiffness": 1e4,
+             "stiffness_change": 10.0}
     effects = []
     for name, param in [("coulomb_friction", None), ("stribeck_friction", 0.05),
-                        ("cubic_stiffness", None), ("dead_time", 2.6), ("backlash", 0.1),
+                        ("cubic_stiffness", None), ("stiffness_change", None),
+                        ("dead_time", 2.6), ("backlash", 0.1),
                         ("dead_zone", 0.05), ("output_saturation", 5.0), ("sensor_offset", None)]:
         spec = SPECS[name]
         n_reg = 2 if name == "stribeck_friction" else 1

@@ -169,3 +169,41 @@ def test_velocity_noise_ignores_a_smooth_motion():
     t = np.arange(20000) / 500.0
     v = 0.2 * np.sin(2 * np.pi * 1.3 * t) + 3e-4 * rng.standard_normal(t.size)
     assert velocity_noise(v) == pytest.approx(3e-4, rel=0.05)
+
+
+@pytest.mark.parametrize("change,expected", [
+    ({"stiffness_n_per_m": 0.8 * 987.0}, "stiffness"),
+    ({"damping_n_s_per_m": 6.3 + 3.0}, "damping"),
+    ({"stiffness_n_per_m": 987.0 * 1.0001}, "none"),
+])
+def test_mode_shift_reads_the_mode_of_a_system_whose_change_we_chose(change, expected):
+    # position output (x = y): the loop's denominator is Â − B_x, so B_x = Â₀ − Â₁ makes
+    # it the exact ZOH denominator of the changed §V model, whose mode is known in closed
+    # form (ZOH maps poles exactly, z = e^{sT}); the input filter's pair (20 Hz, ζ 0.7)
+    # is in Â too and must not be taken for the mechanics'
+    from types import SimpleNamespace
+
+    from fdi_daemon.diagnose.force import mode_shift
+    from hil_sim.msd import MsdParams, friction_tf
+
+    nominal, changed = MsdParams(), MsdParams(**change)
+    a0, a1 = friction_tf(nominal)[1], friction_tf(changed)[1]
+    ctx = SimpleNamespace(chain=StateChain(2, FS, 0.2).coefficients, a_dom=a0,
+                          split=make_split(int(40 * FS), 0))
+    out = mode_shift(ctx, a0 - a1)
+
+    def mode(p):
+        w = np.sqrt(p.stiffness_n_per_m / p.mass_kg)
+        return w / (2 * np.pi), p.damping_n_s_per_m / (2 * np.sqrt(p.stiffness_n_per_m
+                                                                  * p.mass_kg))
+
+    assert (out["resonance_hz_nominal"], out["damping_ratio_nominal"]) == pytest.approx(
+        mode(nominal), rel=1e-6)
+    assert (out["resonance_hz"], out["damping_ratio"]) == pytest.approx(mode(changed),
+                                                                        rel=1e-6)
+    assert out["stiffness_ratio"] == pytest.approx(
+        changed.stiffness_n_per_m / nominal.stiffness_n_per_m, rel=1e-6)
+    assert out["damping_change_per_s"] == pytest.approx(
+        (changed.damping_n_s_per_m - nominal.damping_n_s_per_m) / nominal.mass_kg, rel=1e-6,
+        abs=1e-9)
+    assert out["mode_change"] == expected

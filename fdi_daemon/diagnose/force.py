@@ -274,7 +274,8 @@ def _shifts(w: np.ndarray, width: int) -> np.ndarray:
     return np.column_stack([np.concatenate([np.zeros(i), w[:len(w) - i]]) for i in range(width)])
 
 
-def in_the_loop(ctx, effects: list, previous: list | None = None) -> tuple[list, np.ndarray]:
+def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool = True
+                ) -> tuple[list, np.ndarray]:
     """Refit ``effects`` with the force effects in the loop; returns the refitted effects
     (``loop_stiffness`` added when no spring is among them, `SPRINGS`) and their
     contribution y − ŷ₀ over the record.
@@ -299,7 +300,7 @@ def in_the_loop(ctx, effects: list, previous: list | None = None) -> tuple[list,
         physical_report
 
     width = len(ctx.a_dom)
-    if not any(e.name in SPRINGS for e in effects):
+    if spring and not any(e.name in SPRINGS for e in effects):
         effects = [FittedEffect("loop_stiffness", None, [np.zeros(width)], n_linear=width,
                                 n_free=width)] + list(effects)
     ff = [e for e in effects if e.name not in LOOPED]
@@ -396,6 +397,14 @@ def in_the_loop(ctx, effects: list, previous: list | None = None) -> tuple[list,
             new.physical = physical_report(new, ctx)
             pos += k
         out.append(new)
+    spring = next((e for e in out if e.name in SPRINGS), None)
+    for e in out:
+        if e.name == "viscous_friction" and spring is not None:
+            # a viscous friction is a damper: the loop's linear part must move the mode by
+            # damping (`mode_shift`, with the spring beside it), not by stiffness
+            e.physical["mode_change"] = spring.physical.get("mode_change")
+            e.physical["plausible"] = bool(e.physical["plausible"]
+                                           and e.physical["mode_change"] != "stiffness")
     return out, y - ctx.y0
 
 
@@ -452,7 +461,7 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
     if eff.name in SPRINGS:  # the base's spring is reported too (`report`: loop_spring)
         out.update(mode_shift(ctx, eff.coefficients[0], b_v))
         plausible = plausible and (eff.name != "stiffness_change"
-                                   or out["mode_change"] != "damping")
+                                   or out["mode_change"] == "stiffness")
     out["plausible"] = plausible
     return out
 
@@ -465,10 +474,11 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
 
     Per unit mass a mode s² + 2ζω s + ω² changes its stiffness by Δ(ω²) and its damping by
     Δ(2ζω); at the mode's frequency their forces compare as |Δ(ω²)| against ω₀·|Δ(2ζω)|.
-    ``mode_change``: "stiffness" when the first is the larger (the spring changed:
-    ``stiffness_ratio`` = ω₁²/ω₀² at the same mass), "damping" otherwise
-    (``damping_change_per_s`` = Δ(c/m); added damping is viscous friction, `select`),
-    "unknown" when Â has no pole pair."""
+    ``mode_change``: "none" when the pole moves less than the record's frequency
+    resolution (1/T of the training part: no measured change), else "stiffness" when the
+    first is the larger (the spring changed: ``stiffness_ratio`` = ω₁²/ω₀² at the same
+    mass), "damping" otherwise (``damping_change_per_s`` = Δ(c/m); added damping is viscous
+    friction, `select`); "unknown" when Â has no pole pair."""
     n, vb, va, fs = ctx.chain
     den, num_x, num_v = {0: (np.polymul(va, va), np.polymul(vb, vb), np.polymul(vb, va)),
                          1: (va, vb, va)}.get(n, ([1.0], [1.0], [fs, -fs]))
@@ -487,10 +497,14 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
     w0, w1 = abs(s0), abs(s1)
     stiffness = w1 ** 2 - w0 ** 2
     damping = -2.0 * (s1.real - s0.real)  # Δ(2ζω)
+    moved_hz = abs(s1 - s0) / (2 * math.pi)
+    resolution_hz = fs / max(ctx.split.train_end - ctx.split.warmup, 1)
+    change = ("none" if moved_hz < resolution_hz else
+              "stiffness" if abs(stiffness) >= w0 * abs(damping) else "damping")
     return {"resonance_hz_nominal": w0 / (2 * math.pi), "resonance_hz": w1 / (2 * math.pi),
             "damping_ratio_nominal": -s0.real / w0, "damping_ratio": -s1.real / w1,
             "stiffness_ratio": (w1 / w0) ** 2, "damping_change_per_s": damping,
-            "mode_change": "stiffness" if abs(stiffness) >= w0 * abs(damping) else "damping"}
+            "mode_moved_hz": moved_hz, "resolution_hz": resolution_hz, "mode_change": change}
 
 
 def _s_poles(poly: np.ndarray, fs: float) -> np.ndarray:

@@ -65,6 +65,7 @@ def build_report(result, source: str = "") -> dict[str, Any]:
             "named_s": next((e.physical.get("dead_time_s") for e in named
                              if e.name == "dead_time"), None)},
         "linear_check": result.selection.linear,
+        "spring_check": result.selection.spring,
     }
     spring = [e.physical for e in result.selection.chosen if e.name == "loop_stiffness"]
     if spring:  # the force loop's spring in the base: what it does to the mode (§4.3)

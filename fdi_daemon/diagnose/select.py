@@ -241,6 +241,7 @@ class Selection:
     rounds: list[list[Candidate]]
     prediction: np.ndarray  # Σ contributions of the chosen effects (whole record)
     linear: dict = field(default_factory=dict)  # the refit check (`linear_round`)
+    spring: dict = field(default_factory=dict)  # the base spring's check (`spring_check`)
 
     @property
     def named(self) -> list[FittedEffect]:
@@ -355,6 +356,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                                      for e in chosen])
         prediction = base_cols @ np.concatenate([np.ravel(c) for c in chosen[0].coefficients])
     rounds: list[list[Candidate]] = []
+    spring: dict = {}
     test = ctx.split.test
     skip = set(LINEAR_EXPLANATIONS) if refit_linear else set()
     while len([e for e in chosen if e.name not in BASE_TERMS]) < max_effects:
@@ -380,7 +382,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         best = _choose(results, n_eff)
         if best is None:
             break
-        chosen = best.base + [best.effect]
+        chosen, check = spring_check(ctx, best.base + [best.effect], best.prediction,
+                                     floor_sse)
+        spring = check or spring
         cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
                 for e in chosen]
         base_cols = np.column_stack(cols)
@@ -408,7 +412,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     if not any(e.name not in BASE_TERMS for e in chosen):
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
-    return Selection(chosen, rounds, prediction, linear)
+    return Selection(chosen, rounds, prediction, linear, spring)
 
 
 def _fit_set(ctx: Context, names: list[str], base: list[FittedEffect]
@@ -516,3 +520,50 @@ def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
         return alone
     f_stat = ((sse_alone - sse_with) / k) / (sse_with / dof)
     return alone if float(stats.f.sf(f_stat, k, dof)) >= ALPHA else None
+
+
+
+def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray,
+                 floor_sse: float | None) -> tuple[list[FittedEffect], dict]:
+    """The loop's spring never swallows a stiffness change silently.
+
+    Every force effect brings the loop's spring (``loop_stiffness``, §4.3), unnamed. After
+    a round that leaves it in ``chosen``, the other effects are fitted again without it
+    (`force.in_the_loop`, ``spring=False``): the spring is named ``stiffness_change`` when
+    it pays on top of them as a candidate would (F-test at ALPHA, ΔBIC < 0, at least
+    MIN_REDUCTION of the held-out error energy), the error without it is above the noise
+    floor, there is room for one more effect (MAX_EFFECTS), and the loop's linear part
+    moves the mode by stiffness (`force.mode_shift`). With a fitted baseline the spring
+    stays in the base, as ``stiffness_change`` is not a candidate there (the baseline holds
+    the linear effects). Returns ``chosen`` (the spring renamed when named) and the
+    figures of the check ({} when there was nothing to check)."""
+    from dataclasses import replace
+
+    spring = next((e for e in chosen if e.name == "loop_stiffness"), None)
+    if (spring is None or "stiffness_change" not in ctx.candidates
+            or ctx.form != "simulation"
+            or len([e for e in chosen if e.name not in BASE_TERMS]) >= MAX_EFFECTS):
+        return chosen, {}
+    rest = [e for e in chosen if e is not spring]
+    _, without = in_the_loop(ctx, rest, rest, spring=False)
+    test = ctx.split.test
+    e0 = ctx.target[test] - without[test]
+    e1 = ctx.target[test] - prediction[test]
+    sse0, sse1 = float(e0 @ e0), float(e1 @ e1)
+    n_eff = effective_samples(e0)
+    k = spring.n_params
+    dof = n_eff - sum(e.n_params for e in chosen)
+    if not (math.isfinite(sse0) and sse1 < sse0 and dof > 1):
+        return chosen, {"named": False, "pays": False}
+    p = float(stats.f.sf(((sse0 - sse1) / k) / (sse1 / dof), k, dof))
+    score = n_eff * math.log(sse1 / sse0) + k * math.log(max(n_eff, 2.0))
+    check = {"p_value": p, "score": score, "sse_ratio": sse1 / sse0,
+             "above_floor": floor_sse is None or sse0 > floor_sse,
+             "mode_change": spring.physical.get("mode_change")}
+    check["named"] = bool(p < ALPHA and score < 0.0 and sse1 <= (1.0 - MIN_REDUCTION) * sse0
+                          and check["above_floor"] and check["mode_change"] == "stiffness")
+    if not check["named"]:
+        return chosen, check
+    named = replace(spring, name="stiffness_change",
+                    physical={**spring.physical, "plausible": True})
+    return rest + [named], check

@@ -22,9 +22,11 @@ effect contains ``stiffness_change``, the loop's free linear force of x that com
 (`force.in_the_loop`): a friction, a cubic spring or a constant force is named only where
 it does more than a linear change of the mechanics would. That change is named after what
 it does to the mechanical mode (`force.mode_shift`): ``stiffness_change`` when the spring
-moved, ``viscous_friction`` (its own fit) when damping was added. Then every remaining
-candidate is tried on top of it (jointly refitted) for a second effect, with the same test.
-No accepted candidate: "no significant missing effect".
+moved, ``viscous_friction`` (its own fit) when damping was added. After each round the
+spring a named force effect left in the base is named too when it pays on top of it
+(`spring_check`: a stiffness change behind a friction). Then every remaining candidate is
+tried on top of it (jointly refitted) for a second effect, with the same test. No accepted
+candidate: "no significant missing effect".
 """
 
 from __future__ import annotations

@@ -55,13 +55,15 @@ def test_a_gain_fault_is_named_with_its_ratio():
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-@pytest.mark.parametrize("ratio", [0.8, 1.2])
-def test_a_changed_spring_is_named_with_its_ratio(ratio):
+@pytest.mark.parametrize("kind,ratio", [("acceleration", 0.8), ("acceleration", 1.2),
+                                        ("velocity", 0.8), ("position", 0.8)])
+def test_a_changed_spring_is_named_with_its_ratio(kind, ratio):
     # every force effect brings the loop's free spring, so each would close this gap; a
     # linear change of the mechanics is named after the parameter of the mode that moved
+    # (read through each output's state chain)
     rec = spring_recording(ratio)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    result = run_diagnose(rec.v_in, rec[kind], FS, kind, b, a)
     assert result.named == ["stiffness_change"]
     params = result.selection.named[0].physical
     assert params["mode_change"] == "stiffness"

@@ -63,7 +63,8 @@ def test_a_changed_spring_is_named_with_its_ratio(kind, ratio):
     # (read through each output's state chain)
     rec = spring_recording(ratio)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec[kind], FS, kind, b, a)
+    column = {"acceleration": "accel"}.get(kind, kind)
+    result = run_diagnose(rec.v_in, rec[column], FS, kind, b, a)
     assert result.named == ["stiffness_change"]
     params = result.selection.named[0].physical
     assert params["mode_change"] == "stiffness"

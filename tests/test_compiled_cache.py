@@ -76,3 +76,19 @@ def test_numba_cache_dir_is_honoured(tmp_path):
     assert _run(tmp_path, NUMBA_CACHE_DIR=str(cache)) == (2.5, 0)
     assert len(list(cache.glob("numba-*/*/*.nbi"))) == 2  # caller and callee
     assert not (package / "__pycache__").exists()
+
+
+def test_cache_files_of_the_old_scheme_are_removed(tmp_path):
+    # numba's own locator wrote kernels beside the sources (__pycache__/*.nbi, *.nbc);
+    # they are never read again once the sources' folder is in use
+    package = _package(tmp_path, factor=2.0, offset=0.5)
+    legacy = package / "__pycache__"
+    legacy.mkdir()
+    old = [legacy / "caller.kernel-6.py311.nbi", legacy / "caller.kernel-6.py311.1.nbc"]
+    for f in old:
+        f.write_bytes(b"stale")
+    keep = legacy / "caller.cpython-311.pyc"
+    keep.write_bytes(b"bytecode")
+    assert _run(tmp_path) == (2.5, 0)
+    assert not any(f.exists() for f in old)
+    assert keep.exists()

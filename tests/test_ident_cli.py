@@ -212,6 +212,14 @@ def test_bad_inputs_exit_2_with_one_line(identified, chirps, tmp_path, capsys):
     no_accel = tmp_path / "no_accel.csv"
     write_recording(no_accel, Recording({"t": data.t, "v_in": data.v_in}, {"fs": "256"}))
     assert "accel" in _bad(["identify", str(no_accel), "-o", out], capsys)
+    huge = tmp_path / "huge.csv"  # an accelerometer in the wrong unit, say: squares overflow
+    write_recording(huge, Recording({"t": data.t, "v_in": data.v_in, "accel": data.accel * 1e300},
+                                    {"fs": "256"}))
+    for command in (["identify", str(huge), "-o", out],
+                    ["signature", str(huge), "--model", str(model), "--fault-window", "1:3",
+                     "-o", out],
+                    ["diagnose", str(huge), "--model", str(model)]):
+        assert "column accel holds" in _bad(command, capsys)
     assert "--band" in _bad(["identify", rec, "-o", out, "--band", "x:y"], capsys)
     for window in ("abc", "5:3", "1:2:3"):
         assert "--fault-window" in _bad(["signature", rec, "--model", str(model),

@@ -40,19 +40,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _column(rec, name: str, path: str, option: str):
-    import numpy as np
-
     from fdi_daemon.errors import RecordingError
+    from fdi_daemon.io.recordings import fit_column
 
     try:
-        values = rec[name]
+        rec[name]
     except RecordingError as exc:  # "no column ..." names neither the file nor the option
         raise RecordingError(f"{path}: {option} {name}: {exc}") from None
-    bad = np.flatnonzero(~np.isfinite(values))
-    if bad.size:
-        raise RecordingError(f"{path}: column {name} is not finite at row {int(bad[0])} "
-                             f"({bad.size} bad value(s))")
-    return np.asarray(values, dtype=float)
+    return fit_column(rec, name, path)
 
 
 def run(args: argparse.Namespace) -> int:

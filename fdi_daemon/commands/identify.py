@@ -65,19 +65,11 @@ def parse_range(text: str, what: str, parts: int = 2) -> tuple[float, ...]:
 
 def load_io(path: str, columns: dict[str, str] | None = None):
     """Read a recording (its columns renamed by ``columns``, ``--columns``) and return
-    (rec, v_in, accel) with finite values checked."""
-    import numpy as np
-
-    from fdi_daemon.errors import RecordingError
-    from fdi_daemon.io.recordings import read_recording
+    (rec, v_in, accel), their values checked (`io.recordings.fit_column`)."""
+    from fdi_daemon.io.recordings import fit_column, read_recording
 
     rec = read_recording(path, columns=columns)
-    for name in ("v_in", "accel"):
-        col = rec[name]
-        if not np.all(np.isfinite(col)):
-            row = int(np.flatnonzero(~np.isfinite(col))[0])
-            raise RecordingError(f"{path}: column {name} is not finite at row {row}")
-    return rec, rec.v_in, rec.accel
+    return rec, fit_column(rec, "v_in", path), fit_column(rec, "accel", path)
 
 
 def run(args: argparse.Namespace) -> int:

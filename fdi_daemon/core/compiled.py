@@ -75,15 +75,22 @@ def _package_of(func) -> Path | None:
 @functools.lru_cache(maxsize=None)
 def _package_cache_dir(package: Path) -> str | None:
     """The writable folder for the compiled kernels of ``package``, named after its install
-    and the hash of its sources; the folders of the install's earlier sources are removed.
-    None (compiled at every start) if no folder is writable."""
+    and the hash of its sources. When it is new, the folders of the install's earlier
+    sources are removed, and so are the cache files numba wrote beside the sources before
+    this scheme (``__pycache__/*.nbi``, ``*.nbc``; never read again). None (compiled at
+    every start) if no folder is writable."""
     prefix = f"numba-{_digest(str(package).encode())}-"
     name = prefix + _sources_digest(package)
     for root in _cache_roots(package):
+        fresh = not (root / name).exists()
         if _writable(root / name):
-            for stale in root.glob(prefix + "*"):
-                if stale.name != name:
-                    shutil.rmtree(stale, ignore_errors=True)
+            if fresh:
+                stale = [p for p in root.glob(prefix + "*") if p.name != name]
+                for folder in stale:
+                    shutil.rmtree(folder, ignore_errors=True)
+                for old in (*package.rglob("__pycache__/*.nbi"),
+                            *package.rglob("__pycache__/*.nbc")):
+                    old.unlink(missing_ok=True)
             return str(root / name)
     log.warning("no writable folder to cache the compiled kernels of %s: they are compiled "
                 "at every start", package)

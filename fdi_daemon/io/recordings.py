@@ -157,6 +157,28 @@ def same_rate(fs_a_hz: float, fs_b_hz: float) -> bool:
     return abs(fs_a_hz - fs_b_hz) <= FS_TOLERANCE * fs_b_hz
 
 
+#: largest magnitude an offline fit takes: sums of squares of up to 10⁸ samples stay finite
+MAX_FIT_VALUE = 1e150
+
+
+def fit_column(rec: "Recording", name: str, path: str | Path) -> np.ndarray:
+    """Column ``name`` for the offline fits (identify, signature, baseline, diagnose): every
+    value finite and at most MAX_FIT_VALUE in magnitude, else RecordingError naming the
+    file, the column and the first bad row."""
+    values = np.asarray(rec[name], dtype=float)
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        raise RecordingError(f"{path}: column {name} is not finite at row {int(bad[0])} "
+                             f"({bad.size} bad value(s))")
+    huge = np.flatnonzero(np.abs(values) > MAX_FIT_VALUE)
+    if huge.size:
+        row = int(huge[0])
+        raise RecordingError(f"{path}: column {name} holds {values[row]:.3g} at row {row}: "
+                             f"values beyond {MAX_FIT_VALUE:.0e} cannot be fitted "
+                             "(check the column's unit)")
+    return values
+
+
 def check_sampling(t: np.ndarray, seq: np.ndarray | None = None,
                    fs_hz: float | None = None) -> SamplingReport:
     """Find gaps, duplicates and backward steps in ``seq`` (preferred) or ``t``."""

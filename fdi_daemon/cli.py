@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 
 from fdi_daemon import __version__
@@ -46,9 +47,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: a value that starts with a minus sign and a digit: a negative number, range or list
+_NEGATIVE_VALUE = re.compile(r"^-\.?\d")
+
+
+def attach_negative_values(argv: list[str]) -> list[str]:
+    """``--option -5:10`` as ``--option=-5:10``: argparse takes a token that starts with a
+    minus sign for an option unless it is a plain negative number, so a range like
+    ``--fault-window -5:10`` would be "expected one argument"."""
+    out: list[str] = []
+    for token in argv:
+        if (out and out[-1].startswith("--") and "=" not in out[-1]
+                and _NEGATIVE_VALUE.match(token)):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(attach_negative_values(sys.argv[1:] if argv is None else argv))
     try:
         return int(args._run(args) or 0)
     except UserError as exc:

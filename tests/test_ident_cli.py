@@ -226,6 +226,9 @@ def test_bad_inputs_exit_2_with_one_line(identified, chirps, tmp_path, capsys):
                                          "--fault-window", window, "-o", out], capsys)
     assert "outside" in _bad(["signature", rec, "--model", str(model),
                               "--fault-window", "2:50", "-o", out], capsys)
+    # a range that starts with a minus sign is a value, not an option
+    assert "-5:10 lies outside" in _bad(["signature", rec, "--model", str(model),
+                                         "--fault-window", "-5:10", "-o", out], capsys)
     no_plant = tmp_path / "no_plant.yaml"
     no_plant.write_text(yaml.safe_dump({"fs": 256.0}))
     assert "plant" in _bad(["signature", rec, "--model", str(no_plant),

@@ -52,6 +52,10 @@ def test_report_model_and_plot(files, capsys):
     e_before = rec.accel - nominal.run(rec.v_in)
     e_after = rec.accel - AugmentedPlant.from_model(model).run(rec.v_in)
     assert np.std(e_after[test]) < 0.5 * np.std(e_before[test])
+    # diagnosing against the augmented model starts from its plant again, and says so
+    assert main(["diagnose", str(files / "coulomb.csv"), "--model", str(out / "aug.yaml")]) == 0
+    err = capsys.readouterr().err
+    assert "holds effects (coulomb_friction) from an earlier diagnosis" in err
 
 
 def test_fit_linear_velocity_output_and_no_effect(files, capsys):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from fdi_daemon.io.columns import add_columns_option
 
@@ -57,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.errors import UserError
     from fdi_daemon.io.model_file import FdiModel, load_model, save_model
     from fdi_daemon.io.outputs import check_outputs, write_json
+    from fdi_daemon.diagnose.effects import BASE_TERMS
     from fdi_daemon.io.recordings import read_recording, same_rate
 
     if args.order is not None and not 1 <= args.order <= MAX_ORDER:
@@ -86,6 +88,14 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"{args.model}: model fs = {model.fs:g} Hz but {args.recording} "
                             f"is sampled at {fs:g} Hz")
         plant_b, plant_a = model.plant_b, model.plant_a
+        section = model.extra.get("effects")
+        items = section.get("items") if isinstance(section, dict) else None
+        held = [e["name"] for e in items or [] if isinstance(e, dict) and "name" in e
+                and e["name"] not in BASE_TERMS]
+        if held:  # an augmented model (`-o`): its plant is the nominal model here
+            print(f"fdi diagnose: note: {args.model} holds effects ({', '.join(held)}) from an "
+                  f"earlier diagnosis; they are not part of the nominal model here (its plant "
+                  f"is), and -o writes the effects found now in their place", file=sys.stderr)
 
     from fdi_daemon.diagnose.report import build_report, summary_lines
     from fdi_daemon.diagnose.workflow import run_diagnose

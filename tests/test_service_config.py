@@ -177,3 +177,23 @@ def test_default_state_dir_is_systemds_then_xdg_never_the_working_directory(
     assert config_from_dict(minimal()).state_dir == tmp_path / "sd"  # under systemd
     cfg = config_from_dict(minimal(service={"state_dir": "~/mine"}))
     assert cfg.state_dir == tmp_path / "home" / "mine"  # the config's own wins
+
+
+@pytest.mark.parametrize("sections, message", [
+    # an event log pointed at the replayed recording would append JSON lines to it
+    ({"link": {"kind": "replay", "path": "rec.csv"}, "sinks": {"event_log": "{dir}/rec.csv"}},
+     "sinks.event_log {dir}/rec.csv is also link.path"),
+    ({"alarms": {"state_file": "{dir}/model.yaml"}}, "alarms.state_file {dir}/model.yaml is also "
+                                                     "model.path"),
+    ({"alarms": {"trend": "events.jsonl"}}, "alarms.trend {state}/events.jsonl is also "
+                                            "sinks.event_log"),
+])
+def test_an_output_that_is_an_input_or_another_output_is_refused(tmp_path, sections, message):
+    state = tmp_path / "state"
+    data = minimal(service={"state_dir": str(state)})
+    for name, section in sections.items():
+        data[name] = {k: v.format(dir=tmp_path) if isinstance(v, str) else v
+                      for k, v in section.items()}
+    (tmp_path / "rec.csv").write_text("t,v_in,accel\n")
+    with pytest.raises(ConfigError, match=message.format(dir=tmp_path, state=state)):
+        config_from_dict(data, "rig.yaml", tmp_path)

@@ -52,7 +52,7 @@ def check_outputs(outputs: Mapping[str, str | Path | None],
                             f"does not exist")
         allowed = rewrites.get(option)
         for source in read:
-            if _same_file(path, source) and not (allowed and _same_file(source, Path(allowed))):
+            if same_file(path, source) and not (allowed and same_file(source, Path(allowed))):
                 also = "" if str(source) == str(path) else f" ({source})"
                 raise UserError(f"{option} {path}: is also an input of this command{also}; "
                                 f"writing it would destroy it")
@@ -64,7 +64,8 @@ def check_outputs(outputs: Mapping[str, str | Path | None],
             _check_plot_format(path, option)
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def same_file(a: Path, b: Path) -> bool:
+    """Two paths name one file (the same path resolved, or hard links to one file)."""
     try:
         return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
     except OSError:

@@ -318,12 +318,14 @@ def config_from_dict(data: Any, source: str = "config",
     model_path = Path(model["path"]).expanduser()
     if not model_path.is_absolute():
         model_path = base_dir / model_path
-    return RigConfig(
+    config = RigConfig(
         source=source, base_dir=base_dir, link=link, simulated_device=sim,
         model_path=model_path, monitor=_monitor(data.get("monitor"), source),
         sinks=_section(data, "sinks", source), recorder=_section(data, "recorder", source),
         service=_section(data, "service", source), mqtt=_mqtt(data, source, base_dir),
         metrics=_section(data, "metrics", source), alarms=_alarms(data, source))
+    check_files(config)
+    return config
 
 
 def _mqtt(data: Mapping, source: str, base_dir: Path) -> dict[str, Any]:
@@ -466,6 +468,33 @@ def check_link(link: Mapping[str, Any], source: str) -> None:
         link_settings(link, "link")
     except ConfigError as exc:
         raise ConfigError(f"{source}: {exc}") from None
+
+
+def check_files(config: "RigConfig") -> None:
+    """The daemon's output files (event log, status socket, alarm state, trend, MQTT outbox)
+    are none of its inputs (the model, a replayed recording) and no two of them one file:
+    an event log pointed at the replayed recording would append to it. ConfigError naming
+    both keys."""
+    from fdi_daemon.io.outputs import same_file
+
+    inputs = {"model.path": config.model_path}
+    if config.link.get("kind") == "replay" and config.link.get("path"):
+        inputs["link.path"] = Path(config.link["path"])
+    outputs = {"sinks.event_log": config.sinks["event_log"],
+               "sinks.status_socket": config.sinks["status_socket"],
+               "alarms.state_file": config.alarms["state_file"],
+               "alarms.trend": config.alarms["trend"],
+               "mqtt.buffer_file": config.mqtt["buffer_file"] if config.mqtt["enabled"] else None}
+    seen: dict[str, Path] = {}
+    for key, value in outputs.items():
+        path = config.output_path(value)
+        if path is None:
+            continue
+        for other, known in {**inputs, **seen}.items():
+            if same_file(path, known):
+                raise ConfigError(f"{config.source}: {key} {path} is also {other}: writing it "
+                                  "would destroy it")
+        seen[key] = path
 
 
 def _simulated_device(data: Mapping, source: str) -> dict[str, Any] | None:

@@ -552,10 +552,12 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     e0 = ctx.target[test] - without[test]
     e1 = ctx.target[test] - prediction[test]
     sse0, sse1 = float(e0 @ e0), float(e1 @ e1)
+    if not (math.isfinite(sse0) and sse1 < sse0):  # without it the loop diverges, or worse
+        return chosen, {"named": False, "pays": False}
     n_eff = effective_samples(e0)
     k = spring.n_params
     dof = n_eff - sum(e.n_params for e in chosen)
-    if not (math.isfinite(sse0) and sse1 < sse0 and dof > 1):
+    if dof <= 1:
         return chosen, {"named": False, "pays": False}
     p = float(stats.f.sf(((sse0 - sse1) / k) / (sse1 / dof), k, dof))
     score = n_eff * math.log(sse1 / sse0) + k * math.log(max(n_eff, 2.0))

@@ -75,12 +75,15 @@ def test_a_changed_spring_is_named_with_its_ratio(kind, ratio):
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_added_damping_is_viscous_friction_with_its_coefficient():
+@pytest.mark.parametrize("kind", ["acceleration", "velocity", "position"])
+def test_added_damping_is_viscous_friction_with_its_coefficient(kind):
     # the loop's spring alone fits this case as well as viscous friction does (it holds a
-    # damper too): the mode says which parameter changed (ζ 0.1 -> 0.1 + Δc/(2 m ω))
+    # damper too): the mode says which parameter changed (ζ 0.1 -> 0.1 + Δc/(2 m ω)), read
+    # through each output's state chain, the spring and the viscous column together
     rec = recording("viscous_friction")
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    result = run_diagnose(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind,
+                          b, a)
     spring = next(c for c in result.selection.rounds[0] if c.name == "stiffness_change")
     assert spring.effect.physical["mode_change"] == "damping"
     p = MsdParams()  # ζ = c / (2 √(k m)), 1 kg
@@ -88,9 +91,11 @@ def test_added_damping_is_viscous_friction_with_its_coefficient():
                  / (2 * p.stiffness_n_per_m ** 0.5))
     assert spring.effect.physical["damping_ratio"] == pytest.approx(true_zeta, abs=0.005)
     assert result.named == ["viscous_friction"]
-    # input equivalent: c_v / gain = 2 N·s/m / 10 N/V
-    assert result.selection.named[0].physical[
-        "viscous_coefficient_input_equivalent"] == pytest.approx(0.2, rel=0.1)
+    linear = next(e for e in result.selection.chosen if e.name == "loop_stiffness")
+    assert linear.physical["damping_ratio"] == pytest.approx(true_zeta, abs=0.005)
+    if kind == "acceleration":  # input equivalent: c_v / gain = 2 N·s/m / 10 N/V
+        assert result.selection.named[0].physical[
+            "viscous_coefficient_input_equivalent"] == pytest.approx(0.2, rel=0.1)
 
 
 def test_a_dead_time_is_named_with_its_value_not_absorbed_by_the_refit():

@@ -397,12 +397,12 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
             new.physical = physical_report(new, ctx)
             pos += k
         out.append(new)
-    spring = next((e for e in out if e.name in SPRINGS), None)
+    linear = next((e for e in out if e.name in SPRINGS), None)
     for e in out:
-        if e.name == "viscous_friction" and spring is not None:
+        if e.name == "viscous_friction" and linear is not None:
             # a viscous friction is a damper: the loop's linear part must move the mode by
             # damping (`mode_shift`, with the spring beside it), not by stiffness
-            e.physical["mode_change"] = spring.physical.get("mode_change")
+            e.physical["mode_change"] = linear.physical.get("mode_change")
             e.physical["plausible"] = bool(e.physical["plausible"]
                                            and e.physical["mode_change"] != "stiffness")
     return out, y - ctx.y0
@@ -480,12 +480,14 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
     mass), "damping" otherwise (``damping_change_per_s`` = Δ(c/m); added damping is viscous
     friction, `select`); "unknown" when Â has no pole pair."""
     n, vb, va, fs = ctx.chain
-    den, num_x, num_v = {0: (np.polymul(va, va), np.polymul(vb, vb), np.polymul(vb, va)),
+    # products of polynomials in z⁻¹ are convolutions (numpy.polymul would drop a leading
+    # zero, which in z⁻¹ is a delay)
+    den, num_x, num_v = {0: (np.convolve(va, va), np.convolve(vb, vb), np.convolve(vb, va)),
                          1: (va, vb, va)}.get(n, ([1.0], [1.0], [fs, -fs]))
     a = np.asarray(ctx.a_dom, float)
-    loop = np.polysub(np.polymul(a, den), np.polymul(b_x, num_x))
+    loop = _minus(np.convolve(a, den), np.convolve(b_x, num_x))
     if b_v is not None:
-        loop = np.polysub(loop, np.polymul(b_v, num_v))
+        loop = _minus(loop, np.convolve(b_v, num_v))
     nominal = [s for s in _s_poles(a, fs) if s.imag > 0]
     if not nominal:
         return {"mode_change": "unknown"}
@@ -505,6 +507,14 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
             "damping_ratio_nominal": -s0.real / w0, "damping_ratio": -s1.real / w1,
             "stiffness_ratio": (w1 / w0) ** 2, "damping_change_per_s": damping,
             "mode_moved_hz": moved_hz, "resolution_hz": resolution_hz, "mode_change": change}
+
+
+def _minus(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """p − q for polynomials in z⁻¹ (aligned at the z⁰ term, unlike `numpy.polysub`)."""
+    out = np.zeros(max(len(p), len(q)))
+    out[:len(p)] += p
+    out[:len(q)] -= q
+    return out
 
 
 def _s_poles(poly: np.ndarray, fs: float) -> np.ndarray:

@@ -104,14 +104,15 @@ def rig_model() -> tuple[np.ndarray, np.ndarray]:
 
 @lru_cache(maxsize=None)
 def rig_recording(fault: str | None = None, value: float = 0.0, rms_v: float = 0.4,
-                  duration_s: float = 30.0):
+                  duration_s: float = 30.0, variant: tuple[tuple[str, float], ...] = ()):
     """(v_in, accel) of the simulated pneumatic rig (`hil_sim.rig.Rig`, seed 4) driven by a
     1–12 Hz multisine of ``rms_v`` after 1 s at rest, with ``fault`` switched on from the
     start: ``bearing_supply`` (a fraction of nominal: below ≈ 0.8 the block touches and
-    Coulomb contact friction acts on the load) or one of `hil_sim.rig.FAULTS`."""
-    from hil_sim.rig import Rig
+    Coulomb contact friction acts on the load) or one of `hil_sim.rig.FAULTS`. variant:
+    `RigParams` overrides, as (name, value) pairs (a rig with other physics)."""
+    from hil_sim.rig import Rig, RigParams
 
-    rig = Rig(seed=4)
+    rig = Rig(RigParams(**dict(variant)), seed=4)
     if fault == "bearing_supply":
         rig.set_bearing_supply(value)
     elif fault is not None:

@@ -4,8 +4,8 @@
 
 Per variant (`test_detect_other_rig.rig_variant`: another load mass, damping, valve, seal
 and contact friction): `fdi identify` on its identification chirp, then one blind
-`run_diagnose` per fault switched on from the start of a 40 s, 0.8 V RMS multisine (as
-`diagnose_cases.rig_recording`): none, contact friction (bearing supply 65 %), supply
+`run_diagnose` per fault switched on from the start of a 40 s, 0.8 V RMS multisine
+(`diagnose_cases.rig_recording` on the variant): none, contact friction (bearing supply 65 %), supply
 pressure 80 % (a softer air spring), valve gain 80 %, accelerometer bias 0.3 m/s².
 Prints the names, the held-out gap before and after, the noise floor and the fitted ratio
 of a gain fault or a stiffness change.
@@ -19,10 +19,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 REPO = Path(__file__).resolve().parents[1]
-FS_HZ = 256.0
 FAULTS = ((None, 0.0), ("bearing_supply", 0.65), ("supply_pressure", 0.8),
           ("valve_gain", 0.8), ("accel_bias", 0.3))
 
@@ -40,32 +37,21 @@ def identified_model(rig: dict, folder: Path):
     return load_model(folder / "m.yaml")
 
 
-def faulty_run(rig: dict, fault: str | None, value: float) -> dict:
-    """The variant after 1 s at rest, driven by the 1-12 Hz multisine with ``fault`` on."""
-    from hil_sim.msd import multisine
-    from hil_sim.rig import Rig, RigParams
-
-    sim = Rig(RigParams(**rig), seed=4)
-    if fault == "bearing_supply":
-        sim.set_bearing_supply(value)
-    elif fault is not None:
-        sim.set_fault(fault, value)
-    sim.run(np.zeros(int(FS_HZ)))
-    return sim.run(multisine(40.0, FS_HZ, 1.0, 12.0, 0.8, seed=3))
-
-
 def main(indices: list[int]) -> None:
     sys.path.insert(0, str(REPO / "tests"))
+    sys.path.insert(0, str(REPO))
     from fdi_daemon.diagnose.workflow import run_diagnose
     from test_detect_other_rig import rig_variant
+    from tests.diagnose_cases import RIG_FS, rig_recording
 
     for index in indices:
         rig = rig_variant(index)
-        model = identified_model(rig, Path(tempfile.mkdtemp()))
+        with tempfile.TemporaryDirectory() as folder:
+            model = identified_model(rig, Path(folder))
         for fault, value in FAULTS:
-            out = faulty_run(rig, fault, value)
-            r = run_diagnose(out["v_in"], out["accel"], FS_HZ, "acceleration",
-                             model.plant_b, model.plant_a)
+            u, y = rig_recording(fault, value, rms_v=0.8, duration_s=40.0,
+                                 variant=tuple(sorted(rig.items())))
+            r = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
             ratios = {e.name: round(float(e.physical.get("stiffness_ratio",
                                                          e.physical.get("gain_ratio"))), 3)
                       for e in r.selection.named

@@ -182,11 +182,11 @@ def test_default_state_dir_is_systemds_then_xdg_never_the_working_directory(
 @pytest.mark.parametrize("sections, message", [
     # an event log pointed at the replayed recording would append JSON lines to it
     ({"link": {"kind": "replay", "path": "rec.csv"}, "sinks": {"event_log": "{dir}/rec.csv"}},
-     "sinks.event_log {dir}/rec.csv is also link.path"),
-    ({"alarms": {"state_file": "{dir}/model.yaml"}}, "alarms.state_file {dir}/model.yaml is also "
-                                                     "model.path"),
-    ({"alarms": {"trend": "events.jsonl"}}, "alarms.trend {state}/events.jsonl is also "
-                                            "sinks.event_log"),
+     r"sinks.event_log {dir}/rec.csv: is also an input of this command \(link.path\)"),
+    ({"alarms": {"state_file": "{dir}/model.yaml"}},
+     r"alarms.state_file {dir}/model.yaml: is also an input of this command \(model.path\)"),
+    ({"alarms": {"trend": "events.jsonl"}},
+     "alarms.trend and sinks.event_log name the same file {state}/events.jsonl"),
 ])
 def test_an_output_that_is_an_input_or_another_output_is_refused(tmp_path, sections, message):
     state = tmp_path / "state"

@@ -88,8 +88,7 @@ def _package_cache_dir(package: Path) -> str | None:
                 stale = [p for p in root.glob(prefix + "*") if p.name != name]
                 for folder in stale:
                     shutil.rmtree(folder, ignore_errors=True)
-                for old in (*package.rglob("__pycache__/*.nbi"),
-                            *package.rglob("__pycache__/*.nbc")):
+                for old in package.rglob("__pycache__/*.nb[ic]"):
                     old.unlink(missing_ok=True)
             return str(root / name)
     log.warning("no writable folder to cache the compiled kernels of %s: they are compiled "

@@ -28,32 +28,38 @@ def pyplot():
 
 
 def check_outputs(outputs: Mapping[str, str | Path | None],
-                  inputs: Iterable[str | Path | None] = (), plots: Iterable[str] = (),
-                  rewrites: Mapping[str, str | Path | None] | None = None) -> None:
+                  inputs: Iterable[str | Path | None] | Mapping[str, str | Path | None] = (),
+                  plots: Iterable[str] = (),
+                  rewrites: Mapping[str, str | Path | None] | None = None,
+                  new_dirs: bool = False) -> None:
     """Refuse, before any work, output paths that cannot be written or would destroy an input.
 
-    outputs: option -> path (None: not asked for); inputs: files the command reads; plots:
-    the options of ``outputs`` that are figures (their ending must name a format matplotlib
-    writes); rewrites: option -> the one input it may replace (``-o`` = ``--model``). Each
-    output's directory must exist, no output may be a directory, another input, or another
-    output. A UserError names the option.
+    outputs: option -> path (None: not asked for); inputs: files the command reads (or a
+    mapping name -> file, the name then said in the error); plots: the options of
+    ``outputs`` that are figures (their ending must name a format matplotlib writes);
+    rewrites: option -> the one input it may replace (``-o`` = ``--model``); new_dirs: the
+    outputs' directories need not exist yet (their writer makes them). Each output's
+    directory must exist, no output may be a directory, another input, or another output. A
+    UserError names the option.
     """
     given = {option: Path(path) for option, path in outputs.items() if path is not None}
-    read = [Path(path) for path in inputs if path is not None]
+    named = inputs.items() if isinstance(inputs, Mapping) else ((None, p) for p in inputs)
+    read = [(name, Path(path)) for name, path in named if path is not None]
     rewrites = rewrites or {}
     seen: dict[Path, str] = {}
     for option, path in given.items():
         if path.is_dir():
             raise UserError(f"{option} {path}: is a directory, not a file")
         if path.exists() and not path.is_file():
-            continue  # a device or a pipe (/dev/null, /dev/stdout): written, never read back
-        if not path.resolve().parent.is_dir():
+            continue  # a device, a pipe (/dev/null, /dev/stdout), a socket: never read back
+        if not new_dirs and not path.resolve().parent.is_dir():
             raise UserError(f"{option} {path}: cannot write there: directory {path.parent} "
                             f"does not exist")
         allowed = rewrites.get(option)
-        for source in read:
+        for name, source in read:
             if same_file(path, source) and not (allowed and same_file(source, Path(allowed))):
-                also = "" if str(source) == str(path) else f" ({source})"
+                also = (f" ({name})" if name else
+                        "" if str(source) == str(path) else f" ({source})")
                 raise UserError(f"{option} {path}: is also an input of this command{also}; "
                                 f"writing it would destroy it")
         key = path.resolve()

@@ -47,7 +47,7 @@ from typing import Any
 
 
 from fdi_daemon.alarms.lifecycle import AlarmSettings
-from fdi_daemon.errors import ConfigError
+from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.io.yaml_file import read_yaml
 
 __all__ = ["RigConfig", "load_config", "config_from_dict", "default_config_path",
@@ -472,10 +472,10 @@ def check_link(link: Mapping[str, Any], source: str) -> None:
 
 def check_files(config: "RigConfig") -> None:
     """The daemon's output files (event log, status socket, alarm state, trend, MQTT outbox)
-    are none of its inputs (the model, a replayed recording) and no two of them one file:
-    an event log pointed at the replayed recording would append to it. ConfigError naming
-    both keys."""
-    from fdi_daemon.io.outputs import same_file
+    are none of its inputs (the model, a replayed recording) and no two of them one file
+    (`io.outputs.check_outputs`): an event log pointed at the replayed recording would
+    append to it. A ConfigError names the key."""
+    from fdi_daemon.io.outputs import check_outputs
 
     inputs = {"model.path": config.model_path}
     if config.link.get("kind") == "replay" and config.link.get("path"):
@@ -485,16 +485,11 @@ def check_files(config: "RigConfig") -> None:
                "alarms.state_file": config.alarms["state_file"],
                "alarms.trend": config.alarms["trend"],
                "mqtt.buffer_file": config.mqtt["buffer_file"] if config.mqtt["enabled"] else None}
-    seen: dict[str, Path] = {}
-    for key, value in outputs.items():
-        path = config.output_path(value)
-        if path is None:
-            continue
-        for other, known in {**inputs, **seen}.items():
-            if same_file(path, known):
-                raise ConfigError(f"{config.source}: {key} {path} is also {other}: writing it "
-                                  "would destroy it")
-        seen[key] = path
+    try:
+        check_outputs({key: config.output_path(value) for key, value in outputs.items()},
+                      inputs, new_dirs=True)
+    except UserError as exc:
+        raise ConfigError(f"{config.source}: {exc}") from None
 
 
 def _simulated_device(data: Mapping, source: str) -> dict[str, Any] | None:

@@ -72,19 +72,13 @@ def duffing_recording(k3_n_per_m3: float = 3e5, seed: int = 2):
 
 
 @lru_cache(maxsize=None)
-def gain_fault_recording(gain_ratio: float = 1.2, seed: int = 2):
-    """The §V model whose actuator gain is off by ``gain_ratio`` (the nominal model is not)."""
+def changed_recording(parameter: str, ratio: float, seed: int = 2):
+    """The §V model whose ``parameter`` (an `MsdParams` field: the actuator's
+    ``gain_n_per_v``, the spring's ``stiffness_n_per_m``, the load's ``mass_kg``) is
+    ``ratio`` times the nominal one; the nominal model is not changed."""
     u = multisine(DURATION_S, FS, 0.3, 12.0, 0.5, seed=1)
-    return simulate_recording(MsdParams(gain_n_per_v=10.0 * gain_ratio, **NOISE), u, seed=seed)
-
-
-@lru_cache(maxsize=None)
-def spring_recording(stiffness_ratio: float = 0.8, seed: int = 2):
-    """The §V model whose spring is ``stiffness_ratio`` times the nominal one (the nominal
-    model is not): a linear change of the mechanics, its resonance moved by √ratio."""
-    u = multisine(DURATION_S, FS, 0.3, 12.0, 0.5, seed=1)
-    k = stiffness_ratio * MsdParams().stiffness_n_per_m
-    return simulate_recording(MsdParams(stiffness_n_per_m=k, **NOISE), u, seed=seed)
+    value = ratio * getattr(MsdParams(), parameter)
+    return simulate_recording(MsdParams(**{parameter: value}, **NOISE), u, seed=seed)
 
 
 # ---------------------------------------------------------------- the pneumatic rig (hil_sim.rig)

@@ -6,9 +6,10 @@ Per variant (`test_detect_other_rig.rig_variant`: another load mass, damping, va
 and contact friction): `fdi identify` on its identification chirp, then one blind
 `run_diagnose` per fault switched on from the start of a 40 s, 0.8 V RMS multisine
 (`diagnose_cases.rig_recording` on the variant): none, contact friction (bearing supply 65 %), supply
-pressure 80 % (a softer air spring), valve gain 80 %, accelerometer bias 0.3 m/s².
+pressure 80 % (a softer air spring), valve gain 80 %, accelerometer bias 0.3 m/s², and a
+payload (the bearing block 0.5 kg heavier: a mass the model does not know).
 Prints the names, the held-out gap before and after, the noise floor and the fitted ratio
-of a gain fault or a stiffness change.
+of a gain fault, a stiffness change or a mass change.
 """
 
 from __future__ import annotations
@@ -21,7 +22,10 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 FAULTS = ((None, 0.0), ("bearing_supply", 0.65), ("supply_pressure", 0.8),
-          ("valve_gain", 0.8), ("accel_bias", 0.3))
+          ("valve_gain", 0.8), ("accel_bias", 0.3), ("payload_kg", 0.5))
+#: what a ratio of each named effect is called in its report
+RATIOS = {"stiffness_change": "stiffness_ratio", "mass_change": "mass_ratio",
+          "gain_fault": "gain_ratio"}
 
 
 def identified_model(rig: dict, folder: Path):
@@ -41,6 +45,7 @@ def main(indices: list[int]) -> None:
     sys.path.insert(0, str(REPO / "tests"))
     sys.path.insert(0, str(REPO))
     from fdi_daemon.diagnose.workflow import run_diagnose
+    from hil_sim.rig import RigParams
     from test_detect_other_rig import rig_variant
     from tests.diagnose_cases import RIG_FS, rig_recording
 
@@ -49,16 +54,20 @@ def main(indices: list[int]) -> None:
         with tempfile.TemporaryDirectory() as folder:
             model = identified_model(rig, Path(folder))
         for fault, value in FAULTS:
-            u, y = rig_recording(fault, value, rms_v=0.8, duration_s=40.0,
-                                 variant=tuple(sorted(rig.items())))
+            params = dict(rig)
+            truth = ""
+            if fault == "payload_kg":
+                params["bearing_mass_kg"] = RigParams(**rig).bearing_mass_kg + value
+                ratio = RigParams(**params).moving_mass_kg / RigParams(**rig).moving_mass_kg
+                truth = f" (moving mass x {ratio:.3f})"
+            u, y = rig_recording(None if fault == "payload_kg" else fault, value, rms_v=0.8,
+                                 duration_s=40.0, variant=tuple(sorted(params.items())))
             r = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
-            ratios = {e.name: round(float(e.physical.get("stiffness_ratio",
-                                                         e.physical.get("gain_ratio"))), 3)
-                      for e in r.selection.named
-                      if "stiffness_ratio" in e.physical or "gain_ratio" in e.physical}
+            ratios = {e.name: round(float(e.physical[RATIOS[e.name]]), 3)
+                      for e in r.selection.named if e.name in RATIOS}
             print(f"v{index} {fault or 'none'} {value:g}: {r.named} {r.gap_before:.4f} -> "
-                  f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {ratios}",
-                  flush=True)
+                  f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {ratios}"
+                  + truth, flush=True)
 
 
 if __name__ == "__main__":

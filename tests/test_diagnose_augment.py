@@ -28,10 +28,11 @@ def _plant(kind: str = "acceleration") -> AugmentedPlant:
     #: forces in the loop: friction that opposes motion, a hardening spring, a stiffer
     #: linear spring (input units)
     force = {"coulomb_friction": 0.05, "stribeck_friction": 0.05, "cubic_stiffness": 1e4,
-             "stiffness_change": 10.0}
+             "stiffness_change": 10.0, "mass_change": 5.0}
     effects = []
     for name, param in [("coulomb_friction", None), ("stribeck_friction", 0.05),
                         ("cubic_stiffness", None), ("stiffness_change", None),
+                        ("mass_change", None),
                         ("dead_time", 2.6), ("backlash", 0.1),
                         ("dead_zone", 0.05), ("output_saturation", 5.0), ("sensor_offset", None)]:
         spec = SPECS[name]

@@ -10,13 +10,13 @@ import pytest
 from hil_sim.msd import MsdParams, simulate_recording
 from fdi_daemon.diagnose.effects import EFFECT_NAMES
 from fdi_daemon.diagnose.workflow import run_diagnose
-from tests.diagnose_cases import (FS, HIDDEN, gain_fault_recording, nominal_model, recording,
-                                  spring_recording)
+from tests.diagnose_cases import FS, HIDDEN, changed_recording, nominal_model, recording
 
 #: effects the §V simulator cannot hide, with the test that hides them
 ELSEWHERE = {"gain_fault": "test_a_gain_fault_is_named_with_its_ratio",
              "force_offset": "test_diagnose_machines.py::test_closed_loop_stage",
-             "stiffness_change": "test_a_changed_spring_is_named_with_its_ratio"}
+             "stiffness_change": "test_a_changed_spring_is_named_with_its_ratio",
+             "mass_change": "test_a_changed_mass_is_named_with_its_ratio"}
 
 
 def test_every_library_effect_has_a_case():
@@ -46,7 +46,7 @@ def test_no_hidden_effect_names_none():
 
 
 def test_a_gain_fault_is_named_with_its_ratio():
-    rec = gain_fault_recording(1.2)
+    rec = changed_recording("gain_n_per_v", 1.2)
     b, a = nominal_model()
     result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
     assert result.named == ["gain_fault"]
@@ -61,7 +61,7 @@ def test_a_changed_spring_is_named_with_its_ratio(kind, ratio):
     # every force effect brings the loop's free spring, so each would close this gap; a
     # linear change of the mechanics is named after the parameter of the mode that moved
     # (read through each output's state chain)
-    rec = spring_recording(ratio)
+    rec = changed_recording("stiffness_n_per_m", ratio)
     b, a = nominal_model()
     column = {"acceleration": "accel"}.get(kind, kind)
     result = run_diagnose(rec.v_in, rec[column], FS, kind, b, a)
@@ -72,6 +72,23 @@ def test_a_changed_spring_is_named_with_its_ratio(kind, ratio):
     f0 = MsdParams().stiffness_n_per_m ** 0.5 / (2 * np.pi)  # 1 kg
     assert params["resonance_hz_nominal"] == pytest.approx(f0, rel=1e-6)
     assert params["resonance_hz"] == pytest.approx(f0 * ratio ** 0.5, abs=0.05)
+    assert result.gap_after <= 0.5 * result.gap_before
+
+
+@pytest.mark.parametrize("kind,ratio", [("acceleration", 1.25), ("velocity", 0.8),
+                                        ("position", 0.8)])
+def test_a_changed_mass_is_named_with_its_ratio(kind, ratio):
+    # a mass moves the mode as a spring does (ω² = k/m), and its damping per unit mass by
+    # the same ratio (2ζω = c/m), which a spring leaves alone: the same fit as a changed
+    # spring, named after the mode it moves
+    rec = changed_recording("mass_kg", ratio)
+    b, a = nominal_model()
+    result = run_diagnose(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind,
+                          b, a)
+    assert result.named[0] == "mass_change"
+    params = result.selection.named[0].physical
+    assert params["mode_change"] == "mass"
+    assert params["mass_ratio"] == pytest.approx(ratio, abs=0.02)
     assert result.gap_after <= 0.5 * result.gap_before
 
 

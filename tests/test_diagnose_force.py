@@ -174,6 +174,8 @@ def test_velocity_noise_ignores_a_smooth_motion():
 @pytest.mark.parametrize("change,expected", [
     ({"stiffness_n_per_m": 0.8 * 987.0}, "stiffness"),
     ({"damping_n_s_per_m": 6.3 + 3.0}, "damping"),
+    ({"mass_kg": 1.25}, "mass"),
+    ({"mass_kg": 0.8}, "mass"),
     ({"stiffness_n_per_m": 987.0 * 1.0001}, "none"),
 ])
 def test_mode_shift_reads_the_mode_of_a_system_whose_change_we_chose(change, expected):
@@ -201,9 +203,12 @@ def test_mode_shift_reads_the_mode_of_a_system_whose_change_we_chose(change, exp
         mode(nominal), rel=1e-6)
     assert (out["resonance_hz"], out["damping_ratio"]) == pytest.approx(mode(changed),
                                                                         rel=1e-6)
-    assert out["stiffness_ratio"] == pytest.approx(
-        changed.stiffness_n_per_m / nominal.stiffness_n_per_m, rel=1e-6)
-    assert out["damping_change_per_s"] == pytest.approx(
-        (changed.damping_n_s_per_m - nominal.damping_n_s_per_m) / nominal.mass_kg, rel=1e-6,
-        abs=1e-9)
+    assert out["stiffness_ratio"] == pytest.approx(  # ω₁²/ω₀²
+        (changed.stiffness_n_per_m / changed.mass_kg)
+        / (nominal.stiffness_n_per_m / nominal.mass_kg), rel=1e-6)
+    assert out["damping_change_per_s"] == pytest.approx(  # Δ(c/m)
+        changed.damping_n_s_per_m / changed.mass_kg
+        - nominal.damping_n_s_per_m / nominal.mass_kg, rel=1e-6, abs=1e-9)
     assert out["mode_change"] == expected
+    if expected == "mass":
+        assert out["mass_ratio"] == pytest.approx(changed.mass_kg / nominal.mass_kg, rel=1e-6)

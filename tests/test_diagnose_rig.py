@@ -73,3 +73,24 @@ def test_rig_supply_pressure_is_a_stiffness_change(supply, excitation):
     ratio = spring.physical["stiffness_ratio"]
     assert (ratio < 0.9) if supply < 1 else (ratio > 1.0)
     assert result.gap_after <= 0.5 * result.gap_before
+
+
+@pytest.mark.parametrize("bearing_mass_kg,excitation", [(1.5, STRONG), (1.5, {}), (0.7, STRONG)])
+def test_rig_payload_is_a_mass_change(bearing_mass_kg, excitation):
+    # a payload on the bearing block changes the moving mass (1.35 kg nominal) and nothing
+    # the model knows: the mode moves in frequency and in damping per unit mass alike, which
+    # a spring does not do. The seal's Coulomb friction may come with it
+    from hil_sim.rig import RigParams
+
+    u, y = rig_recording(variant=(("bearing_mass_kg", bearing_mass_kg),), **excitation)
+    b, a = rig_model()
+    result = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+    assert "mass_change" in result.named
+    assert set(result.named) <= {"mass_change"} | SEAL
+    mass = next(e for e in result.selection.named if e.name == "mass_change")
+    nominal = RigParams()
+    true = (nominal.piston_rod_mass_kg + bearing_mass_kg) / nominal.moving_mass_kg
+    # heavier or lighter, as it is (the ratio is the load's mode's, which the chambers' air
+    # spring shapes too: docs/diagnose.md §9)
+    assert (mass.physical["mass_ratio"] - 1.0) * (true - 1.0) > 0.0
+    assert result.gap_after <= 0.5 * result.gap_before

@@ -17,7 +17,7 @@ from scipy import signal
 
 from fdi_daemon.diagnose import signals
 from fdi_daemon.diagnose.augment import AugmentedPlant
-from fdi_daemon.diagnose.effects import EFFECT_NAMES, Context
+from fdi_daemon.diagnose.effects import EFFECT_NAMES, NAMED_BY_MODE, Context
 from fdi_daemon.errors import UserError
 
 
@@ -141,7 +141,7 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
     skip = ({"sensor_offset"} if n_kind else set()) | (
         {"viscous_friction", "dead_time", "stiffness_change"}
         if info["baseline"] != "model file" else set())
-    candidates = tuple(e for e in EFFECT_NAMES if e not in skip)
+    candidates = tuple(e for e in EFFECT_NAMES if e not in skip and e not in NAMED_BY_MODE)
     ref_hz = band_centre_hz(u, fs_hz)
     # a dead time beyond a quarter period at the band centre (> 90° of phase there) is a
     # wrong model, not a dead time

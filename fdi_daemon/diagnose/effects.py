@@ -17,6 +17,7 @@ by search) and linear coefficients (least squares). Where it enters (``source``)
 | cubic_stiffness    | state  | x³                                   | —                     |
 | force_offset       | state  | 1                                    | —                     |
 | stiffness_change   | state  | x (free B_F: the mode's ω and ζ move) | —                    |
+| mass_change        | state  | x (stiffness_change's, by the mode)  | —                     |
 | input_saturation   | input  | sat_L(u − u_c) − (u − u_c)           | level L               |
 | dead_zone          | input  | dz_w(u − u_c) − (u − u_c)            | half-width w          |
 | backlash           | input  | play_g(u) − u                        | gap g                 |
@@ -24,6 +25,9 @@ by search) and linear coefficients (least squares). Where it enters (``source``)
 | gain_fault         | output | ŷ₀                                   | —                     |
 | output_saturation  | output | sat_L(ŷ₀) − ŷ₀                       | level L               |
 | sensor_offset      | output | 1                                    | —                     |
+
+``mass_change`` is not fitted on its own: it is the name of ``stiffness_change``'s fit when
+the mode it moves scales its stiffness and damping per unit mass alike (`force.mode_shift`).
 
 Base terms, never named: ``linear_refit`` (B_e/Â on u), ``loop_stiffness`` (x in the force
 loop), ``force_balance`` (mass and damping of the inverse-dynamics form). In the
@@ -47,7 +51,9 @@ from fdi_daemon.diagnose.regressors import Regressor, Static
 
 EFFECT_NAMES = ("coulomb_friction", "viscous_friction", "stribeck_friction", "cubic_stiffness",
                 "dead_time", "input_saturation", "output_saturation", "dead_zone", "backlash",
-                "sensor_offset", "force_offset", "gain_fault", "stiffness_change")
+                "sensor_offset", "force_offset", "gain_fault", "stiffness_change", "mass_change")
+#: effects named from another candidate's fit (`force.mechanics_name`), not candidates
+NAMED_BY_MODE = ("mass_change",)
 
 
 # regressor blocks: `regressors` (base), `input_effects`, `output_effects`; force effects'
@@ -128,6 +134,8 @@ SPECS: dict[str, EffectSpec] = {
     # the loop's spring alone (`force.mode_shift` says what it changes)
     "stiffness_change": EffectSpec("stiffness_change", "state", True, None, "",
                                    lambda p, c: Static(lambda u, v, x, y0: [x])),
+    "mass_change": EffectSpec("mass_change", "state", True, None, "",
+                              lambda p, c: Static(lambda u, v, x, y0: [x])),
     # not a candidate: corrections of the inverse-dynamics form's mass, damping [, stiffness]
     # refitted with every candidate (columns from `Context.base_columns`)
     "force_balance": EffectSpec("force_balance", "state", False, None, "", lambda p, c: None),

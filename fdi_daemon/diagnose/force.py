@@ -35,6 +35,7 @@ The loop is a streaming block (`ForceLoop`: `run` and `step` run the same compil
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from scipy import signal
@@ -44,11 +45,15 @@ from fdi_daemon.core.compiled import jit
 
 #: effects that are forces on the moving mass
 FORCE_EFFECTS = ("coulomb_friction", "viscous_friction", "stribeck_friction",
-                 "cubic_stiffness", "force_offset", "stiffness_change")
+                 "cubic_stiffness", "force_offset", "stiffness_change", "mass_change")
 #: everything in the loop: the force effects and the loop's linear spring correction
 LOOPED = FORCE_EFFECTS + ("loop_stiffness",)
 #: the loop's linear force of x (a free B_F): the base's spring, or the candidate itself
-SPRINGS = ("loop_stiffness", "stiffness_change")
+#: (named after the parameter of the mode it moves, `mechanics_name`)
+SPRINGS = ("loop_stiffness", "stiffness_change", "mass_change")
+#: the name of the loop's linear force of x by what it does to the mode (`mode_shift`;
+#: added damping is viscous friction, whose own fit `select` names)
+MECHANICS = {"stiffness": "stiffness_change", "mass": "mass_change"}
 
 # regressor kinds of the kernel
 _SIGN, _VEL, _STRIBECK, _CUBE, _ONE, _X = 0, 1, 2, 3, 4, 5
@@ -404,7 +409,7 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
             # damping (`mode_shift`, with the spring beside it), not by stiffness
             e.physical["mode_change"] = linear.physical.get("mode_change")
             e.physical["plausible"] = bool(e.physical["plausible"]
-                                           and e.physical["mode_change"] != "stiffness")
+                                           and e.physical["mode_change"] not in MECHANICS)
     return out, y - ctx.y0
 
 
@@ -412,7 +417,8 @@ _FORCE_LABELS = {"coulomb_friction": ["coulomb_level"],
                  "viscous_friction": ["viscous_coefficient"],
                  "stribeck_friction": ["coulomb_level", "stribeck_excess"],
                  "cubic_stiffness": ["cubic_coefficient"], "force_offset": ["offset"],
-                 "loop_stiffness": ["stiffness"], "stiffness_change": ["stiffness"]}
+                 "loop_stiffness": ["stiffness"], "stiffness_change": ["stiffness"],
+                 "mass_change": ["stiffness"]}
 _FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 
 
@@ -460,8 +466,8 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
             plausible = plausible and power < 0.0
     if eff.name in SPRINGS:  # the base's spring is reported too (`report`: loop_spring)
         out.update(mode_shift(ctx, eff.coefficients[0], b_v))
-        plausible = plausible and (eff.name != "stiffness_change"
-                                   or out["mode_change"] == "stiffness")
+        plausible = plausible and (eff.name == "loop_stiffness"
+                                   or out["mode_change"] in MECHANICS)
     out["plausible"] = plausible
     return out
 
@@ -472,13 +478,18 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
     nominal mode, eq. 6's m ẍ + c ẋ + k x) against the nearest pole pair of the loop, whose
     denominator is Â·D − B_x·N_x − B_v·N_v (x = (N_x/D) y, v = (N_v/D) y: the state chain).
 
-    Per unit mass a mode s² + 2ζω s + ω² changes its stiffness by Δ(ω²) and its damping by
-    Δ(2ζω); at the mode's frequency their forces compare as |Δ(ω²)| against ω₀·|Δ(2ζω)|.
-    ``mode_change``: "none" when the pole moves less than the record's frequency
-    resolution (1/T of the training part: no measured change), else "stiffness" when the
-    first is the larger (the spring changed: ``stiffness_ratio`` = ω₁²/ω₀² at the same
-    mass), "damping" otherwise (``damping_change_per_s`` = Δ(c/m); added damping is viscous
-    friction, `select`); "unknown" when Â has no pole pair."""
+    Per unit mass a mode s² + 2ζω s + ω² moves its pole by Δ(ω²)/(2ω₀) along the frequency
+    when the spring changes, by Δ(ζω) along the damping when the damper changes, and by the
+    same relative amount in both when the mass changes (ω² = k/m, 2ζω = c/m): the move
+    (Δ(ω²)/(2ω₀), Δ(ζω)) is then ρ·(ω₀/2, ζ₀ω₀), with 1 + ρ = m₀/m₁. ``mode_change`` is the
+    parameter whose line lies nearest the move, nearer by at least the record's frequency
+    resolution (1/T of the training part) than the next: "stiffness" (``stiffness_ratio`` =
+    ω₁²/ω₀² at the same mass), "mass" (then ``mass_ratio`` = m₁/m₀ = 1/(1 + ρ), ρ fitted
+    to the move) or "damping" (``damping_change_per_s`` = Δ(c/m); added damping is viscous
+    friction, `select`). Not that much nearer: "stiffness" between a spring and a mass (a
+    mass is told from a spring only by the damping it moves), otherwise "unresolved" (no
+    one parameter explains the move). "none" when the pole moves less than the
+    resolution (no measured change); "unknown" when Â has no pole pair."""
     n, vb, va, fs = ctx.chain
     # products of polynomials in z⁻¹ are convolutions (numpy.polymul would drop a leading
     # zero, which in z⁻¹ is a delay)
@@ -497,16 +508,39 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
     if s1 is None:
         return {"mode_change": "unknown"}
     w0, w1 = abs(s0), abs(s1)
-    stiffness = w1 ** 2 - w0 ** 2
-    damping = -2.0 * (s1.real - s0.real)  # Δ(2ζω)
+    zw0 = -s0.real  # ζ₀ω₀
+    k_move = (w1 ** 2 - w0 ** 2) / (2.0 * w0)  # rad/s
+    c_move = s0.real - s1.real  # Δ(ζω), rad/s
+    rho = (k_move * w0 / 2.0 + c_move * zw0) / ((w0 / 2.0) ** 2 + zw0 ** 2)
+    off = {"stiffness": abs(c_move), "damping": abs(k_move),
+           "mass": (abs(k_move * zw0 - c_move * w0 / 2.0) / math.hypot(w0 / 2.0, zw0)
+                    if rho > -1.0 else math.inf)}  # a mass is positive
     moved_hz = abs(s1 - s0) / (2 * math.pi)
     resolution_hz = fs / max(ctx.split.train_end - ctx.split.warmup, 1)
-    change = ("none" if moved_hz < resolution_hz else
-              "stiffness" if abs(stiffness) >= w0 * abs(damping) else "damping")
+    best, second = sorted(off, key=off.get)[:2]
+    if moved_hz < resolution_hz:
+        change = "none"
+    elif off[second] - off[best] >= 2 * math.pi * resolution_hz:
+        change = best
+    elif {best, second} == {"stiffness", "mass"}:
+        change = "stiffness"  # a lightly damped mode: a mass is not told from a spring
+    else:
+        change = "unresolved"
     return {"resonance_hz_nominal": w0 / (2 * math.pi), "resonance_hz": w1 / (2 * math.pi),
-            "damping_ratio_nominal": -s0.real / w0, "damping_ratio": -s1.real / w1,
-            "stiffness_ratio": (w1 / w0) ** 2, "damping_change_per_s": damping,
-            "mode_moved_hz": moved_hz, "resolution_hz": resolution_hz, "mode_change": change}
+            "damping_ratio_nominal": zw0 / w0, "damping_ratio": -s1.real / w1,
+            "stiffness_ratio": (w1 / w0) ** 2,
+            **({"mass_ratio": 1.0 / (1.0 + rho)} if change == "mass" else {}),
+            "damping_change_per_s": 2.0 * c_move, "mode_moved_hz": moved_hz,
+            "resolution_hz": resolution_hz, "mode_change": change}
+
+
+def mechanics_name(effect):
+    """The loop's linear force of x (``stiffness_change``'s fit) named after the parameter
+    of the mode it moves (`MECHANICS`); any other effect as it is."""
+    name = MECHANICS.get(effect.physical.get("mode_change"))
+    if effect.name not in SPRINGS or name is None or name == effect.name:
+        return effect
+    return replace(effect, name=name)
 
 
 def _minus(p: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -120,7 +120,7 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
                      f"{spring['resonance_hz_nominal']:.3g} -> {spring['resonance_hz']:.3g} Hz, "
                      f"damping ratio {spring['damping_ratio_nominal']:.2g} -> "
                      f"{spring['damping_ratio']:.2g} (stiffness x "
-                     f"{spring['stiffness_ratio']:.3g})")
+                     f"{spring['stiffness_ratio']:.3g}; read as {spring['mode_change']})")
     lines.append(f"gap (NRMSE, held out): {report['gap_before']:.4g} -> "
                  f"{report['gap_after']:.4g}"
                  + (f"  ({report['gap_before_to_floor']:.3g} -> "

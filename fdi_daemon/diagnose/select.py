@@ -22,11 +22,11 @@ effect contains ``stiffness_change``, the loop's free linear force of x that com
 (`force.in_the_loop`): a friction, a cubic spring or a constant force is named only where
 it does more than a linear change of the mechanics would. That change is named after what
 it does to the mechanical mode (`force.mode_shift`): ``stiffness_change`` when the spring
-moved, ``viscous_friction`` (its own fit) when damping was added. After each round the
-spring a named force effect left in the base is named too when it pays on top of it
-(`spring_check`: a stiffness change behind a friction). Then every remaining candidate is
-tried on top of it (jointly refitted) for a second effect, with the same test. No accepted
-candidate: "no significant missing effect".
+moved, ``mass_change`` (the same fit) when the mass did, ``viscous_friction`` (its own fit)
+when damping was added. After each round the spring a named force effect left in the base
+is named too when it pays on top of it (`spring_check`: a stiffness change behind a
+friction). Then every remaining candidate is tried on top of it (jointly refitted) for a
+second effect, with the same test. No accepted candidate: "no significant missing effect".
 """
 
 from __future__ import annotations
@@ -39,7 +39,8 @@ from scipy import stats
 
 from fdi_daemon.diagnose.effects import (BASE_TERMS, SPECS, Context, FittedEffect,
                                          NotApplicable, columns, fit_effect)
-from fdi_daemon.diagnose.force import FORCE_EFFECTS, SPRINGS, in_the_loop
+from fdi_daemon.diagnose.force import (FORCE_EFFECTS, MECHANICS, SPRINGS, in_the_loop,
+                                       mechanics_name)
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
 #: effect in pure noise near 2 %
@@ -70,7 +71,9 @@ class Candidate:
     k_total: int = 0  # parameters of the whole fit
 
     def ranking_entry(self, gap_after: float) -> dict:
-        return {"effect": self.name, "gap_after": gap_after, "score": self.score,
+        """The candidate as the report ranks it (a linear change of the mechanics by the
+        name of the mode it moves, `force.mechanics_name`)."""
+        return {"effect": mechanics_name(self.effect).name, "gap_after": gap_after, "score": self.score,
                 "p_value": self.p_value, "accepted": self.accepted,
                 "params": dict(self.effect.physical)}
 
@@ -384,8 +387,8 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         best = _choose(results, n_eff)
         if best is None:
             break
-        chosen, check = spring_check(ctx, best.base + [best.effect], best.prediction,
-                                     floor_sse)
+        chosen, check = spring_check(ctx, best.base + [mechanics_name(best.effect)],
+                                     best.prediction, floor_sse)
         spring = check or spring
         cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
                 for e in chosen]
@@ -527,18 +530,19 @@ def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
 
 def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray,
                  floor_sse: float | None) -> tuple[list[FittedEffect], dict]:
-    """The loop's spring never swallows a stiffness change silently.
+    """The loop's spring never swallows a stiffness or mass change silently.
 
     Every force effect brings the loop's spring (``loop_stiffness``, §4.3), unnamed. After
     a round that leaves it in ``chosen``, the other effects are fitted again without it
-    (`force.in_the_loop`, ``spring=False``): the spring is named ``stiffness_change`` when
-    it pays on top of them as a candidate would (F-test at ALPHA, ΔBIC < 0, at least
-    MIN_REDUCTION of the held-out error energy), the error without it is above the noise
-    floor, there is room for one more effect (MAX_EFFECTS), and the loop's linear part
-    moves the mode by stiffness (`force.mode_shift`). With a fitted baseline the spring
-    stays in the base, as ``stiffness_change`` is not a candidate there (the baseline holds
-    the linear effects). Returns ``chosen`` (the spring renamed when named) and the
-    figures of the check ({} when there was nothing to check)."""
+    (`force.in_the_loop`, ``spring=False``): the spring is named (``stiffness_change`` or
+    ``mass_change``, `force.mechanics_name`) when it pays on top of them as a candidate
+    would (F-test at ALPHA, ΔBIC < 0, at least MIN_REDUCTION of the held-out error energy),
+    the error without it is above the noise floor, there is room for one more effect
+    (MAX_EFFECTS), and the loop's linear part moves the mode by stiffness or mass
+    (`force.mode_shift`). With a fitted baseline the spring stays in the base, as
+    ``stiffness_change`` is not a candidate there (the baseline holds the linear effects).
+    Returns ``chosen`` (the spring renamed when named) and the figures of the check ({}
+    when there was nothing to check)."""
     from dataclasses import replace
 
     spring = next((e for e in chosen if e.name == "loop_stiffness"), None)
@@ -565,9 +569,8 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
              "above_floor": floor_sse is None or sse0 > floor_sse,
              "mode_change": spring.physical.get("mode_change")}
     check["named"] = bool(p < ALPHA and score < 0.0 and sse1 <= (1.0 - MIN_REDUCTION) * sse0
-                          and check["above_floor"] and check["mode_change"] == "stiffness")
+                          and check["above_floor"] and check["mode_change"] in MECHANICS)
     if not check["named"]:
         return chosen, check
-    named = replace(spring, name="stiffness_change",
-                    physical={**spring.physical, "plausible": True})
+    named = replace(mechanics_name(spring), physical={**spring.physical, "plausible": True})
     return rest + [named], check

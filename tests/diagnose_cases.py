@@ -7,6 +7,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+from scipy import signal
 
 from hil_sim.msd import MsdParams, multisine, nominal_tf, simulate_recording
 
@@ -61,12 +62,18 @@ def stage_recording(coulomb_n: float = 20.0, offset_n: float = 1.0, seed: int = 
 
 
 @lru_cache(maxsize=None)
-def duffing_recording(k3_n_per_m3: float = 3e5, seed: int = 2):
+def duffing_recording(k3_n_per_m3: float = 3e5, seed: int = 2, noise_hz: float | None = None):
     """A Duffing oscillator: the §V mass-spring-damper driven directly by the input (no
     input filter) with a cubic spring (≈ 60 % of the linear force at the peaks); 40 s of a
-    0.3–12 Hz multisine at 1 V RMS; position out (0.5 mm uniform noise)."""
+    0.3–12 Hz multisine at 1 V RMS, or with ``noise_hz`` of Gaussian noise low-passed there
+    (4th-order Butterworth, seed 5, 1 V RMS); position out (0.5 mm uniform noise)."""
     effects = {"cubic_stiffness": {"k3_n_per_m3": k3_n_per_m3}} if k3_n_per_m3 else {}
-    u = multisine(40.0, FS, 0.3, 12.0, 1.0, seed=1)
+    if noise_hz is None:
+        u = multisine(40.0, FS, 0.3, 12.0, 1.0, seed=1)
+    else:
+        u = signal.lfilter(*signal.butter(4, noise_hz, fs=FS),
+                           np.random.default_rng(5).standard_normal(int(40.0 * FS)))
+        u /= np.std(u)
     return simulate_recording(MsdParams(input_filter_hz=None, effects=effects, **NOISE), u,
                               seed=seed)
 

@@ -535,10 +535,11 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
 
 
 def mechanics_name(effect):
-    """The loop's linear force of x (``stiffness_change``'s fit) named after the parameter
-    of the mode it moves (`MECHANICS`); any other effect as it is."""
+    """A named linear change of the mechanics (``stiffness_change``'s fit, also when
+    refitted) named after the parameter of the mode it moves now (`MECHANICS`); any other
+    effect as it is."""
     name = MECHANICS.get(effect.physical.get("mode_change"))
-    if effect.name not in SPRINGS or name is None or name == effect.name:
+    if effect.name not in MECHANICS.values() or name is None or name == effect.name:
         return effect
     return replace(effect, name=name)
 

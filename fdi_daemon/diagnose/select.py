@@ -73,8 +73,8 @@ class Candidate:
     def ranking_entry(self, gap_after: float) -> dict:
         """The candidate as the report ranks it (a linear change of the mechanics by the
         name of the mode it moves, `force.mechanics_name`)."""
-        return {"effect": mechanics_name(self.effect).name, "gap_after": gap_after, "score": self.score,
-                "p_value": self.p_value, "accepted": self.accepted,
+        return {"effect": mechanics_name(self.effect).name, "gap_after": gap_after,
+                "score": self.score, "p_value": self.p_value, "accepted": self.accepted,
                 "params": dict(self.effect.physical)}
 
 
@@ -387,8 +387,8 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         best = _choose(results, n_eff)
         if best is None:
             break
-        chosen, check = spring_check(ctx, best.base + [mechanics_name(best.effect)],
-                                     best.prediction, floor_sse)
+        by_mode = [mechanics_name(e) for e in best.base + [best.effect]]
+        chosen, check = spring_check(ctx, by_mode, best.prediction, floor_sse)
         spring = check or spring
         cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
                 for e in chosen]
@@ -496,7 +496,7 @@ def _physical_on_top(ctx: Context, named: list[str], first: list[FittedEffect]
     for names in ([named, smaller] if smaller != named else [named]):
         chosen, pred, sse = _fit_set(ctx, names, first)
         if all(e.physical.get("plausible", True) for e in chosen):
-            return names, chosen, pred, sse
+            return names, [mechanics_name(e) for e in chosen], pred, sse
     return None
 
 
@@ -535,7 +535,7 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     Every force effect brings the loop's spring (``loop_stiffness``, §4.3), unnamed. After
     a round that leaves it in ``chosen``, the other effects are fitted again without it
     (`force.in_the_loop`, ``spring=False``): the spring is named (``stiffness_change`` or
-    ``mass_change``, `force.mechanics_name`) when it pays on top of them as a candidate
+    ``mass_change``, by the mode) when it pays on top of them as a candidate
     would (F-test at ALPHA, ΔBIC < 0, at least MIN_REDUCTION of the held-out error energy),
     the error without it is above the noise floor, there is room for one more effect
     (MAX_EFFECTS), and the loop's linear part moves the mode by stiffness or mass
@@ -572,5 +572,6 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
                           and check["above_floor"] and check["mode_change"] in MECHANICS)
     if not check["named"]:
         return chosen, check
-    named = replace(mechanics_name(spring), physical={**spring.physical, "plausible": True})
+    named = replace(spring, name=MECHANICS[check["mode_change"]],
+                    physical={**spring.physical, "plausible": True})
     return rest + [named], check

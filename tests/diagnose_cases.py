@@ -61,6 +61,18 @@ def stage_recording(coulomb_n: float = 20.0, offset_n: float = 1.0, seed: int = 
     return simulate_stage(p, r, seed=seed)
 
 
+#: the ratio each named linear change reports
+NAMED_RATIOS = {"mass_change": "mass_ratio", "stiffness_change": "stiffness_ratio",
+                "gain_fault": "gain_ratio"}
+
+
+def noise_input(duration_s: float, corner_hz: float, rms: float, seed: int = 5):
+    """Gaussian noise at FS low-passed at corner_hz (4th-order Butterworth), scaled to rms."""
+    u = signal.lfilter(*signal.butter(4, corner_hz, fs=FS),
+                       np.random.default_rng(seed).standard_normal(int(duration_s * FS)))
+    return u * rms / np.std(u)
+
+
 @lru_cache(maxsize=None)
 def duffing_recording(k3_n_per_m3: float = 3e5, seed: int = 2, noise_hz: float | None = None):
     """A Duffing oscillator: the §V mass-spring-damper driven directly by the input (no
@@ -68,12 +80,8 @@ def duffing_recording(k3_n_per_m3: float = 3e5, seed: int = 2, noise_hz: float |
     0.3–12 Hz multisine at 1 V RMS, or with ``noise_hz`` of Gaussian noise low-passed there
     (4th-order Butterworth, seed 5, 1 V RMS); position out (0.5 mm uniform noise)."""
     effects = {"cubic_stiffness": {"k3_n_per_m3": k3_n_per_m3}} if k3_n_per_m3 else {}
-    if noise_hz is None:
-        u = multisine(40.0, FS, 0.3, 12.0, 1.0, seed=1)
-    else:
-        u = signal.lfilter(*signal.butter(4, noise_hz, fs=FS),
-                           np.random.default_rng(5).standard_normal(int(40.0 * FS)))
-        u /= np.std(u)
+    u = (multisine(40.0, FS, 0.3, 12.0, 1.0, seed=1) if noise_hz is None
+         else noise_input(40.0, noise_hz, 1.0))
     return simulate_recording(MsdParams(input_filter_hz=None, effects=effects, **NOISE), u,
                               seed=seed)
 

@@ -23,9 +23,6 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 FAULTS = ((None, 0.0), ("bearing_supply", 0.65), ("supply_pressure", 0.8),
           ("valve_gain", 0.8), ("accel_bias", 0.3), ("payload_kg", 0.5))
-#: what a ratio of each named effect is called in its report
-RATIOS = {"stiffness_change": "stiffness_ratio", "mass_change": "mass_ratio",
-          "gain_fault": "gain_ratio"}
 
 
 def identified_model(rig: dict, folder: Path):
@@ -47,7 +44,7 @@ def main(indices: list[int]) -> None:
     from fdi_daemon.diagnose.workflow import run_diagnose
     from hil_sim.rig import RigParams
     from test_detect_other_rig import rig_variant
-    from tests.diagnose_cases import RIG_FS, rig_recording
+    from tests.diagnose_cases import NAMED_RATIOS, RIG_FS, rig_recording
 
     for index in indices:
         rig = rig_variant(index)
@@ -63,8 +60,8 @@ def main(indices: list[int]) -> None:
             u, y = rig_recording(None if fault == "payload_kg" else fault, value, rms_v=0.8,
                                  duration_s=40.0, variant=tuple(sorted(params.items())))
             r = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
-            ratios = {e.name: round(float(e.physical[RATIOS[e.name]]), 3)
-                      for e in r.selection.named if e.name in RATIOS}
+            ratios = {e.name: round(float(e.physical[NAMED_RATIOS[e.name]]), 3)
+                      for e in r.selection.named if e.name in NAMED_RATIOS}
             print(f"v{index} {fault or 'none'} {value:g}: {r.named} {r.gap_before:.4f} -> "
                   f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {ratios}"
                   + truth, flush=True)

@@ -10,7 +10,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import re
+import signal
 import sys
+import threading
 
 from fdi_daemon import __version__
 from fdi_daemon.errors import UserError
@@ -65,9 +67,28 @@ def attach_negative_values(argv: list[str]) -> list[str]:
     return out
 
 
+class Terminated(Exception):
+    """SIGTERM during a command: raised in the main thread so that the command unwinds as
+    on Ctrl-C, stopping the processes it started and closing its files (Python's default
+    for SIGTERM ends the process at once and leaves its children running)."""
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
+def _on_sigterm(handler):
+    """Install ``handler`` for SIGTERM (main thread only); returns the one it replaces.
+    Commands with their own handling (`fdi run`, `fdi sim serve`) install theirs over it."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(attach_negative_values(sys.argv[1:] if argv is None else argv))
+    previous = _on_sigterm(_terminate)
     try:
         return int(args._run(args) or 0)
     except UserError as exc:
@@ -76,8 +97,14 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"fdi {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print(f"fdi {args.command}: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except BrokenPipeError:
         return 0
+    finally:
+        if previous is not None:
+            _on_sigterm(previous)
 
 
 if __name__ == "__main__":

@@ -365,3 +365,33 @@ def test_ctrl_c_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_path
     assert err.strip().splitlines() == ["fdi fleet-replay: interrupted"]
     time.sleep(1)
     assert [p.pid for p in seen if p.is_running() and p.status() != psutil.STATUS_ZOMBIE] == []
+
+
+def test_sigterm_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_path):
+    """`kill` of `fdi fleet-replay` (its own pid, not the group) stops its workers too."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    root, _, model_map = fleet
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "fdi_daemon", "fleet-replay", str(root / "recs"), "--model-map",
+         str(model_map), "--workers", "2", "--out", str(tmp_path / "rows.csv")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    parent = psutil.Process(proc.pid)
+    seen: set[psutil.Process] = set()
+    deadline = time.monotonic() + 60
+    while proc.poll() is None and time.monotonic() < deadline and len(seen) < 2:
+        seen.update(parent.children(recursive=True))
+        time.sleep(0.2)
+    assert len(seen) >= 2, "the workers never started"
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, err)
+    assert "Traceback" not in err, err
+    assert err.strip().splitlines() == ["fdi fleet-replay: terminated"]
+    time.sleep(1)
+    assert [p.pid for p in seen if p.is_running() and p.status() != psutil.STATUS_ZOMBIE] == []

@@ -17,6 +17,7 @@ import pytest
 import yaml
 
 from conftest_detect import MODEL, scenario_recording
+from process_support import start_fdi, survivors, wait_for_children
 from fdi_daemon.cli import main
 from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.fleet.inputs import ModelMap, find_recordings
@@ -340,16 +341,9 @@ def test_ctrl_c_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_path
     a KeyboardInterrupt traceback while `fdi fleet-replay` itself stopped cleanly."""
     import os
     import signal
-    import subprocess
-    import sys
     import time
 
-    root, _, model_map = fleet
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "fdi_daemon", "fleet-replay", str(root / "recs"), "--model-map",
-         str(model_map), "--workers", "2", "--out", str(tmp_path / "rows.csv")],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    proc = _start_fleet(fleet, tmp_path)
     parent = psutil.Process(proc.pid)
     seen: set[psutil.Process] = set()
     deadline = time.monotonic() + 60
@@ -363,35 +357,23 @@ def test_ctrl_c_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_path
     assert proc.returncode == 130, (proc.returncode, err)
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
     assert err.strip().splitlines() == ["fdi fleet-replay: interrupted"]
-    time.sleep(1)
-    assert [p.pid for p in seen if p.is_running() and p.status() != psutil.STATUS_ZOMBIE] == []
+    assert survivors(seen) == []
 
 
 def test_sigterm_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_path):
     """`kill` of `fdi fleet-replay` (its own pid, not the group) stops its workers too."""
-    import os
     import signal
-    import subprocess
-    import sys
-    import time
 
-    root, _, model_map = fleet
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "fdi_daemon", "fleet-replay", str(root / "recs"), "--model-map",
-         str(model_map), "--workers", "2", "--out", str(tmp_path / "rows.csv")],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
-    parent = psutil.Process(proc.pid)
-    seen: set[psutil.Process] = set()
-    deadline = time.monotonic() + 60
-    while proc.poll() is None and time.monotonic() < deadline and len(seen) < 2:
-        seen.update(parent.children(recursive=True))
-        time.sleep(0.2)
-    assert len(seen) >= 2, "the workers never started"
+    proc = _start_fleet(fleet, tmp_path)
+    seen = wait_for_children(proc, 2, timeout_s=60.0)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, err)
-    assert "Traceback" not in err, err
     assert err.strip().splitlines() == ["fdi fleet-replay: terminated"]
-    time.sleep(1)
-    assert [p.pid for p in seen if p.is_running() and p.status() != psutil.STATUS_ZOMBIE] == []
+    assert survivors(seen) == []
+
+
+def _start_fleet(fleet, tmp_path):
+    root, _, model_map = fleet
+    return start_fdi("fleet-replay", str(root / "recs"), "--model-map", str(model_map),
+                     "--workers", "2", "--out", str(tmp_path / "rows.csv"))

@@ -1,0 +1,41 @@
+"""An `fdi` command as a subprocess, and the processes it starts (psutil)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def start_fdi(*args: str, cwd: Path | None = None) -> subprocess.Popen:
+    """``python -m fdi_daemon ARGS`` of this checkout in a session of its own (a signal
+    reaches what it is sent to, not the test), stdout and stderr piped as text."""
+    return subprocess.Popen([sys.executable, "-m", "fdi_daemon", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=cwd, start_new_session=True,
+                            env={**os.environ, "PYTHONPATH": str(REPO)})
+
+
+def wait_for_children(proc: subprocess.Popen, count: int, timeout_s: float = 120.0
+                      ) -> set[psutil.Process]:
+    """The processes started under ``proc`` (at any depth) once ``count`` have been seen."""
+    parent = psutil.Process(proc.pid)
+    seen: set[psutil.Process] = set()
+    deadline = time.monotonic() + timeout_s
+    while proc.poll() is None and time.monotonic() < deadline and len(seen) < count:
+        seen.update(parent.children(recursive=True))
+        time.sleep(0.2)
+    assert len(seen) >= count, f"only {len(seen)} of {count} processes started"
+    return seen
+
+
+def survivors(processes) -> list[int]:
+    """The pids of ``processes`` still running a second from now (zombies are gone)."""
+    time.sleep(1)
+    return [p.pid for p in processes if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]

@@ -38,7 +38,7 @@ inverse-dynamics form every φ is taken from the measured motion and low-passed
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -134,8 +134,6 @@ SPECS: dict[str, EffectSpec] = {
     # the loop's spring alone (`force.mode_shift` says what it changes)
     "stiffness_change": EffectSpec("stiffness_change", "state", True, None, "",
                                    lambda p, c: Static(lambda u, v, x, y0: [x])),
-    "mass_change": EffectSpec("mass_change", "state", True, None, "",
-                              lambda p, c: Static(lambda u, v, x, y0: [x])),
     # not a candidate: corrections of the inverse-dynamics form's mass, damping [, stiffness]
     # refitted with every candidate (columns from `Context.base_columns`)
     "force_balance": EffectSpec("force_balance", "state", False, None, "", lambda p, c: None),
@@ -148,6 +146,8 @@ SPECS: dict[str, EffectSpec] = {
                                lambda p, c: Static(lambda u, v, x, y0: [u])),
 }
 
+#: the same fit as stiffness_change, named by the mode it moves (`force.mechanics_name`)
+SPECS["mass_change"] = replace(SPECS["stiffness_change"], name="mass_change")
 
 #: terms of the base, never named: the nominal numerator refit and the force loop's spring
 BASE_TERMS = ("linear_refit", "loop_stiffness", "force_balance")
@@ -200,8 +200,6 @@ class Context:
 
     def head(self, n: int) -> "Context":
         """The first n samples, all of them for fitting (for parameter searches)."""
-        from dataclasses import replace
-
         from fdi_daemon.diagnose.signals import Split
 
         cut = slice(0, n)

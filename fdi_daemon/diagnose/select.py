@@ -32,7 +32,7 @@ second effect, with the same test. No accepted candidate: "no significant missin
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import stats
@@ -174,8 +174,6 @@ def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffe
     """The searched parameter of a force effect (the last of ``effects``) again, with the
     motion in the loop: its feed-forward search saw the nominal motion only. Each grid
     value gets a full loop fit (a short one misleads); the lowest training error wins."""
-    from dataclasses import replace
-
     new = effects[-1]
     spec = SPECS[new.name]
     fit = ctx.split.fit
@@ -507,8 +505,6 @@ def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
     a gain change. The selection without the explanation when it names the same effects
     and the explanation does not pay on top of them (F-test at ALPHA, its parameters
     against the held-out SSE); None when it does."""
-    from dataclasses import replace
-
     alone = select_effects(replace(ctx, candidates=tuple(names)), len(names),
                            floor_sse=floor_sse)
     if sorted(e.name for e in alone.named) != sorted(names):
@@ -543,8 +539,6 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     ``stiffness_change`` is not a candidate there (the baseline holds the linear effects).
     Returns ``chosen`` (the spring renamed when named) and the figures of the check ({}
     when there was nothing to check)."""
-    from dataclasses import replace
-
     spring = next((e for e in chosen if e.name == "loop_stiffness"), None)
     if (spring is None or "stiffness_change" not in ctx.candidates
             or ctx.form != "simulation"

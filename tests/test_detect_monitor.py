@@ -120,6 +120,56 @@ def test_bad_samples_and_gaps():
     assert first_event(events, "fault_detected") is not None
 
 
+@pytest.mark.parametrize("with_seq", [False, True])
+def test_long_recordings_give_the_events_of_step_across_chunks(with_seq):
+    """Three chunks of `Monitor.run`: clean ones take the one-pass fast path, the middle
+    one (a NaN, a gap of 10 samples) the general path; the same events and statistic as
+    step by step, and the numbering goes on across the chunks (no spurious gap)."""
+    rec = scenario_recording("fault_free_hour", duration_s=180.0)
+    cols = {k: v.copy() for k, v in rec.columns.items()}
+    cols["seq"] = np.arange(len(rec))
+    cols["accel"][20_000] = np.nan
+    keep = np.ones(len(rec), dtype=bool)
+    keep[25_000:25_010] = False
+    numbered = Recording({k: v[keep] for k, v in cols.items()}, dict(rec.meta))
+    assert len(numbered) > 2 * 16384
+    rec = (numbered if with_seq else  # without seq the time column tells the gap
+           Recording({k: v for k, v in numbered.columns.items() if k != "seq"}, rec.meta))
+    model = sim_rig_model()
+    events, trace = Monitor(model).run(rec)
+    ev_step, stat_step, _ = _stepped(Monitor(model), numbered)
+    assert events == ev_step
+    np.testing.assert_array_equal(trace.statistic, stat_step)
+    kinds = [e["kind"] for e in events]
+    assert kinds.count("data_gap") == 1 and kinds.count("bad_sample") == 1
+
+
+@pytest.mark.parametrize("defect", ["t", "v_in", "accel", "limit", "gap", "duplicate",
+                                    "seq_jump", "position"])
+def test_a_chunk_with_any_defect_is_not_clean(defect):
+    from fdi_daemon.detect.monitor import _NO_SEQ, _clean_chunk
+
+    n = 50
+    t = np.arange(n) / 256.0
+    v_in, accel, position = np.zeros(n), np.ones(n), np.zeros(n)
+    seq = np.arange(n, dtype=np.int64) if defect == "seq_jump" else _NO_SEQ
+    args = dict(needs_position=defect == "position", limit=10.0)
+    assert _clean_chunk(t, v_in, accel, position, args["needs_position"], 0, n,
+                        args["limit"], 256.0, seq, False)
+    if defect in ("t", "v_in", "accel", "position"):
+        {"t": t, "v_in": v_in, "accel": accel, "position": position}[defect][30] = np.nan
+    elif defect == "limit":
+        accel[30] = -10.0  # at the limit: saturated
+    elif defect == "gap":
+        t[30:] += 0.6 / 256.0  # a step of 1.6 periods
+    elif defect == "duplicate":
+        t[30] = t[29]
+    else:
+        seq[30:] += 1
+    assert not _clean_chunk(t, v_in, accel, position, args["needs_position"], 0, n,
+                            args["limit"], 256.0, seq, False)
+
+
 def test_duplicates_and_backwards_samples_are_dropped():
     model = sim_rig_model()
     mon = Monitor(model)

@@ -77,9 +77,10 @@ def solve_packed(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
 
 @jit(inline=True)
 def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
-    """`solve_packed`, inlined where p is a constant (the loops then unroll). Offsets are
-    unsigned (`_u`): no negative-index test per access, and the compiler sees which
-    scratch entries each step reads, so they stay in registers."""
+    """`solve_packed`, inlined where p is a constant (the loops then unroll). One division
+    per pivot: its reciprocal, kept on L's unit diagonal, multiplies. Offsets are unsigned
+    (`_u`): no negative-index test per access, and the compiler sees which scratch entries
+    each step reads, so they stay in registers."""
     p = _u(p)
     one = _u(1)
     s = _u(scr)
@@ -100,11 +101,13 @@ def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
             acc = acc - f[low + j * p + m] * f[low + j * p + m] * f[d + m]
         f[d + j] = acc
         ok = ok & (acc > min_pivot * f[s + j * p + j])
+        inv = 1.0 / acc if acc != 0.0 else 0.0
+        f[low + j * p + j] = inv  # 1/d on L's (unit) diagonal
         for i in range(j + one, p):
             acc = f[s + j * p + i]
             for m in range(j):
                 acc = acc - f[low + i * p + m] * f[low + j * p + m] * f[d + m]
-            f[low + i * p + j] = acc / f[d + j] if f[d + j] != 0.0 else acc * 0.0
+            f[low + i * p + j] = acc * inv
     # forward L z = s_y (z kept in θ's slots), then θ backward
     for i in range(p):
         acc = f[sy + i]
@@ -113,8 +116,7 @@ def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
         f[to + i] = acc
     for r in range(p):
         i = p - one - r
-        zi = f[to + i]
-        acc = zi / f[d + i] if f[d + i] != 0.0 else zi * 0.0
+        acc = f[to + i] * f[low + i * p + i]
         for m in range(i + one, p):
             acc = acc - f[low + m * p + i] * f[to + m]
         f[to + i] = acc

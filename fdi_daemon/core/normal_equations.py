@@ -67,6 +67,7 @@ def solve_packed(row, p: int, min_pivot: float = 1e-9):
     # LDLᵀ: S = L D Lᵀ with unit lower-triangular L
     low = [[None] * p for _ in range(p)]
     d = [None] * p
+    inv = [None] * p  # 1/d: one division per pivot, then products
     ok = True
     for j in range(p):
         acc = s[j][j]
@@ -74,11 +75,12 @@ def solve_packed(row, p: int, min_pivot: float = 1e-9):
             acc = acc - low[j][m] * low[j][m] * d[m]
         d[j] = acc
         ok = ok & (acc > min_pivot * s[j][j])
+        inv[j] = 1.0 / acc if _nonzero(acc) else 0.0
         for i in range(j + 1, p):
             acc = s[j][i]
             for m in range(j):
                 acc = acc - low[i][m] * low[j][m] * d[m]
-            low[i][j] = acc / d[j] if _nonzero(d[j]) else acc * 0.0
+            low[i][j] = acc * inv[j]
     # forward: L z = s_y ; diagonal: w = z / d ; backward: Lᵀ θ = w
     z = [None] * p
     for i in range(p):
@@ -88,7 +90,7 @@ def solve_packed(row, p: int, min_pivot: float = 1e-9):
         z[i] = acc
     theta = [None] * p
     for i in range(p - 1, -1, -1):
-        acc = z[i] / d[i] if _nonzero(d[i]) else z[i] * 0.0
+        acc = z[i] * inv[i]
         for m in range(i + 1, p):
             acc = acc - low[m][i] * theta[m]
         theta[i] = acc

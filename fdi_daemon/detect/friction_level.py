@@ -64,20 +64,29 @@ def level_restart(f, ii, lo):  # pragma: no cover - jit
 
 @jit
 def _pick(f, ii, lo, ring, cap, held, theta1):  # pragma: no cover - jit
-    """θ1 into the ring; its median and 25–75 % range into f[held], f[held + 1]."""
+    """θ1 into the ring and into its sorted copy (in place of the value it overwrites, once
+    the ring is full: one pass, not a sort); the median and 25–75 % range into f[held],
+    f[held + 1]."""
     head = ii[lo + L_HEAD]
+    count = ii[lo + L_COUNT]
+    srt = ring + cap
+    if count == cap:  # the oldest pick leaves the sorted copy
+        old = f[ring + head]
+        j = 0
+        while f[srt + j] != old:
+            j += 1
+        for i in range(j, count - 1):
+            f[srt + i] = f[srt + i + 1]
+        count -= 1
     f[ring + head] = theta1
     ii[lo + L_HEAD] = head + 1 if head + 1 < cap else 0
-    count = min(ii[lo + L_COUNT] + 1, cap)
+    j = count
+    while j > 0 and f[srt + j - 1] > theta1:
+        f[srt + j] = f[srt + j - 1]
+        j -= 1
+    f[srt + j] = theta1
+    count += 1
     ii[lo + L_COUNT] = count
-    srt = ring + cap
-    for i in range(count):
-        x = f[ring + i]
-        j = i
-        while j > 0 and f[srt + j - 1] > x:
-            f[srt + j] = f[srt + j - 1]
-            j -= 1
-        f[srt + j] = x
     half = count // 2
     f[held] = f[srt + half] if count % 2 else 0.5 * (f[srt + half - 1] + f[srt + half])
     f[held + 1] = f[srt + (3 * (count - 1)) // 4] - f[srt + (count - 1) // 4]

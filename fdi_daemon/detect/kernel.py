@@ -234,7 +234,7 @@ def detector_pre(f, ii, io):  # pragma: no cover - jit
         itest_solve_p(f, ii, cmd, 4)
 
 
-@jit
+@jit(inline=True)
 def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
     """The detector's per-tick arithmetic and quiet decisions on this tick's signals (read
     at the chain's C_OUT, `chain_tick`); returns the tick's code."""

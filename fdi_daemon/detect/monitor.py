@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from fdi_daemon.core.compiled import Arena
+from fdi_daemon.core.compiled import Arena, jit
 from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.baseline import Baseline
 from fdi_daemon.detect.detector import STATES, Detector
@@ -250,18 +250,33 @@ class Monitor:
         events: list[dict[str, Any]] = []
         parts: dict[str, list[np.ndarray]] = {k: [] for k in TRACE_NAMES}
         start = 0
+        limit = math.inf if self.accel_limit_mps2 is None else float(self.accel_limit_mps2)
         while start < n:
             stop = min(n, start + _CHUNK)
+            chunk = (t[start:stop], v_in[start:stop], accel[start:stop],
+                     position[start:stop] if needs_position else position[:stop - start])
+            # the number of the chunk's first sample if it follows on
             if seq is not None:
-                numbers = seq[start:stop]
+                first = int(seq[start])
+            elif start > 0:
+                first = last + 1
             else:
-                lo = max(start - 1, 0)
-                numbers = self.sample_numbers(t[lo:stop], last)[start - lo:]
-                last = int(numbers[-1])
-            events.extend(self._run_chunk(t[start:stop], v_in[start:stop], accel[start:stop],
-                                          position[start:stop] if needs_position
-                                          else position[:stop - start], numbers, parts,
-                                          trace_every))
+                first = 0 if self._last_seq is None else self._last_seq + 1
+            if (not self._bad_run and (self._last_seq is None or first == self._last_seq + 1)
+                    and _clean_chunk(t, v_in, accel, position, needs_position, start, stop,
+                                     limit, self.fs_hz,
+                                     _NO_SEQ if seq is None else seq, start > 0)):
+                # the usual chunk (one compiled pass says so): nothing to replace or split
+                events.extend(self._run_good(*chunk, parts, trace_every))
+                self._last_seq = last = first + stop - start - 1
+            else:
+                if seq is not None:
+                    numbers = seq[start:stop]
+                else:
+                    lo = max(start - 1, 0)
+                    numbers = self.sample_numbers(t[lo:stop], last)[start - lo:]
+                    last = int(numbers[-1])
+                events.extend(self._run_chunk(*chunk, numbers, parts, trace_every))
             start = stop
             if progress is not None:
                 progress(stop, n)
@@ -409,10 +424,12 @@ class Monitor:
         every = self._history_every
         hist = np.arange((-self._samples) % every, n, every)[-HISTORY_POINTS:]
         self._history.extend(zip(t[hist].tolist(), theta1[hist].tolist(), theta2[hist].tolist()))
-        keep = slice((-self._samples) % trace_every, n, trace_every)  # views, not copies
+        # every sample: the arrays themselves; every n-th: a copy, so that the chunk's
+        # arrays are freed (a strided view would keep them all for the whole run)
+        keep = slice((-self._samples) % trace_every, n, trace_every)
         for name, values in zip(TRACE_NAMES, (t, accel, residual, theta1, theta2, stat, state,
                                               v_rms, level)):
-            parts[name].append(np.asarray(values)[keep])
+            parts[name].append(values if trace_every == 1 else values[keep].copy())
         self._samples += n
         self._v_in = float(v_in[-1])
         self._last_t = float(t[-1])
@@ -471,3 +488,31 @@ def check_stable(a: np.ndarray, name: str) -> None:
         if not radius < 1.0:
             raise ConfigError(f"model {name} has a pole at |z| = {radius:.9g} (>= 1): the "
                               f"filter is not stable; re-run the identification")
+
+
+_NO_SEQ = np.zeros(0, dtype=np.int64)
+
+
+@jit
+def _clean_chunk(t, v_in, accel, position, needs_position, start, stop, accel_limit, fs_hz,
+                 seq, after_previous):  # pragma: no cover - jit
+    """Whether samples [start, stop) need none of `Monitor.run`'s checks: every value
+    finite (position only when the velocity uses it), |accel| below the limit, and numbered
+    on without a gap: ``seq`` advancing by one, or without ``seq`` (empty) time steps that
+    round to one sample period (from the sample before ``start`` when ``after_previous``),
+    as `Monitor.sample_numbers` counts them."""
+    for k in range(start, stop):
+        a = accel[k]
+        if not (math.isfinite(t[k]) and math.isfinite(v_in[k]) and math.isfinite(a)
+                and abs(a) < accel_limit):
+            return False
+        if needs_position and not math.isfinite(position[k]):
+            return False
+        if seq.size:
+            if k > start and seq[k] != seq[k - 1] + 1:
+                return False
+        elif k > start or after_previous:
+            steps = (t[k] - t[k - 1]) * fs_hz
+            if not 0.5 < steps < 1.5:  # np.rint(steps) == 1
+                return False
+    return True

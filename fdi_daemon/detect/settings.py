@@ -42,7 +42,7 @@ class DetectorSettings:
     (NaN) and the band method holds."""
     reference_lag_s: float = 0.0625
     """The reference fit ends this long before the newest sample (a fault must not leak in)."""
-    reference_every_samples: int = 4
+    reference_every_samples: int = 8
     """The reference fit is re-solved every this many ticks."""
     test_window_s: float = 0.0625
     """Window of the χ² statistic (mean squared standardised innovation)."""

@@ -106,11 +106,12 @@ def slowest_time_constant(a: np.ndarray, fs_hz: float) -> float:
 
 def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
             plant_b: np.ndarray | None, plant_a: np.ndarray | None,
-            order: int | None = None, form: str = "auto") -> tuple[Context, AugmentedPlant, dict]:
-    """Context for the effect fits and the nominal plant; plant None -> fit a linear baseline
-    of ``order`` (None: `choose_order`). form: "simulation", "inverse_dynamics" or "auto"
-    (inverse dynamics when the free run of a velocity or position model is dominated by
-    drift, `drift`)."""
+            order: int | None = None, form: str = "auto") -> tuple[Context, dict]:
+    """The simulation form's context for the effect fits, and the baseline's info with the
+    form of the test in ``info["form"]`` (`in_form` makes that form's context); plant None
+    -> fit a linear baseline of ``order`` (None: `choose_order`). form: "simulation",
+    "inverse_dynamics" or "auto" (inverse dynamics when the free run of a velocity or
+    position model is dominated by drift, `drift`)."""
     n_kind = signals.OUTPUT_KINDS[output_kind]
     u = np.asarray(u, float)
     y = np.asarray(y, float)
@@ -177,12 +178,19 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
                else "the free run does not drift, so the model is simulated"))
     else:
         info["form_reason"] = "chosen by the user"
+    if form == "inverse_dynamics" and not n_kind:
+        raise UserError("the inverse-dynamics form needs a velocity or position output")
     info["form"] = form
+    return ctx, info
+
+
+def in_form(ctx: Context, info: dict, y: np.ndarray, form: str) -> tuple[Context, dict]:
+    """The context and info of one form of the test, from `prepare`'s simulation context
+    (the info is copied: each form keeps its own)."""
+    info = dict(info, form=form)
     if form == "inverse_dynamics":
-        if not n_kind:
-            raise UserError("the inverse-dynamics form needs a velocity or position output")
-        ctx = inverse_context(u, y, fs_hz, output_kind, split, info)
-    return ctx, nominal, info
+        ctx = inverse_context(ctx.u, y, ctx.fs_hz, ctx.output_kind, ctx.split, info)
+    return ctx, info
 
 
 def inverse_context(u, y, fs_hz, output_kind, split, info) -> Context:

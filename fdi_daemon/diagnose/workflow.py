@@ -20,7 +20,7 @@ from fdi_daemon.diagnose.localize import localize
 from fdi_daemon.diagnose.floor import FLOOR_MARGIN, delay_by_correlation, noise_floor
 from fdi_daemon.diagnose.inverse import noise_floor as inverse_floor
 from fdi_daemon.diagnose.select import Selection, select_effects
-from fdi_daemon.diagnose.baseline import prepare
+from fdi_daemon.diagnose.baseline import in_form, prepare
 
 
 @dataclass
@@ -53,11 +53,12 @@ def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = 
     data, or a linear fit that a nonlinearity bent), both forms are tested and the one
     whose named effects remove the larger share of its own held-out gap is kept
     (``form_reason`` gives both shares)."""
-    args = (u, y, fs_hz, output_kind, plant_b, plant_a, order)
-    result = _diagnose(*args, progress, form)
-    if not result.info.get("form_undecided"):
+    y = np.asarray(y, float)
+    ctx, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order, form)
+    result = _diagnose(*in_form(ctx, info, y, info["form"]), y, progress)
+    if not info.get("form_undecided"):
         return result
-    simulated = _diagnose(*args, progress, "simulation")
+    simulated = _diagnose(*in_form(ctx, info, y, "simulation"), y, progress)
     best = simulated if _left(simulated) < _left(result) else result
     best.info["form_reason"] = (
         f"{result.info['form_reason']}: both forms were tested, the effects named left "
@@ -72,10 +73,9 @@ def _left(result: DiagnoseResult) -> float:
     return result.gap_after / result.gap_before if result.gap_before > 0 else 1.0
 
 
-def _diagnose(u, y, fs_hz, output_kind, plant_b, plant_a, order, progress, form
-              ) -> DiagnoseResult:
-    """The workflow in one form of the test (see the module docstring)."""
-    ctx, _, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order, form)
+def _diagnose(ctx: Context, info: dict, y: np.ndarray, progress) -> DiagnoseResult:
+    """The workflow in one form of the test (`baseline.in_form`; module docstring)."""
+    fs_hz = ctx.fs_hz
     simulated = ctx.form == "simulation"
     test = ctx.split.test
     y_meas = info["y_dom"]
@@ -99,7 +99,7 @@ def _diagnose(u, y, fs_hz, output_kind, plant_b, plant_a, order, progress, form
                      * float(np.sum((y_meas[test] - np.mean(y_meas[test])) ** 2)))
         selection = select_effects(ctx, progress=progress, refit_linear=True,
                                    floor_sse=floor_sse)
-    plant = AugmentedPlant(fs_hz, info["plant_b"], info["plant_a"], output_kind,
+    plant = AugmentedPlant(fs_hz, info["plant_b"], info["plant_a"], ctx.output_kind,
                            info["highpass_hz"], selection.chosen if simulated else [],
                            domain=info["domain"])
     y_after = plant.run(ctx.u) if simulated else ctx.y0 + selection.prediction

@@ -196,8 +196,13 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
     acc = acc + f[tr + 2] * xhat
     acc = acc + f[tr + 3] * 1.0
     e = r - acc
+    # isolated, the episode reports θ and waits to clear: the friction evidence (the post
+    # window's refit, the innovation beyond a linear change, the stopped load) is not
+    # looked at again, so its windows are not kept
+    evidence = state != 4
     if ticks > iso:
         sums_push(f, ii, ii[eo + P_O_SETTLED], n, W, eo + P_SETTLED, row)
+    if ticks > iso and evidence:
         xp = f[sc + S_XHAT_PAST]
         if not math.isnan(xp):
             b = ii[eo + P_O_ROW]
@@ -220,7 +225,7 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
     f[sc + S_XHAT_PAST] = xhat
     accel = r + xhat
     ap = f[sc + S_ACCEL_PAST]
-    if not math.isnan(ap):
+    if evidence and not math.isnan(ap):
         step = accel - ap
         mo = sc + S_MOTION
         f[mo] = step * step
@@ -254,7 +259,7 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
         return _band_decision(f, ii, eo, state, ticks, rep1, rep2, band)
     fmin = f[sc + S_FMIN]
     kind = KIND_NONE
-    if ii[eo + P_POST + 1] >= iso:
+    if evidence and ii[eo + P_POST + 1] >= iso:
         th = ii[eo + P_O_TH]
         _, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR],
                              th)

@@ -2,7 +2,10 @@
 
 A *reference* least-squares fit of y on φ runs over a sliding window of N samples that ends
 ``lag`` samples before the newest one (so that a change in the newest samples does not leak
-into it at once); it is re-solved on the ticks where tick % ``every`` == ``phase``. The standardised innovation
+into it at once); it is re-solved on the ticks where tick % ``every`` == ``phase``. Its
+window sums are kept per refit: the rows the window reached since the last one are summed
+in one go (`core.kernels.group_products`), so N is ``window_samples`` rounded to a whole
+number of refits (`itest_groups`). The standardised innovation
 z = (y - φᵀθ_ref)/σ_ref, with σ_ref² = SSE/(N - p) floored at ``min_sigma``², is averaged
 over the last M samples:
 
@@ -21,7 +24,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from fdi_daemon.core.compiled import Arena, jit
-from fdi_daemon.core.kernels import ITEST_INTS, itest_floats, itest_tick, sums_floats
+from fdi_daemon.core.kernels import (ITEST_INTS, itest_floats, itest_groups, itest_tick,
+                                     sums_floats)
 from fdi_daemon.core.normal_equations import packed_width
 
 __all__ = ["InnovationTest", "packed_row"]
@@ -58,18 +62,21 @@ class InnovationTest:
         self._width = w = packed_width(self.p)
         p, n, lag, m = self.p, self.window_samples, self.lag_samples, self.test_samples
         self.arena = arena if arena is not None else Arena()
-        self.fo, self.io = fo, io = self.arena.alloc(itest_floats(p, n, lag, m), ITEST_INTS)
+        groups = itest_groups(n, self.every)
+        self.fo, self.io = fo, io = self.arena.alloc(itest_floats(p, n, lag, m, self.every),
+                                                  ITEST_INTS)
         ph = fo
         row = ph + p + 1
-        fifo = row + w
-        ref = fifo + lag * (p + 1)
-        tst = ref + sums_floats(n, w)
+        fifo = row + w + 1
+        ref = fifo + (lag + self.every) * (p + 1)
+        tst = ref + sums_floats(groups, w + 1)
         th = tst + sums_floats(m, 1)
         scr = th + p
         sc = scr + 2 * p * p + p
-        self.arena.i[io:io + ITEST_INTS] = (p, n, lag, m, self.every, self.phase, w,
+        self.arena.i[io:io + ITEST_INTS] = (p, groups, lag, m, self.every, self.phase, w,
                                             0, 0, 0, 0, 0, 0, 0, 0,
-                                            ph, row, fifo, ref, tst, th, scr, sc)
+                                            ph, row, fifo, ref, tst, th, scr, sc,
+                                            lag + self.every, groups * self.every)
         self.reset()
 
     def _o(self, k: int) -> int:

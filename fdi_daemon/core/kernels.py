@@ -10,9 +10,10 @@ reference implementation, so compiled and reference results agree:
 - ``solve_packed``: least squares from packed window sums by LDLᵀ
   (`core.normal_equations.solve_packed`, the float path);
 - ``itest_tick``: one tick of the innovation test (`core.innovation_test`): lagged
-  reference fit, standardised innovation, windowed mean of its square; the FIFO of the lag
-  holds (φ, y), and the packed row is formed while it is added (`push_products`); its
-  phases (``itest_*_p``) are inlined where p is constant.
+  reference fit, standardised innovation, windowed mean of its square; a FIFO holds (φ, y)
+  until a solve tick sums the rows the reference window has reached into one group row
+  (`group_products`) of the window sums; its phases (``itest_*_p``) are inlined where p
+  is constant.
 
 Offsets are absolute indices into the float array ``f`` and the int array ``ii``.
 """
@@ -24,9 +25,9 @@ import numpy as np
 from fdi_daemon.core.compiled import jit
 
 __all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed", "push_products",
-           "packed_row_into", "itest_tick", "itest_pop_p", "itest_insert_p", "itest_solve_p",
+           "packed_row_into", "itest_tick", "itest_flush_p", "itest_insert_p", "itest_solve_p",
            "itest_statistic_p",
-           "ITEST_INTS", "itest_floats"]
+           "ITEST_INTS", "itest_floats", "itest_groups", "group_products"]
 
 
 #: an offset as an unsigned integer: indexing with it skips the test for a negative index
@@ -127,16 +128,24 @@ def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
 
 
 #: ints of an innovation test block (see `InnovationTest`)
-ITEST_INTS = 23
+ITEST_INTS = 25
 
 
-def itest_floats(p: int, n: int, lag: int, m: int) -> int:
-    """Floats of an innovation test block: φ and y, the packed row, the FIFO of (φ, y) of
-    the last ``lag`` ticks, the reference and test sums, θ, scratch, scalars (σ² floor,
+def itest_groups(n: int, every: int) -> int:
+    """Refit groups in the reference window: its n rows in whole groups of ``every`` (the
+    window is then ``itest_groups(n, every)·every`` rows)."""
+    return max(1, round(n / every))
+
+
+def itest_floats(p: int, n: int, lag: int, m: int, every: int) -> int:
+    """Floats of an innovation test block: φ and y, a group's packed sums and row count,
+    the FIFO of (φ, y) of the ticks the reference window has not reached (lag + every rows),
+    the reference sums (one row per group), the test sums, θ, scratch, scalars (σ² floor,
     σ², T, z², 1/σ², 1/M)."""
     w = p * (p + 1) // 2 + p + 1
-    return (p + 1) + w + lag * (p + 1) + sums_floats(n, w) + sums_floats(m, 1) + p \
-        + (2 * p * p + p) + 6
+    return (p + 1) + (w + 1) + (lag + every) * (p + 1) + sums_floats(itest_groups(n, every),
+                                                                     w + 1) \
+        + sums_floats(m, 1) + p + (2 * p * p + p) + 6
 
 
 @jit(inline=True)
@@ -192,6 +201,85 @@ def push_products(f, ii, ro, n, ip, src, p, need):  # pragma: no cover - jit
     ii[ip] = 0 if end else ii[ip] + 1
 
 
+@jit(inline=True)
+def group_products(f, fifo, cap, head, count, p, dst):  # pragma: no cover - jit
+    """The packed products of ``count`` rows of (φ, y) from a FIFO (``cap`` rows of p + 1
+    floats at ``fifo``, the first at index ``head``), summed row after row into
+    f[dst:dst+w], and the row count into f[dst+w]. With four regressors (the monitor's
+    tests) the fifteen sums are held in registers."""
+    if p == 4:
+        _group_products_4(f, fifo, cap, head, count, dst)
+        return
+    q = p + 1
+    k = dst
+    for a in range(p):
+        for b in range(a, p):
+            _group_column(f, fifo, cap, head, count, q, a, b, k)
+            k += 1
+    for a in range(q):
+        _group_column(f, fifo, cap, head, count, q, a, p, k)
+        k += 1
+    f[k] = float(count)
+
+
+@jit(inline=True)
+def _group_column(f, fifo, cap, head, count, q, a, b, dst):  # pragma: no cover - jit
+    """One column of `group_products`: Σ φ_a·φ_b over the rows (index p stands for y)."""
+    c = 0.0
+    slot = head
+    for _ in range(count):
+        c = c + f[fifo + slot * q + a] * f[fifo + slot * q + b]
+        slot = slot + 1 if slot + 1 < cap else 0
+    f[dst] = c
+
+
+@jit(inline=True)
+def _group_products_4(f, fifo, cap, head, count, dst):  # pragma: no cover - jit
+    """`group_products` for p = 4, the sums in registers (the order of `packed_row`)."""
+    s00 = s01 = s02 = s03 = s11 = s12 = s13 = s22 = s23 = s33 = 0.0
+    s0y = s1y = s2y = s3y = syy = 0.0
+    slot = head
+    for _ in range(count):
+        r = fifo + slot * 5
+        x0 = f[r]
+        x1 = f[r + 1]
+        x2 = f[r + 2]
+        x3 = f[r + 3]
+        y = f[r + 4]
+        s00 = s00 + x0 * x0
+        s01 = s01 + x0 * x1
+        s02 = s02 + x0 * x2
+        s03 = s03 + x0 * x3
+        s11 = s11 + x1 * x1
+        s12 = s12 + x1 * x2
+        s13 = s13 + x1 * x3
+        s22 = s22 + x2 * x2
+        s23 = s23 + x2 * x3
+        s33 = s33 + x3 * x3
+        s0y = s0y + x0 * y
+        s1y = s1y + x1 * y
+        s2y = s2y + x2 * y
+        s3y = s3y + x3 * y
+        syy = syy + y * y
+        slot = slot + 1 if slot + 1 < cap else 0
+    f[dst] = s00
+    f[dst + 1] = s01
+    f[dst + 2] = s02
+    f[dst + 3] = s03
+    f[dst + 4] = s11
+    f[dst + 5] = s12
+    f[dst + 6] = s13
+    f[dst + 7] = s22
+    f[dst + 8] = s23
+    f[dst + 9] = s33
+    f[dst + 10] = s0y
+    f[dst + 11] = s1y
+    f[dst + 12] = s2y
+    f[dst + 13] = s3y
+    f[dst + 14] = syy
+    f[dst + 15] = float(count)
+
+
 @jit
 def packed_row_into(f, src, p, dst):  # pragma: no cover - jit
     """The packed row of (φ, y) = f[src:src+p+1] into f[dst:..]."""
@@ -214,51 +302,61 @@ def itest_tick(f, ii, io):  # pragma: no cover - jit
     Reference fit on the window ending ``lag`` ticks ago (re-solved when tick % every ==
     phase), σ² = SSE/(N − p) floored, z² = (y − φᵀθ)²/σ², T = mean of z² over M ticks
     (both divisions by reciprocals kept in the block: 1/σ² set at the solve, 1/M). The
-    reference window sums are current on solve ticks (their only reader). The tick is four
-    phases, `itest_pop_p`, `itest_insert_p`, `itest_solve_p`
-    and `itest_statistic_p`, inlined where p is a compile-time constant (the loops unroll):
-    the monitor's kernel inlines those of its two four-regressor tests, phase by phase."""
+    reference window sums are current on solve ticks (their only reader): the rows wait in
+    the FIFO until a solve tick adds them as one group. The tick is four phases,
+    `itest_flush_p`, `itest_solve_p`, `itest_insert_p` and `itest_statistic_p`, inlined
+    where p is a compile-time constant (the loops unroll): the monitor's kernel inlines
+    those of its two four-regressor tests, phase by phase."""
     p = ii[io]
     if p == 4:
-        itest_pop_p(f, ii, io, 4)
-        itest_insert_p(f, ii, io, 4)
-        itest_solve_p(f, ii, io, 4)
-        return itest_statistic_p(f, ii, io, 4)
-    itest_pop_p(f, ii, io, p)
-    itest_insert_p(f, ii, io, p)
-    itest_solve_p(f, ii, io, p)
+        return _itest_tick_p(f, ii, io, 4)
+    return _itest_tick_p(f, ii, io, p)
+
+
+@jit(inline=True)
+def _itest_tick_p(f, ii, io, p):  # pragma: no cover - jit
+    """`itest_tick`'s phases in their order: with a lag the reference is flushed and solved
+    before this tick's row enters the FIFO (the row cannot be in it), without one after."""
+    if ii[io + 2]:
+        itest_flush_p(f, ii, io, p, ii[io + 2] - 1)
+        itest_solve_p(f, ii, io, p)
+        itest_insert_p(f, ii, io, p)
+    else:
+        itest_insert_p(f, ii, io, p)
+        itest_flush_p(f, ii, io, p, 0)
+        itest_solve_p(f, ii, io, p)
     return itest_statistic_p(f, ii, io, p)
 
 
 @jit(inline=True)
-def itest_pop_p(f, ii, io, p):  # pragma: no cover - jit
-    """The row leaving the lag's FIFO (its oldest, once it is full) into the reference
-    window sums (current on a solve tick). It does not read this tick's
-    (φ, y): the monitor calls it, and the solve, before the signal chain."""
-    lag = ii[io + 2]
-    if lag and ii[io + 10] == lag:
-        push_products(f, ii, ii[io + 18], ii[io + 1], io + 11,
-                      ii[io + 17] + ii[io + 9] * (p + 1), p, ii[io + 7] == 0)
+def itest_flush_p(f, ii, io, p, keep):  # pragma: no cover - jit
+    """On a solve tick (countdown ii[io+7] at 0): the FIFO's rows but its newest ``keep``
+    (those the reference window has reached since the last refit) summed into one group
+    row (`group_products`) and pushed into the reference sums; other ticks move nothing."""
+    ln = ii[io + 10]
+    if ii[io + 7] or ln <= keep:
+        return
+    count = ln - keep
+    cap = ii[io + 23]
+    head = ii[io + 9]
+    row = ii[io + 16]
+    group_products(f, ii[io + 17], cap, head, count, p, row)
+    sums_push(f, ii, ii[io + 18], ii[io + 1], ii[io + 6] + 1, io + 11, row)
+    head += count
+    ii[io + 9] = head - cap if head >= cap else head
+    ii[io + 10] = keep
 
 
 @jit(inline=True)
 def itest_insert_p(f, ii, io, p):  # pragma: no cover - jit
-    """This tick's (φ, y) into the lag's FIFO, in the slot `itest_pop_p` emptied (without a
-    lag: straight into the reference window sums, current on a solve tick)."""
-    lag = ii[io + 2]
-    ph = ii[io + 15]
-    if lag == 0:
-        push_products(f, ii, ii[io + 18], ii[io + 1], io + 11, ph, p, ii[io + 7] == 0)
-        return
+    """This tick's (φ, y) at the FIFO's tail (it holds the rows the reference window has
+    not reached: at most lag + every − 1 before a flush; its capacity lag + every)."""
     q = p + 1
-    ln = ii[io + 10]
-    head = ii[io + 9]
-    if ln == lag:
-        slot = ii[io + 17] + head * q
-        ii[io + 9] = head + 1 if head + 1 < lag else 0
-    else:
-        slot = ii[io + 17] + (head + ln if head + ln < lag else head + ln - lag) * q
-        ii[io + 10] = ln + 1
+    cap = ii[io + 23]
+    end = ii[io + 9] + ii[io + 10]
+    slot = ii[io + 17] + (end if end < cap else end - cap) * q
+    ii[io + 10] += 1
+    ph = ii[io + 15]
     for k in range(q):
         f[slot + k] = f[ph + k]
 
@@ -266,17 +364,20 @@ def itest_insert_p(f, ii, io, p):  # pragma: no cover - jit
 @jit(inline=True)
 def itest_solve_p(f, ii, io, p):  # pragma: no cover - jit
     """On a solve tick (countdown ii[io+7] at 0, then ``every`` − 1 again): θ, σ² (floored)
-    and 1/σ² of the reference window, and whether it is ok (full, pivots above 1e-9)."""
+    and 1/σ² of the reference window, and whether it is ok (all its rows there, pivots
+    above 1e-9)."""
     wait = ii[io + 7]
     if wait:
         ii[io + 7] = wait - 1
         return
     ii[io + 7] = ii[io + 4] - 1
-    n = ii[io + 1]
-    if ii[io + 12] == n:
+    g = ii[io + 1]
+    w = ii[io + 6]
+    sl = ii[io + 18] + (g + 2) * (w + 1)
+    n = ii[io + 24]
+    if ii[io + 12] == g and f[sl + w] == n:  # every group of the window full
         sc = ii[io + 22]
-        sse, ok = _solve(f, ii[io + 18] + (n + 2) * ii[io + 6], p, 1e-9, ii[io + 21],
-                         ii[io + 20])
+        sse, ok = _solve(f, sl, p, 1e-9, ii[io + 21], ii[io + 20])
         s2 = sse / (n - p)
         f[sc + 1] = s2 if s2 > f[sc] else f[sc]
         f[sc + 4] = 1.0 / f[sc + 1]

@@ -111,14 +111,15 @@ def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
         f[sc + S_THETA_REF + q] = f[th + q]
     f[sc + S_COULOMB_BASE] = f[th]
     f[sc + S_SIGMA2_REF] = f[ii[res + 22] + 1]
-    lag = ii[res + 2]
-    if lag > 0:
-        head = ii[res + 9]
-        fifo = ii[res + 17]
-        post = ii[eo + P_O_POST]
-        n = ii[eo + P_N]
-        for k in range(ii[res + 10]):  # (φ, y) of the ticks since the reference ended
-            push_products(f, ii, post, n, eo + P_POST, fifo + ((head + k) % lag) * 5, 4, True)
+    cap = ii[res + 23]
+    fifo = ii[res + 17]
+    post = ii[eo + P_O_POST]
+    n = ii[eo + P_N]
+    ln = ii[res + 10]
+    first = ii[res + 9] + ln - min(ln, ii[res + 2])
+    for k in range(first, first + min(ln, ii[res + 2])):  # (φ, y) of the last lag ticks
+        slot = k % cap
+        push_products(f, ii, post, n, eo + P_POST, fifo + slot * 5, 4, True)
     ii[eo + P_TICKS] = 0
     ii[eo + P_HOLD_UNTIL] = 0
     ii[eo + P_PERSISTED] = level

@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.core.kernels import (iir_step, itest_insert_p, itest_pop_p, itest_solve_p,
+from fdi_daemon.core.kernels import (iir_step, itest_flush_p, itest_insert_p, itest_solve_p,
                                      itest_statistic_p, packed_row_into, sums_push)
 from fdi_daemon.detect import episode_kernel as E
 from fdi_daemon.detect.friction_level import L_CAPACITY, L_FLOATS, level_restart, level_tick
@@ -222,14 +222,16 @@ def chain_run(f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums
 @jit(inline=True)
 def detector_pre(f, ii, io):  # pragma: no cover - jit
     """The detector's work that does not need this tick's signals, done before the chain so
-    that the reference solves' chains of divisions overlap with it: the rows leaving the
-    lag's FIFOs into the reference sums and, with a lag, the reference fits (`itest_tick`
-    of both tests, four regressors each, inlined phase by phase; both have the same lag)."""
+    that the reference solves' chains of divisions overlap with it: with a lag, the rows
+    the reference windows have reached into their sums and the reference fits
+    (`itest_tick` of both tests, four regressors each, inlined phase by phase; both have
+    the same lag)."""
     res = ii[io + D_RES]
     cmd = ii[io + D_CMD]
-    itest_pop_p(f, ii, res, 4)
-    itest_pop_p(f, ii, cmd, 4)
-    if ii[res + 2]:
+    lag = ii[res + 2]
+    if lag:
+        itest_flush_p(f, ii, res, 4, lag - 1)
+        itest_flush_p(f, ii, cmd, 4, lag - 1)
         itest_solve_p(f, ii, res, 4)
         itest_solve_p(f, ii, cmd, 4)
 
@@ -260,6 +262,8 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
     itest_insert_p(f, ii, res, 4)
     itest_insert_p(f, ii, cmd, 4)
     if ii[res + 2] == 0:  # no lag: the reference fits end with this tick's rows
+        itest_flush_p(f, ii, res, 4, 0)
+        itest_flush_p(f, ii, cmd, 4, 0)
         itest_solve_p(f, ii, res, 4)
         itest_solve_p(f, ii, cmd, 4)
     stat = itest_statistic_p(f, ii, res, 4)

@@ -116,10 +116,10 @@ def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
     post = ii[eo + P_O_POST]
     n = ii[eo + P_N]
     ln = ii[res + 10]
-    first = ii[res + 9] + ln - min(ln, ii[res + 2])
-    for k in range(first, first + min(ln, ii[res + 2])):  # (φ, y) of the last lag ticks
-        slot = k % cap
-        push_products(f, ii, post, n, eo + P_POST, fifo + slot * 5, 4, True)
+    newest = min(ln, ii[res + 2])  # (φ, y) of the last lag ticks, oldest first
+    first = ii[res + 9] + ln - newest
+    for k in range(first, first + newest):
+        push_products(f, ii, post, n, eo + P_POST, fifo + (k % cap) * 5, 4, True)
     ii[eo + P_TICKS] = 0
     ii[eo + P_HOLD_UNTIL] = 0
     ii[eo + P_PERSISTED] = level

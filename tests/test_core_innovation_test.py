@@ -76,3 +76,32 @@ def test_step_run_and_chunks_are_bit_equal(every):
     mixed.run(phi[:600], y[:600])
     tail = [mixed.step(tuple(row), float(v)) for row, v in zip(phi[600:].tolist(), y[600:])]
     np.testing.assert_array_equal(tail, ref[600:])
+
+
+@pytest.mark.parametrize("p,every", [(3, 3), (4, 8), (4, 1)])
+def test_reference_fit_is_the_least_squares_fit_of_its_lagged_window(p, every):
+    """On every refit tick t (t % every == 0) with a complete window, θ_ref is a direct
+    least-squares solve on the N rows ending ``lag`` before t, N = window_samples rounded to
+    whole refits: both the generic group sums (p = 3) and the four-regressor ones held in
+    registers (p = 4)."""
+    from fdi_daemon.core.kernels import itest_groups
+
+    rng = np.random.default_rng(p + every)
+    n_rows, lag, window = 1200, 7, 100
+    phi = np.column_stack([rng.normal(size=(n_rows, p - 1)), np.ones(n_rows)])
+    y = phi @ np.arange(1.0, p + 1.0) + 0.1 * rng.normal(size=n_rows)
+    test = InnovationTest(p, window_samples=window, lag_samples=lag, test_samples=5,
+                          every=every, min_sigma=1e-3)
+    _, ok, theta = test.run(phi, y)
+    theta = np.column_stack(theta)
+    n = itest_groups(window, every) * every
+    checked = 0
+    for t in range(0, n_rows, every):
+        if not ok[t]:
+            assert t < lag + n + 2 * every  # complete once its first group has left
+            continue
+        rows = slice(t - lag - n + 1, t - lag + 1)
+        direct = np.linalg.lstsq(phi[rows], y[rows], rcond=None)[0]
+        np.testing.assert_allclose(theta[t], direct, rtol=1e-9, atol=1e-12)
+        checked += 1
+    assert checked > (n_rows - lag - n) // every - 3

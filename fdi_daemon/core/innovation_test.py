@@ -33,7 +33,7 @@ __all__ = ["InnovationTest", "packed_row"]
 
 def packed_row(phi: Sequence[float], y: float) -> tuple[float, ...]:
     """One packed product row (order of `packed_products`; the kernel forms the same
-    products, `core.kernels.push_products`)."""
+    products, `core.kernels.group_products`)."""
     p = len(phi)
     row = [phi[i] * phi[j] for i in range(p) for j in range(i, p)]
     row.extend(phi[i] * y for i in range(p))

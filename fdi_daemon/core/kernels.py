@@ -24,7 +24,7 @@ import numpy as np
 
 from fdi_daemon.core.compiled import jit
 
-__all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed", "push_products",
+__all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed",
            "packed_row_into", "itest_tick", "itest_flush_p", "itest_insert_p", "itest_solve_p",
            "itest_statistic_p",
            "ITEST_INTS", "itest_floats", "itest_groups", "group_products"]
@@ -65,7 +65,7 @@ def sums_push(f, ii, ro, n, w, ip, src):  # pragma: no cover - jit
     fresh, prev, sl, rp, end = _slot(ii, ro, n, w, ip)
     src = _u(src)
     for k in range(_u(w)):
-        _column(f, fresh, prev, sl, rp, k, f[src + k], end, True)
+        _column(f, fresh, prev, sl, rp, k, f[src + k], end)
     ii[ip] = 0 if end else ii[ip] + 1
 
 
@@ -162,43 +162,18 @@ def _slot(ii, ro, n, w, ip):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def _column(f, fresh, prev, sl, rp, k, value, end, need):  # pragma: no cover - jit
-    """One column of `sums_push` (the window sums only when ``need``: the reader's tick)."""
+def _column(f, fresh, prev, sl, rp, k, value, end):  # pragma: no cover - jit
+    """One column of `sums_push`."""
     c = f[fresh + k] + value
     if end:
         f[rp + k] = c
         f[prev + k] = c
         f[fresh + k] = 0.0
-        if need:
-            f[sl + k] = c
+        f[sl + k] = c
     else:
-        if need:
-            f[sl + k] = f[prev + k] + (c - f[rp + k])
+        f[sl + k] = f[prev + k] + (c - f[rp + k])
         f[rp + k] = c
         f[fresh + k] = c
-
-
-@jit(inline=True)
-def push_products(f, ii, ro, n, ip, src, p, need):  # pragma: no cover - jit
-    """`sums_push` of the packed row of (φ, y) = f[src:src+p+1], formed column by column
-    (the products of `innovation_test.packed_row`); the window sums are written only when
-    ``need`` (a block's other sums are exact whatever the ticks that read them)."""
-    w = p * (p + 1) // 2 + p + 1
-    fresh, prev, sl, rp, end = _slot(ii, ro, n, w, ip)
-    p = _u(p)
-    one = _u(1)
-    src = _u(src)
-    y = f[src + p]
-    k = _u(0)
-    for a in range(p):
-        for b in range(a, p):
-            _column(f, fresh, prev, sl, rp, k, f[src + a] * f[src + b], end, need)
-            k += one
-    for a in range(p):
-        _column(f, fresh, prev, sl, rp, k, f[src + a] * y, end, need)
-        k += one
-    _column(f, fresh, prev, sl, rp, k, y * y, end, need)
-    ii[ip] = 0 if end else ii[ip] + 1
 
 
 @jit(inline=True)

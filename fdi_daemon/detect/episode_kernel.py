@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.core.kernels import push_products, solve_packed, sums_floats, sums_push
+from fdi_daemon.core.kernels import packed_row_into, solve_packed, sums_floats, sums_push
 
 __all__ = ["episode_start", "episode_restart", "episode_tick", "EPISODE_INTS",
            "episode_floats", "NO_CHANGE", "TO_ISOLATED", "TO_OTHER", "TO_CLEARED",
@@ -118,8 +118,10 @@ def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
     ln = ii[res + 10]
     newest = min(ln, ii[res + 2])  # (φ, y) of the last lag ticks, oldest first
     first = ii[res + 9] + ln - newest
+    row = ii[eo + P_O_ROW]
     for k in range(first, first + newest):
-        push_products(f, ii, post, n, eo + P_POST, fifo + (k % cap) * 5, 4, True)
+        packed_row_into(f, fifo + (k % cap) * 5, 4, row)
+        sums_push(f, ii, post, n, W, eo + P_POST, row)
     ii[eo + P_TICKS] = 0
     ii[eo + P_HOLD_UNTIL] = 0
     ii[eo + P_PERSISTED] = level

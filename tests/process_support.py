@@ -22,15 +22,22 @@ def start_fdi(*args: str, cwd: Path | None = None) -> subprocess.Popen:
                             env={**os.environ, "PYTHONPATH": str(REPO)})
 
 
-def wait_for_children(proc: subprocess.Popen, count: int, timeout_s: float = 120.0
-                      ) -> set[psutil.Process]:
-    """The processes started under ``proc`` (at any depth) once ``count`` have been seen."""
+def wait_for_children(proc: subprocess.Popen, count: int, timeout_s: float = 120.0,
+                      command: str = "") -> set[psutil.Process]:
+    """The processes started under ``proc`` (at any depth) once ``count`` have been seen;
+    with ``command``, only those whose command line contains it (a short-lived helper such
+    as the ``uname -p`` behind `platform.processor` is then not counted)."""
     parent = psutil.Process(proc.pid)
     seen: set[psutil.Process] = set()
     deadline = time.monotonic() + timeout_s
     while proc.poll() is None and time.monotonic() < deadline and len(seen) < count:
-        seen.update(parent.children(recursive=True))
-        time.sleep(0.2)
+        for child in parent.children(recursive=True):
+            try:
+                if command in " ".join(child.cmdline()):
+                    seen.add(child)
+            except psutil.NoSuchProcess:
+                pass
+        time.sleep(0.05)
     assert len(seen) >= count, f"only {len(seen)} of {count} processes started"
     return seen
 

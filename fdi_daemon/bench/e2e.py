@@ -81,6 +81,14 @@ class Device:
         how = ["--modbus-tcp", "127.0.0.1:0"] if transport == "modbus-tcp" else ["--serial"]
         self.proc = _fdi("sim", "serve", *how, "--seed", str(seed), stdin=subprocess.PIPE,
                          stdout=subprocess.PIPE, text=True)
+        try:
+            self._connect(transport, how)
+        except BaseException:  # a SIGTERM or Ctrl-C while it starts: stop it too
+            _stop(self.proc)
+            raise
+
+    def _connect(self, transport: str, how: list[str]) -> None:
+        """Read where the device serves and its clock (its first stdout line and status)."""
         self._lines: queue.Queue[str] = queue.Queue()
         threading.Thread(target=self._read_lines, daemon=True).start()
         self.where = self._line(60.0).strip()

@@ -160,13 +160,17 @@ class Collector:
 
 
 def service_loop(link, model=None, deadline_s: float = 10.0):
-    """A `ServiceLoop` over ``link`` with a real `Monitor` and a `Collector`."""
+    """A `ServiceLoop` over ``link`` with a real `Monitor` (compiled before it serves, as the
+    daemon does: a cold numba cache must not make the first tick miss a test's timeout) and a
+    `Collector`."""
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.service.loop import ServiceLoop
 
     model = model or load_test_model()
     out = Collector()
-    loop = ServiceLoop(link, Monitor(model), out, fs_hz=model.fs, deadline_s=deadline_s,
+    monitor = Monitor(model)
+    monitor.warm_up()
+    loop = ServiceLoop(link, monitor, out, fs_hz=model.fs, deadline_s=deadline_s,
                        read_timeout_s=0.02, status_period_s=3600.0)
     return loop, out
 

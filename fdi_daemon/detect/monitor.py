@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import logging
 import math
-from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +31,7 @@ from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.baseline import Baseline
 from fdi_daemon.detect.detector import STATES, Detector
 from fdi_daemon.detect.events import make_event
+from fdi_daemon.detect.history import History
 from fdi_daemon.detect.pipeline import Pipeline
 from fdi_daemon.detect.settings import DetectorSettings
 from fdi_daemon.errors import ConfigError, UserError
@@ -119,7 +119,8 @@ class Monitor:
         self.arena.i[self.detector.io + K.D_CHAIN] = self.pipeline.io
         self._io = self.detector.io
         self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))
-        self._history: deque = deque(maxlen=HISTORY_POINTS)
+        self._history = History(HISTORY_POINTS)
+        self._scratch: tuple[np.ndarray, ...] | None = None  # see `_outputs`
         self._samples = 0
         self._last_seq: int | None = None
         self._last_t = math.nan
@@ -161,7 +162,7 @@ class Monitor:
                                   float(accel), math.nan, 0.0)
             events = self.detector.decide(code, t) if code else []
             if self._samples % self._history_every == 0:
-                self._history.append((t, self.detector.theta1, self.detector.theta2))
+                self._history.append(t, self.detector.theta1, self.detector.theta2)
             self._samples += 1
             return events
         events: list[dict[str, Any]] = []
@@ -198,7 +199,7 @@ class Monitor:
         if code:
             events.extend(self.detector.decide(code, t))
         if self._samples % self._history_every == 0:
-            self._history.append((t, self.detector.theta1, self.detector.theta2))
+            self._history.append(t, self.detector.theta1, self.detector.theta2)
         self._samples += 1
         return events
 
@@ -407,8 +408,7 @@ class Monitor:
         accel = np.ascontiguousarray(accel, dtype=float)
         position = np.ascontiguousarray(position, dtype=float)
         xext = pl.external_xhat(v_in)
-        stat, theta1, theta2, residual, v_rms, level = (np.empty(n) for _ in range(6))
-        state = np.empty(n, dtype=np.int8)
+        stat, theta1, theta2, residual, v_rms, level, state = self._outputs(n, trace_every)
         f, ii, io = self.arena.f, self.arena.i, self._io
         events: list[dict[str, Any]] = []
         pos = 0
@@ -422,10 +422,10 @@ class Monitor:
                 state[k] = STATES.index(det.state)
                 theta1[k], theta2[k] = det.theta1, det.theta2
         every = self._history_every
-        hist = np.arange((-self._samples) % every, n, every)[-HISTORY_POINTS:]
-        self._history.extend(zip(t[hist].tolist(), theta1[hist].tolist(), theta2[hist].tolist()))
-        # every sample: the arrays themselves; every n-th: a copy, so that the chunk's
-        # arrays are freed (a strided view would keep them all for the whole run)
+        first = (-self._samples) % every
+        self._history.extend(t[first::every], theta1[first::every], theta2[first::every])
+        # every sample: the arrays themselves (new ones per chunk, `_outputs`); every n-th:
+        # a copy (the arrays serve the next chunk)
         keep = slice((-self._samples) % trace_every, n, trace_every)
         for name, values in zip(TRACE_NAMES, (t, accel, residual, theta1, theta2, stat, state,
                                               v_rms, level)):
@@ -438,6 +438,18 @@ class Monitor:
         else:
             self._last_seq = n - 1
         return events
+
+    def _outputs(self, n: int, trace_every: int) -> tuple[np.ndarray, ...]:
+        """`monitor_run`'s per-sample outputs for ``n`` samples (stat, θ1, θ2, residual,
+        v_rms, level, state). A trace of every sample keeps them, so they are new; otherwise
+        the same arrays serve every chunk (the trace copies the samples it keeps), and the
+        memory stays in cache instead of being handed back and faulted in again."""
+        if trace_every == 1 or n > _CHUNK:
+            return (*(np.empty(n) for _ in range(6)), np.empty(n, dtype=np.int8))
+        if self._scratch is None:
+            self._scratch = (*(np.empty(_CHUNK) for _ in range(6)),
+                             np.empty(_CHUNK, dtype=np.int8))
+        return tuple(a[:n] for a in self._scratch)
 
     def _trace_one(self, parts, trace_every) -> None:
         if (self._samples - 1) % trace_every:
@@ -458,7 +470,7 @@ class Monitor:
         det = self.detector
         syy = wls.sums[5]
         count = wls.count
-        hist = list(self._history)
+        hist = self._history.points().tolist()
         return {
             "state": det.state if self._samples else "starting",
             "theta1": _finite(det.theta1),
@@ -501,18 +513,20 @@ def _clean_chunk(t, v_in, accel, position, needs_position, start, stop, accel_li
     on without a gap: ``seq`` advancing by one, or without ``seq`` (empty) time steps that
     round to one sample period (from the sample before ``start`` when ``after_previous``),
     as `Monitor.sample_numbers` counts them."""
-    for k in range(start, stop):
-        a = accel[k]
-        if not (math.isfinite(t[k]) and math.isfinite(v_in[k]) and math.isfinite(a)
-                and abs(a) < accel_limit):
-            return False
-        if needs_position and not math.isfinite(position[k]):
-            return False
-        if seq.size:
-            if k > start and seq[k] != seq[k - 1] + 1:
-                return False
-        elif k > start or after_previous:
-            steps = (t[k] - t[k - 1]) * fs_hz
-            if not 0.5 < steps < 1.5:  # np.rint(steps) == 1
-                return False
-    return True
+    # no early exit and unsigned indices (no negative-index wrap-around): the loops
+    # vectorise; a chunk that is not clean is the rare one
+    ok = True
+    lo, hi, one = np.uint64(start), np.uint64(stop), np.uint64(1)
+    for k in range(lo, hi):
+        ok &= math.isfinite(t[k]) & math.isfinite(v_in[k]) & (abs(accel[k]) < accel_limit)
+    if needs_position:
+        for k in range(lo, hi):
+            ok &= math.isfinite(position[k])
+    if seq.size:
+        for k in range(lo + one, hi):
+            ok &= seq[k] == seq[k - one] + 1
+    else:
+        for k in range(lo if after_previous else lo + one, hi):
+            steps = (t[k] - t[k - one]) * fs_hz
+            ok &= (0.5 < steps) & (steps < 1.5)  # np.rint(steps) == 1
+    return ok

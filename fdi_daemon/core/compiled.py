@@ -59,10 +59,53 @@ def jit(func=None, *, inline: bool = False, nrt: bool = False):
         package = _package_of(f)
         cache_dir = _package_cache_dir(package) if package else None
         if cache_dir is None:
-            return _njit(**options)(f)
+            return _offsets_as_given(_njit(**options)(f))
         with _numba_cache_dir(cache_dir):
-            return _njit(cache=True, **options)(f)
+            return _offsets_as_given(_njit(cache=True, **options)(f))
     return wrap(func) if func is not None else wrap
+
+
+def _offsets_as_given(dispatcher):
+    """``dispatcher`` compiling with every integer index taken as it is (see
+    `_indices_as_given`)."""
+    compile_signature = dispatcher.compile
+
+    @functools.wraps(compile_signature)
+    def compile(sig):
+        with _indices_as_given():
+            return compile_signature(sig)
+
+    dispatcher.compile = compile
+    return dispatcher
+
+
+def _index_as_given(context, builder, idxty, idx, size):
+    """numba's ``fix_integer_index`` without its wrap-around of a negative index."""
+    from numba.core import types
+
+    return context.cast(builder, idx, idxty, types.intp if idxty.signed else types.uintp)
+
+
+@contextlib.contextmanager
+def _indices_as_given():
+    """While a kernel compiles (its callees and inlined helpers with it), an integer index
+    is lowered as it is: numba otherwise tests every signed index for a negative value to
+    wrap it around (Python's ``a[-1]``), an unsigned one excepted (numba PR #929; an opt-out
+    per function was discussed in numba issue #3205, not built). The kernels index the
+    arena by offsets, which are never negative: a test runs them with
+    ``NUMBA_BOUNDSCHECK=1``, under which a negative index raises. Measured: the monitor's
+    tick 125 → 91 ns, the same results (docs/detector.md §6). The compile holds numba's
+    compiler lock, so no other thread compiles with the change."""
+    from numba.core.compiler_lock import global_compiler_lock
+    from numba.np import arrayobj
+
+    with global_compiler_lock:
+        saved = arrayobj.fix_integer_index
+        arrayobj.fix_integer_index = _index_as_given
+        try:
+            yield
+        finally:
+            arrayobj.fix_integer_index = saved
 
 
 def _package_of(func) -> Path | None:

@@ -13,6 +13,11 @@ read constants of other modules: so the cache of a package's kernels is a folder
 after the hash of all the package's ``.py`` files (`_package_cache_dir`), and a change to
 any of them compiles every kernel afresh.
 
+Every kernel compiles with its integer indices taken as given (`_indices_as_given`): numba
+would otherwise test each signed index for a negative value to wrap it around, and the
+kernels index their arrays by offsets that are never negative (a test runs them under
+numba's bounds checks, where a negative index raises).
+
 `Arena` holds the state of the compiled blocks: one float64 and one int64 array shared by
 the blocks of one monitor (each block owns a region and knows its offsets), so one kernel
 call per tick passes two arrays, not one per block.
@@ -59,15 +64,15 @@ def jit(func=None, *, inline: bool = False, nrt: bool = False):
         package = _package_of(f)
         cache_dir = _package_cache_dir(package) if package else None
         if cache_dir is None:
-            return _offsets_as_given(_njit(**options)(f))
+            return _compiling_indices_as_given(_njit(**options)(f))
         with _numba_cache_dir(cache_dir):
-            return _offsets_as_given(_njit(cache=True, **options)(f))
+            return _compiling_indices_as_given(_njit(cache=True, **options)(f))
     return wrap(func) if func is not None else wrap
 
 
-def _offsets_as_given(dispatcher):
-    """``dispatcher`` compiling with every integer index taken as it is (see
-    `_indices_as_given`)."""
+def _compiling_indices_as_given(dispatcher):
+    """``dispatcher``, compiling with every integer index taken as it is
+    (`_indices_as_given`)."""
     compile_signature = dispatcher.compile
 
     @functools.wraps(compile_signature)
@@ -97,10 +102,16 @@ def _indices_as_given():
     tick 125 → 91 ns, the same results (docs/detector.md §6). The compile holds numba's
     compiler lock, so no other thread compiles with the change."""
     from numba.core.compiler_lock import global_compiler_lock
-    from numba.np import arrayobj
 
+    try:
+        from numba.np import arrayobj
+    except ImportError:  # pragma: no cover - another numba layout
+        arrayobj = None
     with global_compiler_lock:
-        saved = arrayobj.fix_integer_index
+        saved = getattr(arrayobj, "fix_integer_index", None)
+        if saved is None:  # a numba without this hook: its own indexing, the same results
+            yield
+            return
         arrayobj.fix_integer_index = _index_as_given
         try:
             yield

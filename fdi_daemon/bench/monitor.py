@@ -31,9 +31,6 @@ import numpy as np
 
 FS_HZ = 256.0
 BLOCK_S = 20.0
-#: samples a batch pass gives the monitor and then the reference chain in turn (eight of
-#: `Monitor.run`'s chunks: tens of milliseconds each)
-BATCH_BLOCK = 8 * 16384
 
 
 def _system():
@@ -115,26 +112,19 @@ def _tick_times_us(steps, v_in, accel, warmup: int) -> list[tuple[np.ndarray, np
 def _batch_pair(model, window: int, rec, v_in: np.ndarray, accel: np.ndarray
                 ) -> tuple[np.ndarray, list]:
     """One pass over the batch data by a new monitor (``Monitor.run``) and a new reference
-    chain, taking blocks of ``BATCH_BLOCK`` samples in turn (a slow spell of the machine
-    falls on both); returns (monitor wall s, monitor CPU s, reference wall s, reference
-    CPU s) and the monitor's events."""
+    chain, side by side (`bench.side_by_side`); returns (monitor wall s, monitor CPU s,
+    reference wall s, reference CPU s) and the monitor's events."""
     from fdi_daemon.bench.reference_chain import ReferenceChain
+    from fdi_daemon.bench.side_by_side import BLOCK, side_by_side
     from fdi_daemon.detect.monitor import Monitor
-    from fdi_daemon.io.recordings import Recording
 
     monitor = Monitor(model)
     ref = ReferenceChain.from_model(model, window)
-    spent = np.zeros(4)
     events: list = []
-    for start in range(0, len(v_in), BATCH_BLOCK):
-        part = slice(start, start + BATCH_BLOCK)
-        block = Recording({k: col[part] for k, col in rec.columns.items()}, rec.meta)
-        t0, c0 = time.perf_counter(), time.process_time()
-        events += monitor.run(block, trace_every=BATCH_BLOCK)[0]
-        t1, c1 = time.perf_counter(), time.process_time()
-        ref.run(v_in[part], accel[part])
-        spent += (t1 - t0, c1 - c0, time.perf_counter() - t1, time.process_time() - c1)
-    return spent, events
+    spent = side_by_side(
+        [lambda part: events.extend(monitor.run(rec.samples(part), trace_every=BLOCK)[0]),
+         lambda part: ref.run(v_in[part], accel[part])], len(v_in))
+    return spent.ravel(), events
 
 
 def bench_monitor(step_samples: int = 20_000, batch_samples: int = 2_000_000,

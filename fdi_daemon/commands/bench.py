@@ -95,7 +95,7 @@ def _reference_table(m: dict):
                   f"{m['step_cpu_over_reference']:.1f}x",
                   f"<= {tg['step_cpu_over_reference_max']:g}x")
     table.add_row(f"batch (samples/CPU-s; median of {len(m['batch_cpu_share_by_pair'])} "
-                  "pairs)", f"{m['batch_samples_per_cpu_s']:,.0f}",
+                  "side-by-side passes)", f"{m['batch_samples_per_cpu_s']:,.0f}",
                   f"{m['reference_samples_per_cpu_s']:,.0f}",
                   f"{m['batch_cpu_share_of_reference']:.2f}",
                   f">= {tg['batch_cpu_share_of_reference_min']:g}")

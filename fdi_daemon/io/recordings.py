@@ -122,6 +122,10 @@ class Recording:
             return float(self.meta["fs"])
         return nominal_fs_hz(self.t, self.columns.get("seq"))
 
+    def samples(self, part: slice) -> "Recording":
+        """The samples of ``part``, a slice of sample indices (views of the columns)."""
+        return Recording({k: v[part] for k, v in self.columns.items()}, dict(self.meta))
+
     def window(self, t0: float, t1: float) -> "Recording":
         """The samples with t0 <= t < t1 (times in s)."""
         keep = (self.t >= t0) & (self.t < t1)

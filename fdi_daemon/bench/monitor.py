@@ -150,9 +150,9 @@ def bench_monitor(step_samples: int = 20_000, batch_samples: int = 2_000_000,
     warmup = 2 * int(FS_HZ)
 
     window = Monitor(model).detector.window_samples
-    warm = Recording({"t": t_all[:4 * warmup], "v_in": v_all[:4 * warmup],
-                      "accel": a_all[:4 * warmup]}, {"fs": str(FS_HZ)})
-    Monitor(model).run(warm)  # load the compiled kernels before timing
+    rec = Recording({"t": t_all[:batch_samples], "v_in": v_all[:batch_samples],
+                     "accel": a_all[:batch_samples]}, {"fs": str(FS_HZ)})
+    Monitor(model).run(rec.samples(slice(0, 4 * warmup)))  # load the compiled kernels first
     ReferenceChain.from_model(model, window).run(v_all[:4 * warmup], a_all[:4 * warmup])
     monitor = Monitor(model)
     ref = ReferenceChain.from_model(model, window)
@@ -167,8 +167,6 @@ def bench_monitor(step_samples: int = 20_000, batch_samples: int = 2_000_000,
     base_a = a_all[:baseline_samples].tolist()
     [(base_us, base_cpu_us)] = _tick_times_us([lambda k, v, a: base.step(v, a)], base_v,
                                               base_a, min(warmup, baseline_samples // 2))
-    rec = Recording({"t": t_all[:batch_samples], "v_in": v_all[:batch_samples],
-                     "accel": a_all[:batch_samples]}, {"fs": str(FS_HZ)})
     pairs = []  # (monitor wall s, monitor CPU s, reference wall s, reference CPU s)
     for _ in range(batch_pairs):
         spent, events = _batch_pair(model, window, rec, v_all[:batch_samples],

@@ -105,7 +105,7 @@ class Pipeline:
 
     __slots__ = ("plant", "velocity", "model_velocity", "needs_position", "ge_sign",
                  "ge_velocity", "wls", "window_samples", "external_plant", "arena", "fo",
-                 "io", "_zo", "_zn", "_out_o", "trusted_from_hz", "_no_xhat")
+                 "io", "_zo", "_zn", "_out_o", "trusted_from_hz")
 
     def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = MIN_RCOND,
                  min_velocity_rms_mps: float = 0.0, arena: Arena | None = None,
@@ -128,7 +128,6 @@ class Pipeline:
         else:
             self.plant = IIRFilter(model.plant_b, model.plant_a)
         self.external_plant = not isinstance(self.plant, IIRFilter)
-        self._no_xhat = np.zeros(0)  # see `external_xhat`
         b_e = np.concatenate([np.zeros(int(ff.nk)), np.asarray(ff.b, dtype=float)])
         self.ge_sign = IIRFilter(b_e, ff.f)
         self.ge_velocity = IIRFilter(b_e, ff.f)
@@ -248,13 +247,11 @@ class Pipeline:
                      math.nan if accel is None else float(accel), float(position), xext)
 
     def external_xhat(self, v_in: np.ndarray) -> np.ndarray:
-        """x̂̈ of a plant the kernel does not hold (effects), else zeros (not read; one
-        array, grown as needed, serves every call)."""
+        """x̂̈ of a plant the kernel does not hold (effects); else ``v_in`` itself, a
+        placeholder of the right length that the kernel does not read."""
         if self.external_plant:
             return np.ascontiguousarray(self.plant.run(v_in), dtype=float)
-        if self._no_xhat.size < v_in.size:
-            self._no_xhat = np.zeros(v_in.size)
-        return self._no_xhat[:v_in.size]
+        return v_in
 
     def run(self, v_in: np.ndarray, accel: np.ndarray, bad_accel: np.ndarray | None = None,
             position: np.ndarray | None = None) -> PipelineBatch:

@@ -34,8 +34,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from fdi_daemon.core.compiled import jit
 from fdi_daemon.core.kernels import (iir_step, itest_flush_p, itest_insert_p, itest_solve_p,
                                      itest_statistic_p, packed_row_into, sums_push)
@@ -406,7 +404,7 @@ def monitor_run(f, ii, io, v_in, accel, position, xext, start, stat, state, thet
     stat_o = ii[ii[io + D_RES] + 22] + 2
     lo = ii[io + D_LEVEL]
     level_out = ii[lo + L_FLOATS] + 2 * ii[lo + L_CAPACITY]
-    for k in range(np.uint64(start), np.uint64(v_in.shape[0])):  # unsigned: no wrap-around
+    for k in range(start, v_in.shape[0]):
         code = monitor_tick(f, ii, io, v_in[k], accel[k], position[k], xext[k])
         stat[k] = f[stat_o]
         state[k] = ii[io + D_STATE]
@@ -416,6 +414,6 @@ def monitor_run(f, ii, io, v_in, accel, position, xext, start, stat, state, thet
         v_rms[k] = f[out + O_VRMS]
         level[k] = f[level_out]
         if code != QUIET:
-            return np.int64(k) + 1
+            return k + 1
     ii[io + D_CODE] = QUIET
     return v_in.shape[0]

@@ -513,20 +513,18 @@ def _clean_chunk(t, v_in, accel, position, needs_position, start, stop, accel_li
     on without a gap: ``seq`` advancing by one, or without ``seq`` (empty) time steps that
     round to one sample period (from the sample before ``start`` when ``after_previous``),
     as `Monitor.sample_numbers` counts them."""
-    # no early exit and unsigned indices (no negative-index wrap-around): the loops
-    # vectorise; a chunk that is not clean is the rare one
+    # no early exit: the loops vectorise; a chunk that is not clean is the rare one
     ok = True
-    lo, hi, one = np.uint64(start), np.uint64(stop), np.uint64(1)
-    for k in range(lo, hi):
+    for k in range(start, stop):
         ok &= math.isfinite(t[k]) & math.isfinite(v_in[k]) & (abs(accel[k]) < accel_limit)
     if needs_position:
-        for k in range(lo, hi):
+        for k in range(start, stop):
             ok &= math.isfinite(position[k])
     if seq.size:
-        for k in range(lo + one, hi):
-            ok &= seq[k] == seq[k - one] + 1
+        for k in range(start + 1, stop):
+            ok &= seq[k] == seq[k - 1] + 1
     else:
-        for k in range(lo if after_previous else lo + one, hi):
-            steps = (t[k] - t[k - one]) * fs_hz
+        for k in range(start if after_previous else start + 1, stop):
+            steps = (t[k] - t[k - 1]) * fs_hz
             ok &= (0.5 < steps) & (steps < 1.5)  # np.rint(steps) == 1
     return ok

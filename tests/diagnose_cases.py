@@ -61,6 +61,24 @@ def stage_recording(coulomb_n: float = 20.0, offset_n: float = 1.0, seed: int = 
     return simulate_stage(p, r, seed=seed)
 
 
+#: the positioning drive (hil_sim.stage.POSITIONER): 24.8 s at 1 kHz of point-to-point moves
+POSITIONER_DURATION_S = 24.8
+
+
+@lru_cache(maxsize=None)
+def positioner_recording(coulomb_n: float = 20.0, offset_n: float = -3.0, seed: int = 2):
+    """A ball-screw drive under a position loop (P position, P velocity on the encoder's
+    differences), moving from point to point with rests between the moves (the load held
+    by its friction a third of the time); columns ``force``, ``vel``, ``pos``."""
+    from dataclasses import replace
+
+    from hil_sim.stage import POSITIONER, move_reference, simulate_stage
+
+    p = replace(POSITIONER, coulomb_n=coulomb_n, offset_n=offset_n)
+    q = move_reference(POSITIONER_DURATION_S, p.fs_hz, seed=1)
+    return simulate_stage(p, q, seed=seed, loop="position")
+
+
 #: the ratio each named linear change reports
 NAMED_RATIOS = {"mass_change": "mass_ratio", "stiffness_change": "stiffness_ratio",
                 "gain_fault": "gain_ratio"}

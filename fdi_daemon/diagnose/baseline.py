@@ -165,17 +165,18 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
         drifting = d["error_share_below"] > DRIFT_SHARE
         marginal = d["slowest_time_constant_s"] > MARGINAL * d["dc_block_time_constant_s"]
         form = "inverse_dynamics" if n_kind and (drifting or marginal) else "simulation"
-        # a slow mode without drift on the held-out part: the data decide (`workflow`)
-        info["form_undecided"] = form == "inverse_dynamics" and not drifting
+        # a velocity or position record whose free run does not drift: the data decide
+        # between the two forms (`workflow`)
+        info["form_undecided"] = bool(n_kind) and not drifting
         info["form_reason"] = (
             f"{100 * d['error_share_below']:.0f} % of the free-run error lies below the "
             f"input band ({d['band_low_hz']:.3g} Hz); slowest model time constant "
             f"{d['slowest_time_constant_s']:.3g} s against the DC block's "
             f"{d['dc_block_time_constant_s']:.3g} s: "
             + ("a free run drifts, so the force balance is tested" if drifting and n_kind
-               else "a marginally stable model whose free run does not drift"
-               if info["form_undecided"]
-               else "the free run does not drift, so the model is simulated"))
+               else "a marginally stable model whose free run does not drift" if marginal
+               and n_kind else "the free run does not drift" if n_kind
+               else "the model is simulated"))
     else:
         info["form_reason"] = "chosen by the user"
     if form == "inverse_dynamics" and not n_kind:

@@ -48,21 +48,25 @@ def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = 
     """plant_b/plant_a: Ĝ (acceleration) from a model file; None: fit a linear baseline
     (of ``order``, None: chosen from the data). form: see `baseline.prepare`.
 
-    When ``auto`` chose the inverse-dynamics form only for the baseline's slow mode (its
-    free run does not drift on the held-out part: a marginally stable fit of closed-loop
-    data, or a linear fit that a nonlinearity bent), both forms are tested and the one
-    whose named effects remove the larger share of its own held-out gap is kept
-    (``form_reason`` gives both shares)."""
+    When ``auto`` finds a velocity or position record whose free run does not drift, the
+    record is tested in both forms and the one whose named effects leave the smaller share
+    of its own held-out gap is kept (a tie keeps the form the baseline suggested;
+    ``form_reason`` gives both shares): a linear fit of closed-loop data or of a
+    nonlinear system can look stable and still leave the effects nothing to explain in a
+    free run (a stage under a position loop resting between moves), or bend a slow mode in
+    that argues for the force balance when the simulation explains the data."""
     y = np.asarray(y, float)
     ctx, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order, form)
     result = _diagnose(*in_form(ctx, info, y, info["form"]), y, progress)
     if not info.get("form_undecided"):
         return result
-    simulated = _diagnose(*in_form(ctx, info, y, "simulation"), y, progress)
-    best = simulated if _left(simulated) < _left(result) else result
+    other_form = "simulation" if info["form"] == "inverse_dynamics" else "inverse_dynamics"
+    other = _diagnose(*in_form(ctx, info, y, other_form), y, progress)
+    best = other if _left(other) < _left(result) else result
+    simulated, balance = (result, other) if other_form == "inverse_dynamics" else (other, result)
     best.info["form_reason"] = (
         f"{result.info['form_reason']}: both forms were tested, the effects named left "
-        f"{_left(simulated):.3g} of the simulation's gap and {_left(result):.3g} of the "
+        f"{_left(simulated):.3g} of the simulation's gap and {_left(balance):.3g} of the "
         "force balance's, so the " + ("model is simulated" if best is simulated
                                       else "force balance is tested"))
     return best

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from fdi_daemon.diagnose.floor import delay_by_correlation, input_period, noise_floor
+from fdi_daemon.diagnose.floor import delay_by_correlation, noise_floor, repeated_input
 from fdi_daemon.diagnose.force import ForceLoop
-from fdi_daemon.diagnose.inverse import baseline, velocity_noise
+from fdi_daemon.diagnose.inverse import baseline, noise_floor as inverse_noise_floor, \
+    velocity_noise
 from fdi_daemon.diagnose.signals import StateChain, make_split
 
 FS = 256.0
@@ -112,22 +113,38 @@ def test_a_linear_force_in_the_loop_is_the_closed_loop_filter():
     np.testing.assert_allclose(loop.run(y_ff), expected, rtol=1e-10, atol=1e-12)
 
 
-def _periodic(n_periods=6, sigma=0.05, seed=5):
+def _periodic(n_periods=6, sigma=0.05, seed=5, realisations=1):
+    """``realisations`` random inputs of 512 samples, each repeated ``n_periods`` times,
+    through a first-order filter, with white noise σ on the output."""
     rng = np.random.default_rng(seed)
     period = 512
-    u1 = rng.standard_normal(period)
-    u = np.tile(u1, n_periods)
+    u = np.concatenate([np.tile(rng.standard_normal(period), n_periods)
+                        for _ in range(realisations)])
     y_clean = signal.lfilter([0.2, 0.1], [1.0, -0.7], u)
     return u, y_clean, y_clean + sigma * rng.standard_normal(u.size)
 
 
-def test_periodic_floor_is_the_period_to_period_noise():
-    u, y_clean, y = _periodic()
-    assert input_period(u, 50) == 512
+@pytest.mark.parametrize("n_periods, realisations", [(6, 1), (2, 4), (3, 3)])
+def test_periodic_floor_is_the_period_to_period_noise(n_periods, realisations):
+    # one input repeated, or several realisations repeated each (as a multisine benchmark
+    # records them): the samples whose input repeats give the noise
+    u, y_clean, y = _periodic(n_periods, realisations=realisations)
+    period, repeating = repeated_input(u, 50, settle=60)
+    assert period == 512
+    expected = [k for r in range(realisations) for k in
+                range(r * n_periods * 512 + 60 - 1, (r * n_periods + n_periods - 1) * 512)]
+    np.testing.assert_array_equal(repeating, expected)
     test = slice(2 * len(u) // 3, None)
-    floor = noise_floor(y, y - y_clean, u, FS, warmup=512, test=test)
+    floor = noise_floor(y, y - y_clean, u, FS, warmup=60, test=test)
     assert floor["method"] == "periodic"
     assert floor["floor"] == pytest.approx(0.05 / np.std(y[test]), rel=0.1)
+
+
+def test_an_input_that_does_not_repeat_has_no_period():
+    u = np.random.default_rng(11).standard_normal(6 * 512)
+    assert repeated_input(u, 50) is None
+    u, *_ = _periodic(1, realisations=6)  # six realisations of one period each
+    assert repeated_input(u, 50) is None
 
 
 def test_spectrum_floor_is_the_white_noise_above_the_input_band():
@@ -162,6 +179,19 @@ def test_force_balance_recovers_mass_and_damping():
     base = baseline(u, v, "velocity", fs, make_split(len(u), 200))
     assert base["coefficients"]["mass"] == pytest.approx(mass, rel=0.01)
     assert base["coefficients"]["damping"] == pytest.approx(damping, rel=0.01)
+
+
+def test_the_floor_of_a_quantised_velocity_is_unknown():
+    # an encoder's differences (1 µm at 1 kHz) of moves with rests: the velocity is exactly
+    # 0 at rest, so its noise cannot be read from its second differences (not a floor of 0)
+    t = np.arange(20000) / 1000.0
+    x = np.round(0.1 * np.clip(np.sin(2 * np.pi * 0.5 * t), -0.5, 0.5) / 1e-6) * 1e-6
+    v = np.diff(x, prepend=x[0]) * 1000.0
+    lp = signal.butter(2, 20.0, fs=1000.0)
+    floor = inverse_noise_floor(v, v, {"mass": 1.0, "damping": 1.0}, lp, 1000.0,
+                                slice(10000, None))
+    assert floor["floor"] is None
+    assert "unknown" in floor["method"]
 
 
 def test_velocity_noise_ignores_a_smooth_motion():

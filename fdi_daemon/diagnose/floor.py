@@ -2,9 +2,11 @@
 
 The noise floor is the part of the gap that no model of the input can remove.
 
-- Periodic excitation (a multisine repeated, detected from the input's autocorrelation):
-  the output's period-to-period variation. With P periods y_p (after the warm-up), the
-  noise variance per sample is Σ_p (y_p − ȳ)² / (P − 1) averaged over the period, and
+- Periodic excitation (a multisine repeated, or several realisations of a multisine each
+  repeated, `repeated_input`): the output's period-to-period variation. Where the input
+  one period P later is the same input, and has been for the model's warm-up, the output
+  differs only by the noise: over those samples k the noise variance per sample is
+  mean((y[k+P] − y[k])²)/2, and
 
       floor = √(noise variance) / std(y on the held-out part)        (an NRMSE, like the gap)
 
@@ -32,42 +34,55 @@ FLOOR_MARGIN = 1.25
 #: quantile of the error's power density above the input band taken as the noise level
 #: (the median: harmonics of an effect there are peaks, the noise is the floor between)
 QUIET_QUANTILE = 0.5
-#: autocorrelation above which the input counts as periodic
-PERIODIC_RHO = 0.99
+#: an input sample "repeats" when it differs from the one a period later by less than this
+#: share of the input's RMS (a measured input repeats within its noise)
+REPEAT_TOLERANCE = 0.05
+#: least share of the record whose input must repeat for the periodic floor
+REPEAT_SHARE = 0.25
 
 
-def input_period(u: np.ndarray, min_samples: int) -> int | None:
-    """The input's period in samples, if it repeats at least 3 times; None otherwise."""
+def repeated_input(u: np.ndarray, min_samples: int, settle: int = 0
+                   ) -> tuple[int, np.ndarray] | None:
+    """(P, k): the input's period P (the autocorrelation's highest peak at a lag of at least
+    ``min_samples``) and the samples k whose input repeats one period later, u[k+P] = u[k]
+    within REPEAT_TOLERANCE, as have the max(settle, min_samples) − 1 samples before it
+    (the model has forgotten where the inputs differed); None when they cover less than
+    REPEAT_SHARE of the record. One multisine repeated repeats everywhere after
+    its first period; R realisations of p periods each repeat on (p − 1)/p of the record."""
     x = np.asarray(u, float) - np.mean(u)
     n = len(x)
     if n < 3 * min_samples or not np.any(x):
         return None
     spec = np.fft.rfft(x, 2 * n)
-    acf = np.fft.irfft(spec * np.conj(spec))[: n // 3 + 1]
+    acf = np.fft.irfft(spec * np.conj(spec))[: n // 2 + 1]
     acf = acf / (acf[0] * (n - np.arange(acf.size)) / n)  # unbiased, normalised
     lags = np.arange(min_samples, acf.size)
     if lags.size == 0:
         return None
-    best = int(lags[np.argmax(acf[lags])])
-    return best if acf[best] > PERIODIC_RHO else None
+    period = int(lags[np.argmax(acf[lags])])
+    same = np.abs(x[period:] - x[:-period]) <= REPEAT_TOLERANCE * np.sqrt(np.mean(x * x))
+    # a run of min_samples at least: not a chance crossing of two different inputs
+    run = np.convolve(same, np.ones(max(settle, min_samples)), "full")[: same.size]
+    kept = np.flatnonzero(run >= max(settle, min_samples))
+    if kept.size < REPEAT_SHARE * n:
+        return None
+    return period, kept
 
 
 def noise_floor(y: np.ndarray, e: np.ndarray, u: np.ndarray, fs_hz: float, warmup: int,
                 test: slice) -> dict:
     """``{"floor": NRMSE or None, "method": ..., ...}`` for the output y (comparison
-    domain) with nominal error e."""
+    domain) with nominal error e; warmup: samples the model needs to forget its past."""
     y = np.asarray(y, float)
     spread = float(np.std(y[test]))
     if spread == 0.0:
         return {"floor": None, "method": "none"}
-    period = input_period(u[warmup:], max(8, int(0.2 * fs_hz)))
-    if period is not None:
-        periods = (len(y) - warmup) // period
-        if periods >= 3:
-            block = y[len(y) - periods * period:].reshape(periods, period)
-            var = float(np.mean(np.var(block, axis=0, ddof=1)))
-            return {"floor": math.sqrt(var) / spread, "method": "periodic",
-                    "period_s": period / fs_hz, "periods": periods}
+    repeated = repeated_input(u, max(8, int(0.2 * fs_hz)), warmup)
+    if repeated is not None:
+        period, k = repeated
+        var = 0.5 * float(np.mean((y[k + period] - y[k]) ** 2))
+        return {"floor": math.sqrt(var) / spread, "method": "periodic",
+                "period_s": period / fs_hz, "repeated_share": k.size / len(y)}
     x = np.asarray(u, float)[test] - np.mean(u[test])
     nper = min(len(x), 256)  # many averages: a steady level estimate
     f, pu = signal.welch(x, fs=fs_hz, nperseg=nper)

@@ -130,6 +130,11 @@ def noise_floor(v_raw: np.ndarray, target: np.ndarray, coefficients: dict,
     measured with noise: white velocity noise σ_v (from `at_rest`'s estimate) through
     M L D and c L (D the difference of `measured_motion`), as an NRMSE of L u."""
     sigma = velocity_noise(v_raw)
+    if sigma <= 1e-9 * float(np.std(v_raw)):  # over half the second differences are 0 (to
+        # rounding): a quantised or held velocity, whose noise this cannot measure
+        return {"floor": None, "velocity_noise": sigma,
+                "method": "velocity noise through the force balance: unknown, the "
+                          "velocity's second differences are mostly zero (quantised or held)"}
     impulse = np.r_[1.0, np.zeros(4095)]
     h_l = signal.lfilter(*lp, impulse)
     h_ld = signal.lfilter(*lp, np.r_[-1.0, 1.0, np.zeros(4094)]) * fs_hz

@@ -90,6 +90,8 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     if floor.get("floor") is not None:
         lines.append(f"noise floor (NRMSE): {floor['floor']:.4g} ({floor['method']})"
                      + ("  -- the nominal model is at the floor" if floor["at_floor"] else ""))
+    else:
+        lines.append(f"noise floor (NRMSE): unknown ({floor['method']})")
     check = report["linear_check"]
     if check.get("matching"):
         held = check.get("held_by")

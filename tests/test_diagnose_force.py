@@ -169,14 +169,18 @@ def test_dead_time_by_correlation():
     assert delay_by_correlation(y, y0, FS, 20) * FS == pytest.approx(3.4, abs=0.15)
 
 
-def test_force_balance_recovers_mass_and_damping():
-    # M v̇ = u − c v, exact for a held force: v[k+1] = d v[k] + (1 − d)/c u[k]
+@pytest.mark.parametrize("lag", [0, 3])
+def test_force_balance_recovers_mass_damping_and_the_motions_lag(lag):
+    # M v̇ = u − c v, exact for a held force: v[k+1] = d v[k] + (1 − d)/c u[k]; the
+    # velocity recorded ``lag`` samples late (a drive's filter and computation)
     mass, damping, fs = 8.0, 40.0, 500.0
     d = np.exp(-damping / mass / fs)
     rng = np.random.default_rng(8)
     u = signal.lfilter(*signal.butter(2, 5.0, fs=fs), 50 * rng.standard_normal(20000)) + 30.0
     v = signal.lfilter([0.0, (1 - d) / damping], [1.0, -d], u)
+    v = np.concatenate([np.full(lag, v[0]), v[:len(v) - lag]])
     base = baseline(u, v, "velocity", fs, make_split(len(u), 200))
+    assert base["lag"] == lag
     assert base["coefficients"]["mass"] == pytest.approx(mass, rel=0.01)
     assert base["coefficients"]["damping"] == pytest.approx(damping, rel=0.01)
 

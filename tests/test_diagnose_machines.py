@@ -7,6 +7,7 @@ recording; the truth is compared at the end."""
 from __future__ import annotations
 
 import pytest
+from scipy import signal
 
 from fdi_daemon.diagnose.workflow import run_diagnose
 from tests.diagnose_cases import FS, duffing_recording, positioner_recording, \
@@ -49,6 +50,21 @@ def test_positioning_drive_moving_from_point_to_point(column, kind):
     assert params["coulomb_friction"]["coulomb_level"] == pytest.approx(20.0, rel=0.05)
     assert params["force_offset"]["offset"] == pytest.approx(-3.0, abs=0.3)
     assert result.gap_after <= 0.5 * result.gap_before
+    assert result.gap_after <= 0.03
+
+
+def test_positioning_drive_with_a_filtered_velocity():
+    # a drive that records its velocity through a low-pass (2nd-order, 100 Hz) of the
+    # encoder's differences: the motion lags the force by about two samples; the force
+    # balance finds the lag (before: 20.83 N, 0.1027 -> 0.0630; now 3 samples, 19.95 N, 0.0082)
+    rec = positioner_recording(20.0, -3.0)
+    vel = signal.lfilter(*signal.butter(2, 100.0, fs=rec.fs), rec["vel"])
+    result = run_diagnose(rec["force"], vel, rec.fs, "velocity")
+    assert result.info["form"] == "inverse_dynamics"
+    assert set(result.named[:2]) == {"coulomb_friction", "force_offset"}
+    params = {e.name: e.physical for e in result.selection.named}
+    assert params["coulomb_friction"]["coulomb_level"] == pytest.approx(20.0, rel=0.05)
+    assert 1 <= result.info["inverse_lag_s"] * rec.fs <= 4
     assert result.gap_after <= 0.03
 
 

@@ -32,7 +32,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="how effects are tested: a free-run simulation, or the force "
                              "balance on the measured motion (velocity/position outputs; for "
                              "integrating or closed-loop plants); auto: inverse_dynamics when "
-                             "the free run drifts (default auto)")
+                             "the free run drifts, both forms (the one whose effects explain "
+                             "more kept) for a velocity or position output otherwise "
+                             "(default auto)")
     add_columns_option(parser)
     parser.add_argument("--json", metavar="REPORT.json", help="write the report as JSON")
     parser.add_argument("--plot", metavar="FILE.png", help="measured vs simulated, error maps")

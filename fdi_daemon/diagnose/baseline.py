@@ -201,8 +201,12 @@ def inverse_context(u, y, fs_hz, output_kind, split, info) -> Context:
     base = baseline(u, y, output_kind, fs_hz, split)
     info["y_dom"] = base["target"]
     info["inverse_baseline"] = base["coefficients"]
-    info["baseline"] += "; inverse dynamics: L u = M L a + c L v" + (
-        " + k L x" if output_kind == "position" else "")
+    lag = base["lag"]
+    info["inverse_lag_s"] = lag / fs_hz
+    info["baseline"] += ("; inverse dynamics: L u" + (f"(t − {lag / fs_hz:.3g} s)" if lag else "")
+                         + " = M L a + c L v" + (" + k L x" if output_kind == "position" else "")
+                         + (f" (the motion lags the input by {lag} sample{'s' if lag > 1 else ''})"
+                            if lag else ""))
     candidates = tuple(c for c in INVERSE_CANDIDATES
                        if output_kind == "position" or c != "cubic_stiffness")
     return Context(u=np.asarray(u, float), v=base["v"], x=base["x"], y0=base["y0"],

@@ -11,7 +11,7 @@ u the input (a force, or proportional to one), v and x the measured velocity and
 a = D v the backward-difference acceleration, L a second-order Butterworth low-pass applied
 to both sides (the equation holds for any L applied to every term; L keeps the noise that D
 amplifies out of the fit). The baseline is M, c (and k for a position output), fitted on the
-training part; the effects' θ are forces in input units: Coulomb level F_c (sign v),
+training part, with u delayed by the lag of the measured motion (`baseline`); the effects' θ are forces in input units: Coulomb level F_c (sign v),
 Stribeck excess, cubic spring k₃ (x³, position output only), a constant force F_0 (1).
 The gap is the held-out NRMSE of L u: how much of the force the model does not explain.
 """
@@ -75,10 +75,17 @@ def settle_samples(b: np.ndarray, a: np.ndarray) -> int:
     return int(np.searchsorted(np.cumsum(h * h) / np.sum(h * h), 0.99)) + 1
 
 
+#: the measured motion may lag the input by up to this many samples (a sensor's filter, a
+#: drive's computation): found, not assumed (`baseline`)
+MAX_LAG_SAMPLES = 8
+
+
 def baseline(u, y, output_kind: str, fs_hz: float, split: signals.Split) -> dict:
     """The linear force balance fitted on the training part, and what the effect fits
     need: ``target`` (L u), ``y0`` (its linear prediction), ``columns`` (L a, L v [, L x]),
-    the filter and the motion.
+    the filter, the motion and ``lag``: the samples (0 … MAX_LAG_SAMPLES) by which the
+    measured motion lags the input, the one whose balance fits the training part best (the
+    target is then L u[k − lag]; a velocity filtered in the drive lags its force).
 
     Samples at rest (`at_rest`) and those L is still settling from them take no part in
     any fit or gap: their rows are zeroed in the target and every column (``moving``)."""
@@ -89,11 +96,19 @@ def baseline(u, y, output_kind: str, fs_hz: float, split: signals.Split) -> dict
     rest = at_rest(motion["v"]).astype(float)
     moving = np.convolve(rest, np.ones(settle_samples(b, a)))[: rest.size] == 0
     cols = np.column_stack([signal.lfilter(b, a, c) for c in raw]) * moving[:, None]
-    target = signal.lfilter(b, a, np.asarray(u, float)) * moving
+    filtered_u = signal.lfilter(b, a, np.asarray(u, float))
     fit = split.fit
-    coef, *_ = np.linalg.lstsq(cols[fit], target[fit], rcond=None)
+    best = None
+    for lag in range(MAX_LAG_SAMPLES + 1):
+        target = np.concatenate([np.full(lag, filtered_u[0]), filtered_u[:len(u) - lag]])
+        target = target * moving
+        coef, *_ = np.linalg.lstsq(cols[fit], target[fit], rcond=None)
+        sse = float(np.sum((target[fit] - cols[fit] @ coef) ** 2))
+        if best is None or sse < best[0]:
+            best = (sse, lag, target, coef)
+    _, lag, target, coef = best
     return {"lp": (b, a), "target": target, "y0": cols @ coef, "columns": cols,
-            "moving": moving, "names": names,
+            "moving": moving, "names": names, "lag": lag,
             "coefficients": dict(zip(names, (float(c) for c in coef))),
             "v": motion["v"], "x": motion["x"] if motion["x"] is not None
             else np.zeros_like(motion["v"])}

@@ -62,6 +62,8 @@ def build_report(result, source: str = "") -> dict[str, Any]:
         "gap_after_to_floor": _ratio(result.gap_after, result.info["noise_floor"]),
         "dead_time": {
             "by_correlation_s": result.info.get("dead_time_by_correlation_s"),
+            # the force balance's: the measured motion behind its input (`inverse.baseline`)
+            "motion_lag_s": result.info.get("inverse_lag_s"),
             "named_s": next((e.physical.get("dead_time_s") for e in named
                              if e.name == "dead_time"), None)},
         "linear_check": result.selection.linear,

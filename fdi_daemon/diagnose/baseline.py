@@ -173,9 +173,9 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
             f"input band ({d['band_low_hz']:.3g} Hz); slowest model time constant "
             f"{d['slowest_time_constant_s']:.3g} s against the DC block's "
             f"{d['dc_block_time_constant_s']:.3g} s: "
-            + ("a free run drifts, so the force balance is tested" if drifting and n_kind
-               else "a marginally stable model whose free run does not drift" if marginal
-               and n_kind else "the free run does not drift" if n_kind
+            + (("a free run drifts, so the force balance is tested" if drifting
+                else "a marginally stable model whose free run does not drift" if marginal
+                else "the free run does not drift") if n_kind
                else "the model is simulated"))
     else:
         info["form_reason"] = "chosen by the user"
@@ -203,10 +203,11 @@ def inverse_context(u, y, fs_hz, output_kind, split, info) -> Context:
     info["inverse_baseline"] = base["coefficients"]
     lag = base["lag"]
     info["inverse_lag_s"] = lag / fs_hz
-    info["baseline"] += ("; inverse dynamics: L u" + (f"(t − {lag / fs_hz:.3g} s)" if lag else "")
-                         + " = M L a + c L v" + (" + k L x" if output_kind == "position" else "")
-                         + (f" (the motion lags the input by {lag} sample{'s' if lag > 1 else ''})"
-                            if lag else ""))
+    delayed = f"(t − {lag / fs_hz:.3g} s)" if lag else ""
+    info["baseline"] += (f"; inverse dynamics: L u{delayed} = M L a + c L v"
+                         + (" + k L x" if output_kind == "position" else "")
+                         + (f" (the motion lags the input by {lag} sample"
+                            f"{'s' if lag > 1 else ''})" if lag else ""))
     candidates = tuple(c for c in INVERSE_CANDIDATES
                        if output_kind == "position" or c != "cubic_stiffness")
     return Context(u=np.asarray(u, float), v=base["v"], x=base["x"], y0=base["y0"],

@@ -11,8 +11,9 @@ u the input (a force, or proportional to one), v and x the measured velocity and
 a = D v the backward-difference acceleration, L a second-order Butterworth low-pass applied
 to both sides (the equation holds for any L applied to every term; L keeps the noise that D
 amplifies out of the fit). The baseline is M, c (and k for a position output), fitted on the
-training part, with u delayed by the lag of the measured motion (`baseline`); the effects' θ are forces in input units: Coulomb level F_c (sign v),
-Stribeck excess, cubic spring k₃ (x³, position output only), a constant force F_0 (1).
+training part, with u delayed by the lag of the measured motion (`baseline`); the effects'
+θ are forces in input units: Coulomb level F_c (sign v), Stribeck excess, cubic spring k₃
+(x³, position output only), a constant force F_0 (1).
 The gap is the held-out NRMSE of L u: how much of the force the model does not explain.
 """
 

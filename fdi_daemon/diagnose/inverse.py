@@ -85,8 +85,9 @@ def baseline(u, y, output_kind: str, fs_hz: float, split: signals.Split) -> dict
     """The linear force balance fitted on the training part, and what the effect fits
     need: ``target`` (L u), ``y0`` (its linear prediction), ``columns`` (L a, L v [, L x]),
     the filter, the motion and ``lag``: the samples (0 … MAX_LAG_SAMPLES) by which the
-    measured motion lags the input, the one whose balance fits the training part best (the
-    target is then L u[k − lag]; a velocity filtered in the drive lags its force).
+    measured motion lags the input, the one whose balance (with a Coulomb friction and a
+    constant force) fits the training part best; the target is then L u[k − lag] (a
+    velocity filtered in the drive lags its force).
 
     Samples at rest (`at_rest`) and those L is still settling from them take no part in
     any fit or gap: their rows are zeroed in the target and every column (``moving``)."""
@@ -99,15 +100,19 @@ def baseline(u, y, output_kind: str, fs_hz: float, split: signals.Split) -> dict
     cols = np.column_stack([signal.lfilter(b, a, c) for c in raw]) * moving[:, None]
     filtered_u = signal.lfilter(b, a, np.asarray(u, float))
     fit = split.fit
-    best = None
-    for lag in range(MAX_LAG_SAMPLES + 1):
-        target = np.concatenate([np.full(lag, filtered_u[0]), filtered_u[:len(u) - lag]])
-        target = target * moving
-        coef, *_ = np.linalg.lstsq(cols[fit], target[fit], rcond=None)
-        sse = float(np.sum((target[fit] - cols[fit] @ coef) ** 2))
-        if best is None or sse < best[0]:
-            best = (sse, lag, target, coef)
-    _, lag, target, coef = best
+    # the lag is read with a Coulomb friction and a constant force beside the mass and the
+    # damping: left out, their force decides the lag (under feedback the force answers the
+    # motion, so a shifted force can stand in for the friction)
+    forces = [np.sign(motion["v"]), np.ones_like(motion["v"])]
+    timing = np.column_stack([cols] + [signal.lfilter(b, a, f) * moving for f in forces])
+    targets = [np.concatenate([np.full(lag, filtered_u[0]), filtered_u[:len(u) - lag]])
+               * moving for lag in range(MAX_LAG_SAMPLES + 1)]
+    sse = [float(np.sum((t[fit] - timing[fit] @ np.linalg.lstsq(timing[fit], t[fit],
+                                                                rcond=None)[0]) ** 2))
+           for t in targets]
+    lag = int(np.argmin(sse))
+    target = targets[lag]
+    coef, *_ = np.linalg.lstsq(cols[fit], target[fit], rcond=None)
     return {"lp": (b, a), "target": target, "y0": cols @ coef, "columns": cols,
             "moving": moving, "names": names, "lag": lag,
             "coefficients": dict(zip(names, (float(c) for c in coef))),

@@ -62,8 +62,9 @@ def repeated_input(u: np.ndarray, min_samples: int, settle: int = 0
     period = int(lags[np.argmax(acf[lags])])
     same = np.abs(x[period:] - x[:-period]) <= REPEAT_TOLERANCE * np.sqrt(np.mean(x * x))
     # a run of min_samples at least: not a chance crossing of two different inputs
-    run = np.convolve(same, np.ones(max(settle, min_samples)), "full")[: same.size]
-    kept = np.flatnonzero(run >= max(settle, min_samples))
+    width = max(settle, min_samples)
+    run = np.convolve(same, np.ones(width), "full")[: same.size]
+    kept = np.flatnonzero(run >= width)
     if kept.size < REPEAT_SHARE * n:
         return None
     return period, kept

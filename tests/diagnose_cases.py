@@ -105,6 +105,23 @@ def duffing_recording(k3_n_per_m3: float = 3e5, seed: int = 2, noise_hz: float |
 
 
 @lru_cache(maxsize=None)
+def arrow_recording(k3_n_per_m3: float = 1.5e5, seed: int = 2):
+    """A Duffing oscillator recorded as nonlinear benchmarks are (the Silverbox): 20 s of
+    an "arrow" (Gaussian noise low-passed at 12 Hz whose amplitude rises linearly to
+    1.7 V RMS) then three realisations of a 0.3–12 Hz multisine, 8 s each at 1 V RMS; the
+    §V model without input filter, position out. The arrow's tip drives the spring harder
+    than anything after it."""
+    rising = noise_input(20.0, 12.0, 1.0) * np.linspace(0.0, 1.0, int(20.0 * FS))
+    rising *= 1.7 / np.std(rising[-int(2.0 * FS):])
+    u = np.concatenate([rising] + [multisine(8.0, FS, 0.3, 12.0, 1.0, seed=s)
+                                   for s in (11, 12, 13)])
+    return simulate_recording(MsdParams(input_filter_hz=None,
+                                        effects={"cubic_stiffness":
+                                                 {"k3_n_per_m3": k3_n_per_m3}}, **NOISE),
+                              u, seed=seed)
+
+
+@lru_cache(maxsize=None)
 def changed_recording(parameter: str, ratio: float, seed: int = 2):
     """The §V model whose ``parameter`` (an `MsdParams` field: the actuator's
     ``gain_n_per_v``, the spring's ``stiffness_n_per_m``, the load's ``mass_kg``) is

@@ -110,9 +110,13 @@ def test_added_damping_is_viscous_friction_with_its_coefficient(kind):
     assert result.named == ["viscous_friction"]
     linear = next(e for e in result.selection.chosen if e.name == "loop_stiffness")
     assert linear.physical["damping_ratio"] == pytest.approx(true_zeta, abs=0.005)
-    if kind == "acceleration":  # input equivalent: c_v / gain = 2 N·s/m / 10 N/V
-        assert result.selection.named[0].physical[
-            "viscous_coefficient_input_equivalent"] == pytest.approx(0.2, rel=0.1)
+    viscous = result.selection.named[0].physical
+    # its size from the mode: Δ(c/m) = 2 N·s/m / 1 kg, however the fit splits the damping
+    # between the spring's and the viscous column's free numerators
+    assert viscous["damping_change_per_s"] == pytest.approx(2.0, rel=0.02)
+    # the input equivalent c_v / gain = 2 N·s/m / 10 N/V is projected through Ĝ's input
+    # path, which holds the 20 Hz input filter and is not the force's: a size only
+    assert viscous["viscous_coefficient_input_equivalent"] == pytest.approx(0.2, rel=0.25)
 
 
 def test_a_dead_time_is_named_with_its_value_not_absorbed_by_the_refit():

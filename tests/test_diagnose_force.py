@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from fdi_daemon.diagnose.effects import Context
 from fdi_daemon.diagnose.floor import delay_by_correlation, noise_floor, repeated_input
 from fdi_daemon.diagnose.force import ForceLoop
-from fdi_daemon.diagnose.inverse import baseline, noise_floor as inverse_noise_floor, \
-    velocity_noise
+from fdi_daemon.diagnose.inverse import baseline, measured_motion, \
+    noise_floor as inverse_noise_floor, noise_sigma
 from fdi_daemon.diagnose.signals import StateChain, make_split
 
 FS = 256.0
@@ -192,17 +193,42 @@ def test_the_floor_of_a_quantised_velocity_is_unknown():
     x = np.round(0.1 * np.clip(np.sin(2 * np.pi * 0.5 * t), -0.5, 0.5) / 1e-6) * 1e-6
     v = np.diff(x, prepend=x[0]) * 1000.0
     lp = signal.butter(2, 20.0, fs=1000.0)
-    floor = inverse_noise_floor(v, v, {"mass": 1.0, "damping": 1.0}, lp, 1000.0,
+    floor = inverse_noise_floor(v, "velocity", v, {"mass": 1.0, "damping": 1.0}, lp, 1000.0,
                                 slice(10000, None))
     assert floor["floor"] is None
     assert "unknown" in floor["method"]
 
 
-def test_velocity_noise_ignores_a_smooth_motion():
+def test_noise_sigma_ignores_a_smooth_motion():
     rng = np.random.default_rng(9)
     t = np.arange(20000) / 500.0
     v = 0.2 * np.sin(2 * np.pi * 1.3 * t) + 3e-4 * rng.standard_normal(t.size)
-    assert velocity_noise(v) == pytest.approx(3e-4, rel=0.05)
+    assert noise_sigma(v) == pytest.approx(3e-4, rel=0.05)
+
+
+@pytest.mark.parametrize("kind", ["velocity", "position"])
+def test_the_floor_is_the_output_noise_through_the_force_balance(kind):
+    # reference: the force-balance terms of the noise alone (a Monte-Carlo run), against the
+    # floor read from a noisy smooth motion; a position's noise is differenced twice for the
+    # acceleration, so the same σ gives a floor about fs/ω_L times a velocity's
+    rng = np.random.default_rng(4)
+    fs, sigma = 1000.0, 2e-6
+    t = np.arange(60000) / fs
+    noise = sigma * rng.standard_normal(t.size)
+    motion = 0.01 * np.sin(2 * np.pi * 0.7 * t) + 0.004 * np.sin(2 * np.pi * 2.3 * t)
+    coefficients = {"mass": 95.0, "damping": 200.0} | ({"stiffness": 3000.0}
+                                                      if kind == "position" else {})
+    lp = signal.butter(2, 20.0, fs=fs)
+    terms = measured_motion(noise, kind, fs)
+    balance = [terms["a"], terms["v"]] + ([terms["x"]] if kind == "position" else [])
+    noise_force = signal.lfilter(*lp, sum(c * b for c, b in zip(coefficients.values(),
+                                                                balance)))
+    target = 50.0 + 30.0 * np.sin(2 * np.pi * 1.1 * t)
+    test = slice(20000, None)
+    expected = float(np.std(noise_force[test]) / np.std(target[test]))
+    floor = inverse_noise_floor(motion + noise, kind, target, coefficients, lp, fs, test)
+    assert floor["floor"] == pytest.approx(expected, rel=0.05)
+    assert floor["output_noise"] == pytest.approx(sigma, rel=0.05)
 
 
 @pytest.mark.parametrize("change,expected", [
@@ -246,3 +272,19 @@ def test_mode_shift_reads_the_mode_of_a_system_whose_change_we_chose(change, exp
     assert out["mode_change"] == expected
     if expected == "mass":
         assert out["mass_ratio"] == pytest.approx(changed.mass_kg / nominal.mass_kg, rel=1e-6)
+
+
+def test_a_long_records_parameter_search_sees_the_force_balance_of_its_own_samples():
+    # a long record's parameters are searched on its first samples (`Context.head`); in the
+    # inverse-dynamics form the force balance's columns must be cut with them (a 131 072-
+    # sample oscillator record failed with "operands could not be broadcast")
+    n, head = 1000, 300
+    ctx = Context(u=np.zeros(n), v=np.zeros(n), x=np.zeros(n), y0=np.zeros(n),
+                  target=np.zeros(n), a_dom=np.ones(1), b_dom=np.ones(1),
+                  split=make_split(n, 10), fs_hz=100.0, output_kind="velocity", ref_hz=1.0,
+                  max_delay_samples=1, form="inverse_dynamics",
+                  base_columns=np.arange(2.0 * n).reshape(n, 2))
+    cut = ctx.head(head)
+    assert cut.base_columns.shape == (head, 2)
+    assert np.array_equal(cut.base_columns, ctx.base_columns[:head])
+    assert cut.split.train_end == head

@@ -205,6 +205,7 @@ class Context:
         cut = slice(0, n)
         return replace(self, u=self.u[cut], v=self.v[cut], x=self.x[cut], y0=self.y0[cut],
                        target=self.target[cut],
+                       base_columns=None if self.base_columns is None else self.base_columns[cut],
                        split=Split(warmup=self.split.warmup, train_end=n, n=n), cache={})
 
 

@@ -57,17 +57,17 @@ def measured_motion(y: np.ndarray, output_kind: str, fs_hz: float) -> dict[str, 
     raise ValueError("the inverse-dynamics form needs a velocity or position output")
 
 
-def velocity_noise(v: np.ndarray) -> float:
-    """σ of white noise on v, from the median absolute second difference (σ√6 for white
-    noise; a smooth motion hardly contributes)."""
-    d2 = np.diff(np.asarray(v, float), 2)
+def noise_sigma(y: np.ndarray) -> float:
+    """σ of white noise on a measured signal (a velocity or a position), from the median
+    absolute second difference (σ√6 for white noise; a smooth motion hardly contributes)."""
+    d2 = np.diff(np.asarray(y, float), 2)
     return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0)
 
 
 def at_rest(v: np.ndarray) -> np.ndarray:
-    """Samples where the velocity is within 3σ of its noise (`velocity_noise`): at rest,
+    """Samples where the velocity is within 3σ of its noise (`noise_sigma`): at rest,
     friction is whatever holds the mass."""
-    return np.abs(v) <= 3.0 * velocity_noise(v)
+    return np.abs(v) <= 3.0 * noise_sigma(v)
 
 
 def settle_samples(b: np.ndarray, a: np.ndarray) -> int:
@@ -145,25 +145,28 @@ def physical(name: str, theta: np.ndarray, param: float | None, ctx=None) -> dic
     return out
 
 
-def noise_floor(v_raw: np.ndarray, target: np.ndarray, coefficients: dict,
+def noise_floor(y_raw: np.ndarray, output_kind: str, target: np.ndarray, coefficients: dict,
                 lp: tuple, fs_hz: float, test: slice) -> dict:
-    """The part of L u that the force balance cannot explain because the velocity is
-    measured with noise: white velocity noise σ_v (from `at_rest`'s estimate) through
-    M L D and c L (D the difference of `measured_motion`), as an NRMSE of L u."""
-    sigma = velocity_noise(v_raw)
-    if sigma <= 1e-9 * float(np.std(v_raw)):  # over half the second differences are 0 (to
-        # rounding): a quantised or held velocity, whose noise this cannot measure
-        return {"floor": None, "velocity_noise": sigma,
-                "method": "velocity noise through the force balance: unknown, the "
-                          "velocity's second differences are mostly zero (quantised or held)"}
-    impulse = np.r_[1.0, np.zeros(4095)]
-    h_l = signal.lfilter(*lp, impulse)
-    h_ld = signal.lfilter(*lp, np.r_[-1.0, 1.0, np.zeros(4094)]) * fs_hz
-    mass, damping = coefficients["mass"], coefficients["damping"]
-    var = sigma ** 2 * (mass ** 2 * float(h_ld @ h_ld) + damping ** 2 * float(h_l @ h_l) / 2)
+    """The part of L u that the force balance cannot explain because the motion is
+    measured with noise: white noise σ on the measured output (velocity or position,
+    `noise_sigma`) through the balance's own differences (`measured_motion`: M a + c v
+    [+ k x]) and L, as an NRMSE of L u."""
+    sigma = noise_sigma(y_raw)
+    if sigma <= 1e-9 * float(np.std(y_raw)):  # over half the second differences are 0 (to
+        # rounding): a quantised or held output, whose noise this cannot measure
+        return {"floor": None, "output_noise": sigma,
+                "method": f"{output_kind} noise through the force balance: unknown, the "
+                          f"{output_kind}'s second differences are mostly zero (quantised "
+                          "or held)"}
+    pulse = np.zeros(4096)
+    pulse[2] = 1.0  # one noise sample, as every motion term sees it
+    motion = measured_motion(pulse, output_kind, fs_hz)
+    terms = [motion["a"], motion["v"]] + ([motion["x"]] if motion["x"] is not None else [])
+    h = signal.lfilter(*lp, sum(c * t for c, t in zip(coefficients.values(), terms)))
     # the gap's NRMSE runs over every held-out row, the rows at rest being zero on both sides
     live = float(np.mean(target[test] != 0))
     spread = float(np.std(target[test]))
-    return {"floor": float(np.sqrt(var * live) / spread) if spread > 0 else None,
-            "method": "velocity noise through the force balance",
-            "velocity_noise": float(sigma)}
+    return {"floor": float(sigma * np.sqrt(float(h @ h) * live) / spread) if spread > 0
+            else None,
+            "method": f"{output_kind} noise through the force balance",
+            "output_noise": float(sigma)}

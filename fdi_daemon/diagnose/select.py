@@ -114,8 +114,9 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
                                 for e in effects])
         prediction = xx @ theta
     test = ctx.split.test
-    e1 = ctx.target[test] - prediction[test]
-    sse1 = float(e1 @ e1)
+    with np.errstate(over="ignore", invalid="ignore"):  # a loop that diverges: inf
+        e1 = ctx.target[test] - prediction[test]
+        sse1 = float(e1 @ e1)
     if not math.isfinite(sse1):  # a force loop that diverges on the held-out part
         sse1 = math.inf
     k = eff.n_params + sum(e.n_params for e in refitted if e.name not in {b.name for b in base})
@@ -173,7 +174,8 @@ def input_share(effects: list[FittedEffect]) -> None:
 def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffect:
     """The searched parameter of a force effect (the last of ``effects``) again, with the
     motion in the loop: its feed-forward search saw the nominal motion only. Each grid
-    value gets a full loop fit (a short one misleads); the lowest training error wins."""
+    value gets a loop fit (a short one misleads; the joint step only at the value chosen,
+    in `evaluate`); the lowest training error wins."""
     new = effects[-1]
     spec = SPECS[new.name]
     fit = ctx.split.fit
@@ -181,8 +183,9 @@ def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffe
     grid = np.append(spec.grid(ctx), new.param)
     for value in grid[np.isfinite(grid) & (grid > 0)]:
         trial = replace(new, param=float(value))
-        _, pred = in_the_loop(ctx, effects[:-1] + [trial])
-        sse = float(np.sum((ctx.target - pred)[fit] ** 2))
+        _, pred = in_the_loop(ctx, effects[:-1] + [trial], joint=False)
+        with np.errstate(over="ignore", invalid="ignore"):  # a diverging loop: inf, not chosen
+            sse = float(np.sum((ctx.target - pred)[fit] ** 2))
         if sse < best[0]:
             best = (sse, trial)
     return best[1]
@@ -454,8 +457,10 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
     MATCH_SHARE of what the refit adds to E. E on top of the explanation is refitted as the
     rounds name effects (`_physical_on_top`): the larger of a nested pair that is not
     physically possible there is replaced by the smaller (a Stribeck excess that pushes
-    the motion once the gain has taken its part: Coulomb friction); the refit with E stays
-    the reference (the smaller effect does not do better with the refit than the larger).
+    the motion once the gain has taken its part: Coulomb friction). The share is always
+    of what the refit adds to E as named: the smaller effect with the explanation must
+    account for more than MATCH_SHARE of the way from E alone to E with the refit (the
+    smaller effect alone starts further away and would make any pair look like a match).
     Otherwise (None) E holds the apparent gain or shift (a friction's describing function,
     a static map's Bussgang gain) and the refit stays in the base."""
     test = ctx.split.test
@@ -470,15 +475,16 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
             return None
         names, chosen, pred, sse_with = on_top
         _, _, sse_alone = _fit_set(ctx, names, [])
+        sse_named = sse_alone if names == named else _fit_set(ctx, named, [])[2]
     except NotApplicable:
         return None
     n_eff = effective_samples(ctx.target[test])
     k = first[0].n_params
     dof = n_eff - sum(e.n_params for e in chosen)
-    if sse_with >= sse_alone or sse_refit >= sse_alone or dof <= 1:
+    if sse_with >= sse_alone or sse_refit >= sse_named or dof <= 1:
         return None  # nothing to explain: the refit adds nothing to E on held-out data
     p = float(stats.f.sf(((sse_alone - sse_with) / k) / (sse_with / dof), k, dof))
-    share = (sse_alone - sse_with) / (sse_alone - sse_refit)
+    share = (sse_named - sse_with) / (sse_named - sse_refit)
     if p >= ALPHA or share <= MATCH_SHARE:
         return None
     return Selection(chosen, [], pred, {})

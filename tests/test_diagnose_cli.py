@@ -153,3 +153,29 @@ def test_any_column_names(tmp_path, capsys):
         main(["diagnose", str(path), "--fit-linear", "--columns", "v_in"])
     assert exc.value.code == 2
     assert "--columns" in capsys.readouterr().err
+
+
+def test_a_recording_without_a_time_column_takes_its_rate_from_fs(tmp_path, capsys):
+    # benchmark data (the Silverbox's V1, V2) have no time column: --fs gives the rate
+    from tests.diagnose_cases import duffing_recording
+
+    rec = duffing_recording(3e5)
+    bare = tmp_path / "bare.csv"
+    np.savetxt(bare, np.column_stack([rec.v_in, rec["position"]]), delimiter=",",
+               header="V1,V2", comments="", fmt="%.10g")  # the digits `write_recording` keeps
+    args = ["--fit-linear", "--input", "V1", "--output", "V2", "--output-kind", "position"]
+    assert "missing column(s) t" in _bad([str(bare)] + args, capsys)
+    rc = main(["diagnose", str(bare), *args, "--fs", str(FS), "--json", str(tmp_path / "a.json")])
+    assert rc == 0
+    timed = tmp_path / "timed.csv"
+    write_recording(timed, Recording({"t": rec.t, "V1": rec.v_in, "V2": rec["position"]},
+                                     dict(rec.meta)))
+    rc = main(["diagnose", str(timed), *args, "--json", str(tmp_path / "b.json")])
+    assert rc == 0
+    bare_report = json.loads((tmp_path / "a.json").read_text())
+    assert bare_report["effect"] == "cubic_stiffness"
+    assert bare_report["gap_after"] == pytest.approx(
+        json.loads((tmp_path / "b.json").read_text())["gap_after"], rel=1e-9)
+    # a time column and a rate that disagree: one line, no traceback
+    assert "not 100 Hz" in _bad([str(timed)] + args + ["--fs", "100"], capsys)
+    assert "--fs must be a positive" in _bad([str(bare)] + args + ["--fs", "0"], capsys)

@@ -36,6 +36,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "more kept) for a velocity or position output otherwise "
                              "(default auto)")
     add_columns_option(parser)
+    parser.add_argument("--fs", type=float, default=None, metavar="HZ",
+                        help="sample rate of a recording without a time column t (t = k/fs "
+                             "is made; with a t column the two must agree)")
     parser.add_argument("--json", metavar="REPORT.json", help="write the report as JSON")
     parser.add_argument("--plot", metavar="FILE.png", help="measured vs simulated, error maps")
     parser.add_argument("-o", "--out", metavar="AUGMENTED_MODEL.yaml",
@@ -69,7 +72,9 @@ def run(args: argparse.Namespace) -> int:
                   (args.recording, args.model), plots=("--plot",), rewrites={"-o": args.model})
     out_col = args.output or OUTPUT_COLUMNS[args.output_kind]
     # only the time and the two columns used are required (real data name them freely)
-    rec = read_recording(args.recording, required=("t",), columns=args.columns)
+    if args.fs is not None and not (np.isfinite(args.fs) and args.fs > 0):
+        raise UserError(f"--fs must be a positive sample rate in Hz, got {args.fs:g}")
+    rec = read_recording(args.recording, required=("t",), columns=args.columns, fs_hz=args.fs)
     fs = rec.fs
     u = _column(rec, args.input, args.recording, "--input")
     y = _column(rec, out_col, args.recording, "--output")

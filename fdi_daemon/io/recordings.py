@@ -215,12 +215,15 @@ def check_sampling(t: np.ndarray, seq: np.ndarray | None = None,
 
 def read_recording(path: str | Path, strict: bool = True,
                    required: tuple[str, ...] = REQUIRED_COLUMNS,
-                   columns: Mapping[str, str] | None = None) -> Recording:
+                   columns: Mapping[str, str] | None = None,
+                   fs_hz: float | None = None) -> Recording:
     """Read a recording in any supported format and check its sampling.
 
     strict: refuse gaps, duplicates and backward time with a RecordingError; otherwise
     return them in ``Recording.sampling``. columns: fdi name -> the file's column name
     (``--columns``, `fdi_daemon.io.columns`); the file's columns are renamed on read.
+    fs_hz: the sample rate (Hz) of a recording without a time column (benchmark data often
+    have none): t = k / fs_hz is made; a recording with one must agree with it.
     """
     path = Path(path)
     if not path.exists():
@@ -246,6 +249,9 @@ def read_recording(path: str | Path, strict: bool = True,
 
     columns = _renamed(columns_read, mapping, path) if (mapping := dict(columns or {})) \
         else columns_read
+    if fs_hz is not None and "t" not in columns and columns:
+        n = len(next(iter(columns.values())))
+        columns = {"t": np.arange(n) / fs_hz, **columns}
     missing = [c for c in required if c not in columns]
     if missing:
         raise RecordingError(
@@ -268,6 +274,9 @@ def read_recording(path: str | Path, strict: bool = True,
         raise RecordingError(f"{path}: {exc}") from None
     if strict and not rec.sampling.ok:
         raise RecordingError(f"{path}: irregular sampling, {rec.sampling.summary()}")
+    if fs_hz is not None and not same_rate(rec.fs, fs_hz):
+        raise RecordingError(f"{path}: sampled at {rec.fs:g} Hz by its time column, "
+                             f"not {fs_hz:g} Hz")
     return rec
 
 

@@ -396,9 +396,10 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
         with np.errstate(all="ignore"):
             sol = least_squares_nl(residual, x0, method="trf", x_scale="jac",
                                    max_nfev=JOINT_ITERATIONS)
-        traced, sse = run(sol.x[:n_ff], sol.x[n_ff:].reshape(len(cols), width))
+        theta_ff, nums = sol.x[:n_ff], sol.x[n_ff:].reshape(len(cols), width)
+        traced, sse = run(theta_ff, nums)
         if sse < best and np.all(np.isfinite(traced[0])):  # not one that diverges later
-            return sse, sol.x[:n_ff], sol.x[n_ff:].reshape(len(cols), width), *traced
+            return sse, theta_ff, nums, *traced
         return best, best_ff, best_nums, y, phi, v
 
     # two starts, the lower training error kept: the input's path B̂ (a force input) and

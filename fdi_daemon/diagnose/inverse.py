@@ -107,9 +107,9 @@ def baseline(u, y, output_kind: str, fs_hz: float, split: signals.Split) -> dict
     timing = np.column_stack([cols] + [signal.lfilter(b, a, f) * moving for f in forces])
     targets = [np.concatenate([np.full(lag, filtered_u[0]), filtered_u[:len(u) - lag]])
                * moving for lag in range(MAX_LAG_SAMPLES + 1)]
-    sse = [float(np.sum((t[fit] - timing[fit] @ np.linalg.lstsq(timing[fit], t[fit],
-                                                                rcond=None)[0]) ** 2))
-           for t in targets]
+    shifted = np.column_stack([t[fit] for t in targets])  # one solve for every lag
+    sse = np.sum((shifted - timing[fit] @ np.linalg.lstsq(timing[fit], shifted,
+                                                          rcond=None)[0]) ** 2, axis=0)
     lag = int(np.argmin(sse))
     target = targets[lag]
     coef, *_ = np.linalg.lstsq(cols[fit], target[fit], rcond=None)

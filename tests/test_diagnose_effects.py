@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from hil_sim.msd import MsdParams, simulate_recording
-from fdi_daemon.diagnose.effects import EFFECT_NAMES
+from fdi_daemon.diagnose.effects import EFFECT_NAMES, FittedEffect
+from fdi_daemon.diagnose.select import map_share
 from fdi_daemon.diagnose.workflow import run_diagnose
 from tests.diagnose_cases import FS, HIDDEN, changed_recording, nominal_model, recording
 
@@ -31,6 +32,32 @@ def test_hidden_effect_is_named_and_gap_halves(effect):
     assert result.named, f"nothing named for hidden {effect}"
     assert result.named[0] == effect
     assert result.gap_after <= 0.5 * result.gap_before
+
+
+@pytest.mark.parametrize("gain, refit_gain, plausible", [
+    (1.0, 0.0, True), (1.2, 0.2, True), (0.02, 0.0, False), (-0.0025, 0.0, False)])
+def test_a_map_is_possible_only_with_its_own_gain(gain, refit_gain, plausible):
+    # a sensor that clips maps the output as a saturation maps the input: φ = sat(w) − w
+    # enters with the gain of w itself, (1 + r) with the numerator refit's gain r
+    refit = FittedEffect("linear_refit", None, [np.zeros(3)], physical={"input_gain": refit_gain})
+    clip = FittedEffect("output_saturation", 0.6, [np.array([gain])],
+                        physical={"gain": gain, "plausible": True})
+    map_share([refit, clip])
+    assert clip.physical["map_share"] == pytest.approx(gain / (1.0 + refit_gain))
+    assert clip.physical["plausible"] is plausible
+
+
+@pytest.mark.parametrize("effect", ["cubic_stiffness", "output_saturation"])
+def test_a_hidden_spring_or_clip_is_named_alone(effect):
+    # before the loop's joint fit (docs/diagnose.md §4.3 step 4) the hidden cubic spring
+    # was named with an output clip of gain ≈ 0 second, standing in for the part of the
+    # spring the loop had not fitted; a clip must have a clip's gain (`map_share`)
+    rec = recording(effect)
+    b, a = nominal_model()
+    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    assert result.named == [effect]
+    if effect == "output_saturation":
+        assert result.selection.named[0].physical["map_share"] == pytest.approx(1.0, abs=0.1)
 
 
 def test_no_hidden_effect_names_none():

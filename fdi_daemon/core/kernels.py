@@ -32,20 +32,20 @@ __all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed",
 
 #: an offset as an unsigned integer: indexing with it skips the test for a negative index
 #: (the hot loops; every operand of its arithmetic must be unsigned too)
-_u = np.uint64
+unsigned = np.uint64
 
 
 @jit(inline=True)
 def iir_step(f, bo, ao, zo, n, x):  # pragma: no cover - jit
     """One sample through b = f[bo:bo+n+1], a = f[ao:..] (a0 = 1), state f[zo:zo+n]
-    (offsets unsigned inside, `_u`)."""
-    bo = _u(bo)
+    (offsets `unsigned` inside)."""
+    bo = unsigned(bo)
     if n == 0:
         return f[bo] * x
-    one = _u(1)
-    ao = _u(ao)
-    zo = _u(zo)
-    n = _u(n)
+    one = unsigned(1)
+    ao = unsigned(ao)
+    zo = unsigned(zo)
+    n = unsigned(n)
     y = f[bo] * x + f[zo]
     for i in range(n - one):
         f[zo + i] = f[zo + i + one] + f[bo + i + one] * x - f[ao + i + one] * y
@@ -63,8 +63,8 @@ def sums_push(f, ii, ro, n, w, ip, src):  # pragma: no cover - jit
     """Push row f[src:src+w] into the sums block at ``ro`` (pos, count in ii[ip], ii[ip+1]);
     the window sums are then at ro + (n + 2)·w (module docstring)."""
     fresh, prev, sl, rp, end = _slot(ii, ro, n, w, ip)
-    src = _u(src)
-    for k in range(_u(w)):
+    src = unsigned(src)
+    for k in range(unsigned(w)):
         _column(f, fresh, prev, sl, rp, k, f[src + k], end)
     ii[ip] = 0 if end else ii[ip] + 1
 
@@ -79,16 +79,16 @@ def solve_packed(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
 @jit(inline=True)
 def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
     """`solve_packed`, inlined where p is a constant (the loops then unroll). One division
-    per pivot: its reciprocal, kept on L's unit diagonal, multiplies. Offsets are unsigned
-    (`_u`): no negative-index test per access, and the compiler sees which scratch entries
+    per pivot: its reciprocal, kept on L's unit diagonal, multiplies. Offsets are
+    `unsigned`: no negative-index test per access, and the compiler sees which scratch entries
     each step reads, so they stay in registers."""
-    p = _u(p)
-    one = _u(1)
-    s = _u(scr)
-    to = _u(to)
+    p = unsigned(p)
+    one = unsigned(1)
+    s = unsigned(scr)
+    to = unsigned(to)
     low = s + p * p
     d = low + p * p
-    k = _u(so)
+    k = unsigned(so)
     for i in range(p):
         for j in range(i, p):
             f[s + i * p + j] = f[k]
@@ -150,7 +150,7 @@ def itest_floats(p: int, n: int, lag: int, m: int, every: int) -> int:
 
 @jit(inline=True)
 def _slot(ii, ro, n, w, ip):  # pragma: no cover - jit
-    """The offsets (unsigned, `_u`) of a sums block's fresh, previous and sliding rows and
+    """The `unsigned` offsets of a sums block's fresh, previous and sliding rows and
     of the ring row this push writes, and whether it ends the block (the row count grows up
     to n)."""
     pos = ii[ip]
@@ -158,7 +158,7 @@ def _slot(ii, ro, n, w, ip):  # pragma: no cover - jit
     prev = fresh + w
     if ii[ip + 1] < n:
         ii[ip + 1] += 1
-    return _u(fresh), _u(prev), _u(prev + w), _u(ro + pos * w), pos + 1 == n
+    return unsigned(fresh), unsigned(prev), unsigned(prev + w), unsigned(ro + pos * w), pos + 1 == n
 
 
 @jit(inline=True)

@@ -39,7 +39,7 @@ from scipy import stats
 
 from fdi_daemon.diagnose.effects import (BASE_TERMS, SPECS, Context, FittedEffect,
                                          NotApplicable, columns, fit_effect)
-from fdi_daemon.diagnose.force import (FORCE_EFFECTS, MECHANICS, SPRINGS, in_the_loop,
+from fdi_daemon.diagnose.force import (FORCE_EFFECTS, LOOPED, MECHANICS, SPRINGS, in_the_loop,
                                        mechanics_name)
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
@@ -133,7 +133,7 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
             p = float(stats.f.sf(f_stat, k, dof))
         else:
             p = 1.0
-    input_share(refitted + [eff])
+    map_share(refitted + [eff])
     plausible = all(e.physical.get("plausible", True) for e in refitted + [eff])
     return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, float(score), p,
                      bool(p < ALPHA and score < 0.0 and plausible
@@ -141,30 +141,35 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
                      k, k_total)
 
 
-#: input maps whose φ = N(u) − u must enter with the gain of the input itself
-INPUT_MAPS = ("input_saturation", "dead_zone", "backlash")
-#: the share of the full map a fitted input map may have (as a dead time's shift share)
+#: static maps whose φ = N(w) − w must enter with the gain of the signal w they map: the
+#: input (a saturation, dead zone, backlash) or the output (a sensor's clip); each with the
+#: key of its fitted coefficient in ``physical``
+MAPS = {"input_saturation": "input_gain", "dead_zone": "input_gain", "backlash": "input_gain",
+        "output_saturation": "gain"}
+#: the share of the full map a fitted map may have (as a dead time's shift share)
 SHARE_RANGE = (0.5, 1.5)
 
 
-def input_share(effects: list[FittedEffect]) -> None:
+def map_share(effects: list[FittedEffect]) -> None:
     """A saturation, dead zone or backlash is the input map N itself: the plant sees
     (1 + r) N(u) = (1 + r) u + (1 + r) [N(u) − u], r the numerator refit's gain
-    (``linear_refit``, 0 without it). The fitted coefficient c of φ = N(u) − u (referred to
-    the input, `effects.physical_report`) is the map's share s = c / (1 + r): 1 for the
-    effect, 0 for none. A share far from 1 is another map: s < 0 turns a saturation into
-    an input gain that *rises* with amplitude and a dead zone into one that falls; 0 < s ≪ 1
-    is a gain that changes a little with amplitude, not an input that stops (saturation),
-    moves nothing (dead zone) or has play (backlash). The effect being added (the last of
-    ``effects``) is plausible only within SHARE_RANGE, the tolerance of a dead time's shift
-    share; a map named in an earlier round keeps its name when a later effect takes over
-    part of it (its share is reported, in ``physical``, for every map)."""
+    (``linear_refit``, 0 without it); a sensor that clips maps the output the same way,
+    sat((1 + r) ŷ₀) = (1 + r) ŷ₀ + (1 + r) [sat'(ŷ₀) − ŷ₀]. The fitted coefficient c of
+    φ = N(w) − w (an input map's referred to the input, `effects.physical_report`) is the
+    map's share s = c / (1 + r): 1 for the effect, 0 for none. A share far from 1 is another
+    map: s < 0 turns a saturation into a gain that *rises* with amplitude and a dead zone
+    into one that falls; 0 < s ≪ 1 is a gain that changes a little with amplitude, not a
+    signal that stops (saturation), moves nothing (dead zone) or has play (backlash). The
+    effect being added (the last of ``effects``) is plausible only within SHARE_RANGE, the
+    tolerance of a dead time's shift share; a map named in an earlier round keeps its name
+    when a later effect takes over part of it (its share is reported, in ``physical``, for
+    every map)."""
     r = next((e.physical.get("input_gain", 0.0) for e in effects
               if e.name == "linear_refit"), 0.0)
     new = effects[-1]
     for e in effects:
-        if e.name in INPUT_MAPS and "input_gain" in e.physical and 1.0 + r > 0.0:
-            share = e.physical["input_gain"] / (1.0 + r)
+        if e.name in MAPS and MAPS[e.name] in e.physical and 1.0 + r > 0.0:
+            share = e.physical[MAPS[e.name]] / (1.0 + r)
             e.physical["map_share"] = share
             if e is new:
                 e.physical["plausible"] = bool(e.physical.get("plausible", True)
@@ -366,9 +371,16 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     test = ctx.split.test
     skip = set(LINEAR_EXPLANATIONS) if refit_linear else set()
     while len([e for e in chosen if e.name not in BASE_TERMS]) < max_effects:
-        e0 = ctx.target[test] - prediction[test]
+        reference = (chosen, prediction)
+        if rounds and ctx.form == "simulation" and any(e.name in LOOPED for e in chosen):
+            # the reference is the base given the fit each candidate gets on top of it
+            # (its loop refitted from where it stands, `in_the_loop`): what the loop's
+            # fit reaches by itself is no candidate's
+            reference = in_the_loop(ctx, chosen, chosen)
+        e0 = ctx.target[test] - reference[1][test]
         sse0 = float(e0 @ e0)
         if rounds and floor_sse is not None and sse0 <= floor_sse:
+            chosen, prediction = reference
             break  # what is left is noise
         n_eff = effective_samples(e0)
         has_spring = any(e.name in SPRINGS for e in chosen)  # the loop's spring is in
@@ -387,6 +399,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         rounds.append(results)
         best = _choose(results, n_eff)
         if best is None:
+            chosen, prediction = reference
             break
         by_mode = [mechanics_name(e) for e in best.base + [best.effect]]
         chosen, check = spring_check(ctx, by_mode, best.prediction, floor_sse)

@@ -7,16 +7,16 @@ An electronic Duffing oscillator recorded as the Silverbox benchmark is:
 so k₃/ω₀² is the cubic coefficient in V per V³ that `cubic_stiffness` reports as its input
 equivalent. The record: 40 000 samples of an "arrow" (Gaussian noise low-passed at 200 Hz
 whose amplitude rises linearly), then ten realisations of an odd random-phase multisine to
-200 Hz, each one period of 8192 samples after 475 transient samples (the period's end),
-131 072 samples at 610.35 Hz in all; 0.1 mV of position noise. The strength
+200 Hz (``--band``), each one period of 8192 samples after 475 transient samples (the
+period's end), 131 072 samples at 610.35 Hz in all; 0.1 mV of position noise. The strength
 β = k₃ y²_rms/ω₀² (y_rms of the multisine part). Run as a script:
 
-    python tests/silverbox_like.py 0.01 0.02      # about two minutes per record
+    python tests/silverbox_like.py 0.01 0.02 [--band 80]   # two minutes per record
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
 
 import numpy as np
 from scipy import signal
@@ -33,32 +33,34 @@ U_RMS_V = 0.1
 ARROW_TIP = 1.6
 
 
-def odd_multisine(seed: int) -> np.ndarray:
-    """One period of an odd random-phase multisine to 200 Hz, unit RMS."""
+def odd_multisine(seed: int, band_hz: float = 200.0) -> np.ndarray:
+    """One period of an odd random-phase multisine to band_hz, unit RMS."""
     rng = np.random.default_rng(seed)
-    lines = np.arange(1, int(200.0 * PERIOD / FS) + 1, 2)
+    lines = np.arange(1, int(band_hz * PERIOD / FS) + 1, 2)
     spectrum = np.zeros(PERIOD // 2 + 1, complex)
     spectrum[lines] = np.exp(2j * np.pi * rng.uniform(size=lines.size))
     u = np.fft.irfft(spectrum, PERIOD)
     return u / np.std(u)
 
 
-def excitation(seed: int = 1) -> np.ndarray:
+def excitation(seed: int = 1, band_hz: float = 200.0, realisations: int = REALISATIONS
+               ) -> np.ndarray:
     """V1: the arrow, the realisations (each preceded by its period's last 475 samples),
-    zeros to 131 072 samples."""
+    with all ten, zeros to the benchmark's 131 072 samples."""
     rng = np.random.default_rng(seed)
-    noise = signal.lfilter(*signal.butter(6, 200.0, fs=FS), rng.standard_normal(ARROW))
+    noise = signal.lfilter(*signal.butter(6, band_hz, fs=FS), rng.standard_normal(ARROW))
     arrow = noise / np.std(noise) * np.linspace(0.0, 1.0, ARROW)
     parts = []
-    for r in range(REALISATIONS):
-        period = odd_multisine(seed * 100 + r)
+    for r in range(realisations):
+        period = odd_multisine(seed * 100 + r, band_hz)
         parts.append(np.concatenate([period[-TRANSIENT:], period]))
     multi = np.concatenate(parts)
     # the arrow's tip (its last 2000 samples) at ARROW_TIP times the multisine's RMS, in u:
     # the oscillator is nearly linear, so the output follows
     arrow *= ARROW_TIP / np.std(arrow[-2000:])
     u = np.concatenate([arrow, multi]) * U_RMS_V
-    return np.concatenate([u, np.zeros(LENGTH - u.size)])
+    tail = LENGTH - u.size if realisations == REALISATIONS else 0
+    return np.concatenate([u, np.zeros(tail)])
 
 
 def params(k3: float) -> MsdParams:
@@ -68,33 +70,36 @@ def params(k3: float) -> MsdParams:
                      position_noise_width=0.1e-3 * np.sqrt(12.0), effects=effects)
 
 
-def k3_for(beta: float, seed: int = 1) -> float:
-    """k₃ (per unit mass) giving the strength β on the linear oscillator's multisine part."""
-    u = excitation(seed)
-    y = simulate_recording(params(0.0), u, seed=seed)["position"][ARROW:ARROW + 10 * PERIOD]
-    return beta * W0 ** 2 / float(np.mean(y ** 2))
-
-
-def record(beta: float, seed: int = 1):
-    """(V1, V2 = position, the true cubic coefficient in V per V³)."""
-    k3 = k3_for(beta, seed) if beta else 0.0
-    rec = simulate_recording(params(k3), excitation(seed), seed=seed)
+def record(beta: float, seed: int = 1, band_hz: float = 200.0,
+           realisations: int = REALISATIONS):
+    """(V1, V2 = position, the true cubic coefficient in V per V³); k₃ gives the strength
+    β on the linear oscillator's multisine part."""
+    u = excitation(seed, band_hz, realisations)
+    y = simulate_recording(params(0.0), u, seed=seed)["position"][
+        ARROW:ARROW + realisations * PERIOD]
+    k3 = beta * W0 ** 2 / float(np.mean(y ** 2))
+    rec = simulate_recording(params(k3), u, seed=seed)
     return rec.v_in, rec["position"], k3 / W0 ** 2
 
 
-def main(betas: list[float]) -> None:
+def main(betas: list[float], band_hz: float) -> None:
     from fdi_daemon.diagnose.workflow import run_diagnose
 
     for beta in betas:
-        u, y, truth = record(beta)
+        u, y, truth = record(beta, band_hz=band_hz)
         result = run_diagnose(u, y, FS, "position")
         sizes = {e.name: {k: round(v, 4) for k, v in e.physical.items()
                           if k.endswith("input_equivalent")}
                  for e in result.selection.named}
-        print(f"beta {beta}: named {result.named}, gap {result.gap_before:.4f} -> "
-              f"{result.gap_after:.4f} (floor {result.info['noise_floor']['floor']}), "
+        print(f"beta {beta}, band {band_hz:g} Hz: named {result.named}, gap "
+              f"{result.gap_before:.4f} -> {result.gap_after:.4f} "
+              f"(floor {result.info['noise_floor']['floor']}), "
               f"sizes {sizes}, k3 truth {truth:.4f} V/V^3", flush=True)
 
 
 if __name__ == "__main__":
-    main([float(b) for b in sys.argv[1:]] or [0.01, 0.02])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("beta", type=float, nargs="*", default=[0.01, 0.02])
+    parser.add_argument("--band", type=float, default=200.0, help="multisine band, Hz")
+    args = parser.parse_args()
+    main(args.beta, args.band)

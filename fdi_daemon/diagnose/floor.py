@@ -84,20 +84,31 @@ def noise_floor(y: np.ndarray, e: np.ndarray, u: np.ndarray, fs_hz: float, warmu
         var = 0.5 * float(np.mean((y[k + period] - y[k]) ** 2))
         return {"floor": math.sqrt(var) / spread, "method": "periodic",
                 "period_s": period / fs_hz, "repeated_share": k.size / len(y)}
+    variance, f_hi = quiet_variance(u, e, fs_hz, test)
+    if f_hi is None:
+        return {"floor": None, "method": "none"}
+    return {"floor": None if variance is None else math.sqrt(variance) / spread,
+            "method": "spectrum", "input_band_hz": f_hi}
+
+
+def quiet_variance(u: np.ndarray, e: np.ndarray, fs_hz: float, test: slice
+                   ) -> tuple[float | None, float | None]:
+    """(variance, f_hi): the variance of white noise in e from its power density where the
+    input has no power (the QUIET_QUANTILE above 1.5 × f_hi, f_hi the band holding 99 % of
+    the input power), taken as white over 0..fs/2; None when the input fills the band
+    (f_hi None: no input at all)."""
     x = np.asarray(u, float)[test] - np.mean(u[test])
     nper = min(len(x), 256)  # many averages: a steady level estimate
     f, pu = signal.welch(x, fs=fs_hz, nperseg=nper)
     _, pe = signal.welch(np.asarray(e, float)[test], fs=fs_hz, nperseg=nper)
     if not np.sum(pu) > 0:
-        return {"floor": None, "method": "none"}
+        return None, None
     cum = np.cumsum(pu) / np.sum(pu)
     f_hi = float(f[min(np.searchsorted(cum, 0.99), f.size - 1)])
     quiet = f > 1.5 * f_hi
     if np.count_nonzero(quiet) < 8:
-        return {"floor": None, "method": "spectrum", "input_band_hz": f_hi}
-    level = float(np.quantile(pe[quiet], QUIET_QUANTILE))
-    return {"floor": math.sqrt(level * fs_hz / 2.0) / spread, "method": "spectrum",
-            "input_band_hz": f_hi}
+        return None, f_hi
+    return float(np.quantile(pe[quiet], QUIET_QUANTILE)) * fs_hz / 2.0, f_hi
 
 
 def delay_by_correlation(y: np.ndarray, y0: np.ndarray, fs_hz: float, max_lag: int) -> float:

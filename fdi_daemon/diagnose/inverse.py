@@ -19,10 +19,13 @@ The gap is the held-out NRMSE of L u: how much of the force the model does not e
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import signal
 
 from fdi_daemon.diagnose import signals
+from fdi_daemon.diagnose.floor import quiet_variance
 
 #: effects that can be tested in this form (forces on the mass from the measured motion)
 INVERSE_CANDIDATES = ("coulomb_friction", "stribeck_friction", "cubic_stiffness",
@@ -145,13 +148,19 @@ def physical(name: str, theta: np.ndarray, param: float | None, ctx=None) -> dic
     return out
 
 
-def noise_floor(y_raw: np.ndarray, output_kind: str, target: np.ndarray, coefficients: dict,
-                lp: tuple, fs_hz: float, test: slice) -> dict:
+def noise_floor(y_raw: np.ndarray, output_kind: str, u: np.ndarray, target: np.ndarray,
+                coefficients: dict, lp: tuple, fs_hz: float, test: slice) -> dict:
     """The part of L u that the force balance cannot explain because the motion is
-    measured with noise: white noise σ on the measured output (velocity or position,
-    `noise_sigma`) through the balance's own differences (`measured_motion`: M a + c v
-    [+ k x]) and L, as an NRMSE of L u."""
+    measured with noise: white noise σ on the measured output (velocity or position)
+    through the balance's own differences (`measured_motion`: M a + c v [+ k x]) and L, as
+    an NRMSE of L u. σ is the smaller of two bounds that the motion can only raise: its
+    second differences (`noise_sigma`; a motion with content near fs/4 is not smooth there)
+    and the output's power density above the input band (`floor.quiet_variance`; none when
+    the input fills the band)."""
     sigma = noise_sigma(y_raw)
+    quiet, _ = quiet_variance(u, y_raw, fs_hz, test)
+    if quiet is not None:
+        sigma = min(sigma, math.sqrt(quiet))
     if sigma <= 1e-9 * float(np.std(y_raw)):  # over half the second differences are 0 (to
         # rounding): a quantised or held output, whose noise this cannot measure
         return {"floor": None, "output_noise": sigma,

@@ -86,8 +86,8 @@ def _diagnose(ctx: Context, info: dict, y: np.ndarray, progress) -> DiagnoseResu
     gap_before = signals.nrmse(y_meas[test], ctx.y0[test])
     floor = (noise_floor(y_meas, y_meas - ctx.y0, ctx.u, fs_hz, ctx.split.warmup, test)
              if simulated else
-             inverse_floor(y, ctx.output_kind, ctx.target + ctx.y0, info["inverse_baseline"],
-                           ctx.lowpass, fs_hz, test))
+             inverse_floor(y, ctx.output_kind, ctx.u, ctx.target + ctx.y0,
+                           info["inverse_baseline"], ctx.lowpass, fs_hz, test))
     floor["at_floor"] = bool(floor["floor"] is not None
                              and gap_before <= FLOOR_MARGIN * floor["floor"])
     info["noise_floor"] = floor

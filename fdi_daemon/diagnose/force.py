@@ -306,7 +306,8 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
     4. (``joint``) every coefficient at once by output-error least squares with the motion
        in the loop, from the best of step 3 (its passes regress on the previous run's
        states and stop short of the optimum: a hardening spring under a rising excitation
-       left 0.109 of a 0.199 gap, the joint fit 0.007).
+       left 0.109 of a 0.199 gap, the joint fit 0.007); kept where its training error is
+       lower and its effects are physically possible, or step 3's were not either.
     Step 3 also starts from ``previous`` (the effects named so far, as fitted in their
     loop), the rest at zero, when they hold a loop.
     ``loop_stiffness`` (x through its own B_F) lets the loop move the nominal poles, as a
@@ -424,42 +425,62 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
         # new at zero: the fit never starts further from the data than the model it extends
         fits.append(refine(np.concatenate([_held(e, before) for e in ff] + [np.zeros(0)]),
                            np.concatenate([_held(e, before) for e in fb]).reshape(-1, width)))
+
+    def fitted(best_ff, best_nums, y, phi, v) -> list:
+        """The effects with these coefficients, each with its report (`force_report`)."""
+        viscous = next((best_nums[j] for j, (kind, _) in enumerate(cols) if kind == _VEL),
+                       None)
+        spring = next(((best_nums[j], phi[:, j]) for j, (kind, _) in enumerate(cols)
+                       if kind == _X), None)
+        out, pos, row = [], 0, 0
+        for e in effects:
+            if e.name in LOOPED:
+                k = len(kinds(e.name, e.param))
+                new = FittedEffect(e.name, e.param, list(best_nums[row:row + k]),
+                                   n_linear=k * width, centre=e.centre, n_free=k * width)
+                new.physical = force_report(new, ctx, y, phi[:, row:row + k], v, viscous,
+                                            spring)
+                row += k
+            else:
+                k = e.n_linear
+                flat = best_ff[pos:pos + k]
+                coefs = ([flat[j:j + width] for j in range(0, k, width)]
+                         if SPECS[e.name].dynamic else [flat])
+                new = FittedEffect(e.name, e.param, coefs, n_linear=k, centre=e.centre)
+                new.physical = physical_report(new, ctx)
+                pos += k
+            out.append(new)
+        linear = next((e for e in out if e.name in SPRINGS), None)
+        for e in out:
+            if e.name == "viscous_friction" and linear is not None:
+                # a viscous friction is a damper: the loop's linear part must move the mode
+                # by damping (`mode_shift`, with the spring beside it), not by stiffness
+                e.physical["mode_change"] = linear.physical.get("mode_change")
+                # its size per unit mass, Δ(c/m), read from the mode like the damping: the
+                # split of the damping between the spring's and the viscous column's free
+                # numerators is not determined by the data
+                e.physical["damping_change_per_s"] = linear.physical.get(
+                    "damping_change_per_s")
+                e.physical["plausible"] = bool(e.physical["plausible"]
+                                               and e.physical["mode_change"] not in MECHANICS)
+        return out
+
     best, best_ff, best_nums, y, phi, v = min(fits, key=lambda f: f[0])
+    out = fitted(best_ff, best_nums, y, phi, v)
     if joint and np.isfinite(best):
-        best, best_ff, best_nums, y, phi, v = joint_fit(best, best_ff, best_nums)
-    viscous = next((best_nums[j] for j, (kind, _) in enumerate(cols) if kind == _VEL), None)
-    spring = next(((best_nums[j], phi[:, j]) for j, (kind, _) in enumerate(cols)
-                   if kind == _X), None)
-    out, pos, row = [], 0, 0
-    for e in effects:
-        if e.name in LOOPED:
-            k = len(kinds(e.name, e.param))
-            new = FittedEffect(e.name, e.param, list(best_nums[row:row + k]),
-                               n_linear=k * width, centre=e.centre, n_free=k * width)
-            new.physical = force_report(new, ctx, y, phi[:, row:row + k], v, viscous, spring)
-            row += k
-        else:
-            k = e.n_linear
-            flat = best_ff[pos:pos + k]
-            coefs = ([flat[j:j + width] for j in range(0, k, width)] if SPECS[e.name].dynamic
-                     else [flat])
-            new = FittedEffect(e.name, e.param, coefs, n_linear=k, centre=e.centre)
-            new.physical = physical_report(new, ctx)
-            pos += k
-        out.append(new)
-    linear = next((e for e in out if e.name in SPRINGS), None)
-    for e in out:
-        if e.name == "viscous_friction" and linear is not None:
-            # a viscous friction is a damper: the loop's linear part must move the mode by
-            # damping (`mode_shift`, with the spring beside it), not by stiffness
-            e.physical["mode_change"] = linear.physical.get("mode_change")
-            # its size per unit mass, Δ(c/m), read from the mode like the damping: the
-            # split of the damping between the spring's and the viscous column's free
-            # numerators is not determined by the data
-            e.physical["damping_change_per_s"] = linear.physical.get("damping_change_per_s")
-            e.physical["plausible"] = bool(e.physical["plausible"]
-                                           and e.physical["mode_change"] not in MECHANICS)
+        joined = joint_fit(best, best_ff, best_nums)
+        if joined[0] < best:
+            effects_joined = fitted(*joined[1:])
+            # the joint optimum may lie where the effects are not physically possible (a
+            # Stribeck excess that pushes the motion): the best possible fit is kept then
+            if _possible(effects_joined) or not _possible(out):
+                out, y = effects_joined, joined[3]
     return out, y - ctx.y0
+
+
+def _possible(effects: list) -> bool:
+    """Every effect physically possible (its report's ``plausible``)."""
+    return all(e.physical.get("plausible", True) for e in effects)
 
 
 _FORCE_LABELS = {"coulomb_friction": ["coulomb_level"],

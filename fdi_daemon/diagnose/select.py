@@ -413,7 +413,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         if not named:  # nothing but the refit: name what it matches
             return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
                                   explain=linear["matching"])
-        held = _explanation_on_top(ctx, named, linear["matching"], prediction, floor_sse)
+        refit = next(e for e in chosen if e.name == "linear_refit")
+        held = _explanation_on_top(ctx, named, linear["matching"], prediction, refit.n_params,
+                                   floor_sse)
         if held is not None:
             held.linear = {**linear, "named": linear["matching"],
                            "on_top_of": [e.name for e in held.named
@@ -461,12 +463,14 @@ def _fit_set(ctx: Context, names: list[str], base: list[FittedEffect]
 
 
 def _explanation_on_top(ctx: Context, named: list[str], explain: str,
-                        prediction: np.ndarray, floor_sse: float | None) -> Selection | None:
-    """Effects ``named`` with the refit in the base, whose refit the check found to be
-    mostly a gain or a shift (``explain``): is it still that on top of them? The three
-    nested fits E ⊂ E + explanation ⊂ E + refit on the held-out part: the explanation is
-    named (a Selection of it and E, E refitted on top of it) when the refit adds to E at
-    all, and the explanation pays on top of E (F-test at ALPHA) and accounts for more than
+                        prediction: np.ndarray, refit_params: int, floor_sse: float | None
+                        ) -> Selection | None:
+    """Effects ``named`` with the refit in the base (``prediction``; the refit has
+    ``refit_params`` numbers), whose refit the check found to be mostly a gain or a shift
+    (``explain``): is it still that on top of them? The three nested fits E ⊂ E +
+    explanation ⊂ E + refit on the held-out part: the explanation is named (a Selection of
+    it and E, E refitted on top of it) when the refit adds to E significantly (F-test at
+    ALPHA: a share of next to nothing is no match), and the explanation pays on top of E (F-test at ALPHA) and accounts for more than
     MATCH_SHARE of what the refit adds to E. E on top of the explanation is refitted as the
     rounds name effects (`_physical_on_top`): the larger of a nested pair that is not
     physically possible there is replaced by the smaller (a Stribeck excess that pushes
@@ -491,14 +495,29 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
         sse_named = sse_alone if names == named else _fit_set(ctx, named, [])[2]
     except NotApplicable:
         return None
+    if ctx.form == "simulation" and any(e.name in LOOPED for e in chosen):
+        # E's loop as fitted on top of the explanation is a fit of E too: refitted from
+        # there without it, E must not do as well (a loop's fit depends on where it starts,
+        # and an explanation that only moved the start explains nothing)
+        rest = [e for e in chosen if e.name != explain]
+        _, from_there = in_the_loop(ctx, rest, rest)
+        e_there = ctx.target[test] - from_there[test]
+        with np.errstate(over="ignore", invalid="ignore"):
+            sse_there = float(e_there @ e_there)
+        if math.isfinite(sse_there):
+            sse_alone = min(sse_alone, sse_there)
+            sse_named = min(sse_named, sse_there) if names == named else sse_named
     n_eff = effective_samples(ctx.target[test])
     k = first[0].n_params
     dof = n_eff - sum(e.n_params for e in chosen)
-    if sse_with >= sse_alone or sse_refit >= sse_named or dof <= 1:
+    dof_refit = n_eff - refit_params - sum(e.n_params for e in chosen if e.name != explain)
+    if sse_with >= sse_alone or sse_refit >= sse_named or min(dof, dof_refit) <= 1:
         return None  # nothing to explain: the refit adds nothing to E on held-out data
+    p_refit = float(stats.f.sf(((sse_named - sse_refit) / refit_params)
+                               / (sse_refit / dof_refit), refit_params, dof_refit))
     p = float(stats.f.sf(((sse_alone - sse_with) / k) / (sse_with / dof), k, dof))
     share = (sse_named - sse_with) / (sse_named - sse_refit)
-    if p >= ALPHA or share <= MATCH_SHARE:
+    if p_refit >= ALPHA or p >= ALPHA or share <= MATCH_SHARE:
         return None
     return Selection(chosen, [], pred, {})
 

@@ -470,11 +470,14 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
     (``explain``): is it still that on top of them? The three nested fits E ⊂ E +
     explanation ⊂ E + refit on the held-out part: the explanation is named (a Selection of
     it and E, E refitted on top of it) when the refit adds to E significantly (F-test at
-    ALPHA: a share of next to nothing is no match), and the explanation pays on top of E (F-test at ALPHA) and accounts for more than
-    MATCH_SHARE of what the refit adds to E. E on top of the explanation is refitted as the
-    rounds name effects (`_physical_on_top`): the larger of a nested pair that is not
-    physically possible there is replaced by the smaller (a Stribeck excess that pushes
-    the motion once the gain has taken its part: Coulomb friction). The share is always
+    ALPHA: a share of next to nothing is no match), and the explanation pays on top of E
+    (F-test at ALPHA) and accounts for more than MATCH_SHARE of what the refit adds to E.
+    E alone is also E's loop as fitted on top of the explanation, refitted from there
+    without it (an explanation that only moved the loop's start explains nothing). E on
+    top of the explanation is refitted as the rounds name effects (`_physical_on_top`):
+    the larger of a nested pair that is not physically possible there is replaced by the
+    smaller (a Stribeck excess that pushes the motion once the gain has taken its part:
+    Coulomb friction). The share is always
     of what the refit adds to E as named: the smaller effect with the explanation must
     account for more than MATCH_SHARE of the way from E alone to E with the refit (the
     smaller effect alone starts further away and would make any pair look like a match).
@@ -506,7 +509,8 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
             sse_there = float(e_there @ e_there)
         if math.isfinite(sse_there):
             sse_alone = min(sse_alone, sse_there)
-            sse_named = min(sse_named, sse_there) if names == named else sse_named
+            if names == named:
+                sse_named = sse_alone
     n_eff = effective_samples(ctx.target[test])
     k = first[0].n_params
     dof = n_eff - sum(e.n_params for e in chosen)

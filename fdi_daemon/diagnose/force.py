@@ -473,12 +473,12 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
             effects_joined = fitted(*joined[1:])
             # the joint optimum may lie where the effects are not physically possible (a
             # Stribeck excess that pushes the motion): the best possible fit is kept then
-            if _possible(effects_joined) or not _possible(out):
+            if possible(effects_joined) or not possible(out):
                 out, y = effects_joined, joined[3]
     return out, y - ctx.y0
 
 
-def _possible(effects: list) -> bool:
+def possible(effects: list) -> bool:
     """Every effect physically possible (its report's ``plausible``)."""
     return all(e.physical.get("plausible", True) for e in effects)
 

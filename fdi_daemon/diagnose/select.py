@@ -40,7 +40,7 @@ from scipy import stats
 from fdi_daemon.diagnose.effects import (BASE_TERMS, SPECS, Context, FittedEffect,
                                          NotApplicable, columns, fit_effect)
 from fdi_daemon.diagnose.force import (FORCE_EFFECTS, LOOPED, MECHANICS, SPRINGS, in_the_loop,
-                                       mechanics_name)
+                                       mechanics_name, possible)
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
 #: effect in pure noise near 2 %
@@ -134,7 +134,7 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
         else:
             p = 1.0
     map_share(refitted + [eff])
-    plausible = all(e.physical.get("plausible", True) for e in refitted + [eff])
+    plausible = possible(refitted + [eff])
     return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, float(score), p,
                      bool(p < ALPHA and score < 0.0 and plausible
                           and sse1 <= (1.0 - MIN_REDUCTION) * sse_reference), prediction,
@@ -535,7 +535,7 @@ def _physical_on_top(ctx: Context, named: list[str], first: list[FittedEffect]
     smaller = [NESTS.get(n, n) for n in named]
     for names in ([named, smaller] if smaller != named else [named]):
         chosen, pred, sse = _fit_set(ctx, names, first)
-        if all(e.physical.get("plausible", True) for e in chosen):
+        if possible(chosen):
             return names, [mechanics_name(e) for e in chosen], pred, sse
     return None
 

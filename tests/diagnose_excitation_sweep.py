@@ -8,11 +8,12 @@ mechanics: the §V model with its nominal model file, one parameter changed (mas
 and position outputs. duffing: the Duffing oscillator of `diagnose_cases.duffing_recording`
 (no model file: a fitted linear baseline), k₃ 3·10⁴, 10⁵ and 3·10⁵ N/m³, under the 0.3–12 Hz
 multisine, 15 Hz noise and a 0.3–4 Hz multisine (40 s, 1 V RMS), position output.
-Prints the names, the held-out gap before and after, the form and the ratios read.
+Prints the names, the held-out gap before and after, the form and the ratios or the k₃ read.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -57,9 +58,14 @@ def duffing() -> None:
                                effects={"cubic_stiffness": {"k3_n_per_m3": k3}}, **NOISE)
             rec = simulate_recording(params, u, seed=2)
             r = run_diagnose(rec.v_in, rec["position"], FS, "position")
+            cubic = next((e.physical for e in r.selection.named
+                          if e.name == "cubic_stiffness"), {})
+            # both forms size k₃ in input units (V per m³): times the input's gain, N/m³
+            read = params.gain_n_per_v * cubic.get(
+                "cubic_coefficient_input_equivalent", cubic.get("cubic_coefficient", math.nan))
             print(f"k3 {k3:.0e}, {label}: {r.named} {r.gap_before:.4f} -> {r.gap_after:.4f} "
-                  f"(floor {r.info['noise_floor']['floor']:.4f}), form {r.info['form']}",
-                  flush=True)
+                  f"(floor {r.info['noise_floor']['floor']:.4f}), form {r.info['form']}, "
+                  f"k3 read {read:.3g} N/m^3", flush=True)
 
 
 if __name__ == "__main__":

@@ -426,20 +426,31 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
         fits.append(refine(np.concatenate([_held(e, before) for e in ff] + [np.zeros(0)]),
                            np.concatenate([_held(e, before) for e in fb]).reshape(-1, width)))
 
+    def input_path(best_ff) -> np.ndarray:
+        """The loop's input numerator: B̂, plus B_e where the nominal one is refitted
+        (``linear_refit``, whose coefficients lie where its columns do in x_ff)."""
+        pos = 0
+        for e in ff:
+            if e.name == "linear_refit":
+                return _padded(ctx.b_dom, width) + best_ff[pos:pos + width]
+            pos += e.n_linear
+        return ctx.b_dom
+
     def fitted(best_ff, best_nums, y, phi, v) -> list:
         """The effects with these coefficients, each with its report (`force_report`)."""
         viscous = next((best_nums[j] for j, (kind, _) in enumerate(cols) if kind == _VEL),
                        None)
         spring = next(((best_nums[j], phi[:, j]) for j, (kind, _) in enumerate(cols)
                        if kind == _X), None)
+        b_input = input_path(best_ff)
         out, pos, row = [], 0, 0
         for e in effects:
             if e.name in LOOPED:
                 k = len(kinds(e.name, e.param))
                 new = FittedEffect(e.name, e.param, list(best_nums[row:row + k]),
                                    n_linear=k * width, centre=e.centre, n_free=k * width)
-                new.physical = force_report(new, ctx, y, phi[:, row:row + k], v, viscous,
-                                            spring)
+                new.physical = force_report(new, ctx, y, phi[:, row:row + k], v, b_input,
+                                            viscous, spring)
                 row += k
             else:
                 k = e.n_linear
@@ -493,20 +504,25 @@ _FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 
 
 def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
-                 b_v: np.ndarray | None = None,
+                 b_input: np.ndarray, b_v: np.ndarray | None = None,
                  spring: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
     """Size and physical check of a force effect, from the augmented motion: output ``y``,
     the regressors ``phi`` (samples × the effect's columns) and the velocity ``v`` of the
-    loop (`ForceLoop.trace`); b_v: the numerator of a viscous friction in the same loop
+    loop (`ForceLoop.trace`); b_input: the loop's input numerator (B̂, refitted where the
+    base refits it); b_v: the numerator of a viscous friction in the same loop
     (a spring's mode is that of the loop's linear forces together, `mode_shift`); spring:
     (numerator, x) of the loop's spring, whose free B_F holds a damper as well: a viscous
     friction is sized and tested on the two linear forces together (how the fit splits
     the damping between them is not determined by the data; their sum is).
 
     ``<label>_input_equivalent``: the input per unit of φ that the force takes away,
-    c = −⟨Ĝφ, G_Fφ⟩/⟨Ĝφ, Ĝφ⟩ on the training part (v, x the augmented motion): the friction
-    level, the cubic spring coefficient, the constant force — newtons when the input is a
-    force; on a plant whose input acts through a valve only an order of magnitude.
+    c = −⟨G_uφ, G_Fφ⟩/⟨G_uφ, G_uφ⟩ on the training part (v, x the augmented motion): the
+    friction level, the cubic spring coefficient, the constant force — newtons when the
+    input is a force; on a plant whose input acts through a valve only an order of
+    magnitude. G_u = b_input/Â is the loop's own input path: both paths share the loop's
+    denominator, so c does not depend on the loop; referred to the nominal B̂ it would
+    carry the refit's gain (a Silverbox-like cubic spring under a refit of −51 % read
+    0.137 V/V³ for 0.435).
     Friction must take energy out of the motion: the velocity w_j that regressor j causes
     (its output contribution G_Fj φ_j, turned into velocity) must oppose the motion,
     P_j = ⟨w_j, v⟩/⟨v, v⟩ < 0 (``*_power_ratio``); a Stribeck excess must too (friction
@@ -527,7 +543,7 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
         c = signal.lfilter(b, ctx.a_dom, phi[:, j])
         if eff.name == "viscous_friction" and spring is not None:
             c = c + signal.lfilter(spring[0], ctx.a_dom, spring[1])
-        g = signal.lfilter(ctx.b_dom, ctx.a_dom, phi[:, j])[fit]
+        g = signal.lfilter(b_input, ctx.a_dom, phi[:, j])[fit]
         gg = float(g @ g)
         out[f"{label}_input_equivalent"] = -float(g @ c[fit]) / gg if gg > 0 else 0.0
         if eff.name in _FRICTION:

@@ -26,7 +26,9 @@ moved, ``mass_change`` (the same fit) when the mass did, ``viscous_friction`` (i
 when damping was added. After each round the spring a named force effect left in the base
 is named too when it pays on top of it (`spring_check`: a stiffness change behind a
 friction). Then every remaining candidate is tried on top of it (jointly refitted) for a
-second effect, with the same test. No accepted candidate: "no significant missing effect".
+second effect, with the same test, against the base given the same loop fit; the one named
+must also beat the base refitted from its own fit without it (`_beyond_its_start`: a loop's
+fit depends on where it starts). No accepted candidate: "no significant missing effect".
 """
 
 from __future__ import annotations
@@ -69,13 +71,19 @@ class Candidate:
     prediction: np.ndarray = field(repr=False, default=None)  # contribution of all effects
     k: int = 0  # parameters it adds to the round's reference (its own and new base terms)
     k_total: int = 0  # parameters of the whole fit
+    #: held-out SSE of the base refitted from the candidate's own fit, without it (a later
+    #: round's check, `_beyond_its_start`; None where not made)
+    sse_from_its_start: float | None = None
 
     def ranking_entry(self, gap_after: float) -> dict:
         """The candidate as the report ranks it (a linear change of the mechanics by the
         name of the mode it moves, `force.mechanics_name`)."""
-        return {"effect": mechanics_name(self.effect).name, "gap_after": gap_after,
-                "score": self.score, "p_value": self.p_value, "accepted": self.accepted,
-                "params": dict(self.effect.physical)}
+        entry = {"effect": mechanics_name(self.effect).name, "gap_after": gap_after,
+                 "score": self.score, "p_value": self.p_value, "accepted": self.accepted,
+                 "params": dict(self.effect.physical)}
+        if self.sse_from_its_start is not None:
+            entry["base_from_its_fit_sse_ratio"] = self.sse_from_its_start / self.sse_reference
+        return entry
 
 
 def effective_samples(e: np.ndarray, max_lag: int = 200) -> float:
@@ -183,14 +191,12 @@ def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffe
     in `evaluate`); the lowest training error wins."""
     new = effects[-1]
     spec = SPECS[new.name]
-    fit = ctx.split.fit
     best = (math.inf, new)
     grid = np.append(spec.grid(ctx), new.param)
     for value in grid[np.isfinite(grid) & (grid > 0)]:
         trial = replace(new, param=float(value))
         _, pred = in_the_loop(ctx, effects[:-1] + [trial], joint=False)
-        with np.errstate(over="ignore", invalid="ignore"):  # a diverging loop: inf, not chosen
-            sse = float(np.sum((ctx.target - pred)[fit] ** 2))
+        sse = _training_sse(ctx, pred)  # a diverging loop: inf, not chosen
         if sse < best[0]:
             best = (sse, trial)
     return best[1]
@@ -372,7 +378,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     skip = set(LINEAR_EXPLANATIONS) if refit_linear else set()
     while len([e for e in chosen if e.name not in BASE_TERMS]) < max_effects:
         reference = (chosen, prediction)
-        if rounds and ctx.form == "simulation" and any(e.name in LOOPED for e in chosen):
+        refit_base = bool(rounds) and ctx.form == "simulation" and any(
+            e.name in LOOPED for e in chosen)
+        if refit_base:
             # the reference is the base given the fit each candidate gets on top of it
             # (its loop refitted from where it stands, `in_the_loop`): what the loop's
             # fit reaches by itself is no candidate's
@@ -398,6 +406,15 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         results.sort(key=lambda c: c.score)
         rounds.append(results)
         best = _choose(results, n_eff)
+        while best is not None and refit_base:
+            pays, there = _beyond_its_start(ctx, best)
+            if pays:
+                break
+            # the base's loop from the candidate's start did it: that fit of the base is
+            # kept when it fits the training part better, and the next candidate is tried
+            reference = min(reference, there, key=lambda fit: _training_sse(ctx, fit[1]))
+            best.accepted = False
+            best = _choose(results, n_eff)
         if best is None:
             chosen, prediction = reference
             break
@@ -434,6 +451,42 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
     return Selection(chosen, rounds, prediction, linear, spring)
+
+
+def _training_sse(ctx: Context, prediction: np.ndarray) -> float:
+    """The SSE of a fit's contribution on the training part (inf where its loop diverged)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = (ctx.target - prediction)[ctx.split.fit]
+        sse = float(e @ e)
+    return sse if math.isfinite(sse) else math.inf
+
+
+def _beyond_its_start(ctx: Context, cand: Candidate
+                      ) -> tuple[bool, tuple[list[FittedEffect], np.ndarray]]:
+    """Does ``cand`` pay on top of the base as the candidate's own fit left it? A later
+    round's candidate moves the base's loop to another start before the joint fit, and the
+    base refitted from there without it (`force.in_the_loop`) may do as well: then what
+    the candidate "explains" is the start, not an effect (the same argument as E alone in
+    `_explanation_on_top`). The candidate must pass the round's tests (F-test at ALPHA,
+    ΔBIC < 0, MIN_REDUCTION) against the better of the round's reference and that refit;
+    the held-out SSE of the refit is kept in ``cand.sse_from_its_start``. Returns whether
+    it pays, and the base so refitted (effects, contribution)."""
+    test = ctx.split.test
+    there = in_the_loop(ctx, cand.base, cand.base)
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = ctx.target[test] - there[1][test]
+        sse_there = float(e @ e)
+    cand.sse_from_its_start = sse_there if math.isfinite(sse_there) else math.inf
+    reference = min(cand.sse_reference, cand.sse_from_its_start)
+    dof = cand.n_eff - cand.k_total
+    if cand.sse_test >= reference or dof <= 1:
+        return False, there
+    p = float(stats.f.sf(((reference - cand.sse_test) / cand.k) / (cand.sse_test / dof),
+                         cand.k, dof))
+    score = cand.n_eff * math.log(cand.sse_test / reference) + cand.k * math.log(
+        max(cand.n_eff, 2.0))
+    return bool(p < ALPHA and score < 0.0
+                and cand.sse_test <= (1.0 - MIN_REDUCTION) * reference), there
 
 
 def _fit_set(ctx: Context, names: list[str], base: list[FittedEffect]

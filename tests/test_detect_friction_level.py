@@ -224,3 +224,18 @@ def test_with_the_observer_a_clipping_accelerometer_is_not_friction(low_frequenc
     events, _ = Monitor(models["default"]).run(scenario_recording("fault_valve_gain",
                                                                  duration_s=64.0))
     assert events[-1]["kind"] == "other_fault" and "accel_clipping" not in events[-1]
+
+
+def test_the_level_after_a_fault_does_not_depend_on_the_sample_the_monitor_started_at():
+    """The level's picks restart with the episode: test case 1 monitored from its first
+    sample and from 7, 23 and 41 samples later (the pick period is 64 samples) reports the
+    same level at isolation. Before, the picks kept the phase of the monitor's start, and
+    three runs of README's command read 0.53, 0.83 and 1.05 at the same isolation."""
+    rec = scenario_recording("test_case_1")
+    levels = []
+    for start in (0, 7, 23, 41):
+        events, _ = Monitor(sim_rig_model()).run(rec.samples(slice(start, None)))
+        isolated = next(e for e in events if e["kind"] == "friction_isolated")
+        levels.append(isolated["friction_level"])
+    assert np.isfinite(levels[0])
+    assert levels == pytest.approx([levels[0]] * 4, rel=1e-3)

@@ -14,15 +14,17 @@ FS = 256.0
 
 
 def _reference(theta1, valid, pick, capacity, restart_at=()):
-    """Median and 25-75 % range of the last ``capacity`` valid picks (ticks 0, pick, ...),
-    forgotten at ``restart_at``; reported where valid, NaN elsewhere."""
+    """Median and 25-75 % range of the last ``capacity`` valid picks (ticks 0, pick, ...
+    counted from the start and from each restart), forgotten at ``restart_at``; reported
+    where valid, NaN elsewhere."""
     picks, level, spread = [], np.full(theta1.size, np.nan), np.full(theta1.size, np.nan)
     held = (math.nan, math.nan)
+    since = 0  # the tick the pick period counts from
     for k in range(theta1.size):
         if k in restart_at:
-            picks, held = [], (math.nan, math.nan)
+            picks, held, since = [], (math.nan, math.nan), k
         ok = valid[k] and math.isfinite(theta1[k])
-        if k % pick == 0 and ok:
+        if (k - since) % pick == 0 and ok:
             picks = (picks + [theta1[k]])[-capacity:]
             s = np.sort(picks)
             n = len(s)
@@ -41,7 +43,7 @@ def test_level_and_spread_match_a_direct_computation():
     valid[2000:2600] = False  # operation where the velocity is not trusted
     arena = Arena()
     block = FrictionLevel(10.0, FS, arena)
-    restart = {3500}
+    restart = {3500, 4321}  # 4321 - 3500 is not a multiple of the pick period
     got = np.empty((n, 2))
     for k in range(n):
         if k in restart:

@@ -54,7 +54,10 @@ def level_tick(f, ii, lo, theta1, valid):  # pragma: no cover - jit
 
 @jit
 def level_restart(f, ii, lo):  # pragma: no cover - jit
-    """Forget the picks (an alarm episode begins or ends); the level is NaN until the next."""
+    """Forget the picks (an alarm episode begins or ends); the level is NaN until the next.
+    The pick period restarts here (the next pick at the next tick): the level after a fault
+    depends on the data, not on the sample the monitor started at."""
+    ii[lo + L_WAIT] = 0
     ii[lo + L_COUNT] = 0
     ii[lo + L_HEAD] = 0
     held = ii[lo + L_FLOATS] + 2 * ii[lo + L_CAPACITY] + 2
@@ -115,7 +118,6 @@ class FrictionLevel:
 
     def reset(self) -> None:
         """No pick yet: the level is NaN."""
-        self.arena.i[self.io + L_WAIT] = 0
         level_restart(self.arena.f, self.arena.i, self.io)
         self.arena.f[self.out:self.out + 2] = math.nan
 

@@ -51,13 +51,19 @@ def test_a_map_is_possible_only_with_its_own_gain(gain, refit_gain, plausible):
 def test_a_hidden_spring_or_clip_is_named_alone(effect):
     # before the loop's joint fit (docs/diagnose.md §4.3 step 4) the hidden cubic spring
     # was named with an output clip of gain ≈ 0 second, standing in for the part of the
-    # spring the loop had not fitted; a clip must have a clip's gain (`map_share`)
+    # spring the loop had not fitted; a clip must have a clip's gain (`map_share`). Later
+    # a sensor offset came second, credited with the loop's fit from its own start
+    # (`select._beyond_its_start`)
     rec = recording(effect)
     b, a = nominal_model()
     result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
     assert result.named == [effect]
+    physical = result.selection.named[0].physical
     if effect == "output_saturation":
-        assert result.selection.named[0].physical["map_share"] == pytest.approx(1.0, abs=0.1)
+        assert physical["map_share"] == pytest.approx(1.0, abs=0.1)
+    else:  # the spring's size in input units: k₃ over the input's gain
+        truth = HIDDEN[effect]["k3_n_per_m3"] / MsdParams().gain_n_per_v
+        assert physical["cubic_coefficient_input_equivalent"] == pytest.approx(truth, rel=0.1)
 
 
 def test_no_hidden_effect_names_none():

@@ -121,32 +121,40 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
         theta = np.concatenate([np.concatenate([np.ravel(c) for c in e.coefficients])
                                 for e in effects])
         prediction = xx @ theta
-    test = ctx.split.test
-    with np.errstate(over="ignore", invalid="ignore"):  # a loop that diverges: inf
-        e1 = ctx.target[test] - prediction[test]
-        sse1 = float(e1 @ e1)
-    if not math.isfinite(sse1):  # a force loop that diverges on the held-out part
-        sse1 = math.inf
+    sse1 = _sse(ctx, prediction, ctx.split.test)  # a force loop that diverges: inf
     k = eff.n_params + sum(e.n_params for e in refitted if e.name not in {b.name for b in base})
     k_total = eff.n_params + sum(b.n_params for b in refitted)
+    score, p, pays = _judged(sse_reference, sse1, k, k_total, n_eff)
+    map_share(refitted + [eff])
+    return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, score, p,
+                     pays and possible(refitted + [eff]), prediction, k, k_total)
+
+
+def _judged(sse0: float, sse1: float, k: int, k_total: int, n_eff: float
+            ) -> tuple[float, float, bool]:
+    """A fit with held-out SSE ``sse1`` and ``k`` parameters more (``k_total`` in all)
+    against one with ``sse0`` (module docstring): (Δ score, F-test p, whether it pays:
+    p < ALPHA, Δ score < 0 and at least MIN_REDUCTION of sse0 removed)."""
     dof = n_eff - k_total
     if sse1 <= 0.0:
         score, p = -math.inf, 0.0
     elif math.isinf(sse1):
         score, p = math.inf, 1.0
     else:
-        score = n_eff * math.log(sse1 / sse_reference) + k * math.log(max(n_eff, 2.0))
-        if dof > 1 and sse1 < sse_reference:
-            f_stat = ((sse_reference - sse1) / k) / (sse1 / dof)
-            p = float(stats.f.sf(f_stat, k, dof))
-        else:
-            p = 1.0
-    map_share(refitted + [eff])
-    plausible = possible(refitted + [eff])
-    return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, float(score), p,
-                     bool(p < ALPHA and score < 0.0 and plausible
-                          and sse1 <= (1.0 - MIN_REDUCTION) * sse_reference), prediction,
-                     k, k_total)
+        score = n_eff * math.log(sse1 / sse0) + k * math.log(max(n_eff, 2.0))
+        p = (float(stats.f.sf(((sse0 - sse1) / k) / (sse1 / dof), k, dof))
+             if dof > 1 and sse1 < sse0 else 1.0)
+    return float(score), p, bool(p < ALPHA and score < 0.0
+                                 and sse1 <= (1.0 - MIN_REDUCTION) * sse0)
+
+
+def _sse(ctx: Context, prediction: np.ndarray, part: np.ndarray) -> float:
+    """The SSE of a fit's contribution on a part of the record (``ctx.split.fit`` or
+    ``.test``); inf where its loop diverged."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = (ctx.target - prediction)[part]
+        sse = float(e @ e)
+    return sse if math.isfinite(sse) else math.inf
 
 
 #: static maps whose φ = N(w) − w must enter with the gain of the signal w they map: the
@@ -196,7 +204,7 @@ def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffe
     for value in grid[np.isfinite(grid) & (grid > 0)]:
         trial = replace(new, param=float(value))
         _, pred = in_the_loop(ctx, effects[:-1] + [trial], joint=False)
-        sse = _training_sse(ctx, pred)  # a diverging loop: inf, not chosen
+        sse = _sse(ctx, pred, ctx.split.fit)  # a diverging loop: inf, not chosen
         if sse < best[0]:
             best = (sse, trial)
     return best[1]
@@ -412,7 +420,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 break
             # the base's loop from the candidate's start did it: that fit of the base is
             # kept when it fits the training part better, and the next candidate is tried
-            reference = min(reference, there, key=lambda fit: _training_sse(ctx, fit[1]))
+            reference = min(reference, there, key=lambda fit: _sse(ctx, fit[1], ctx.split.fit))
             best.accepted = False
             best = _choose(results, n_eff)
         if best is None:
@@ -453,14 +461,6 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     return Selection(chosen, rounds, prediction, linear, spring)
 
 
-def _training_sse(ctx: Context, prediction: np.ndarray) -> float:
-    """The SSE of a fit's contribution on the training part (inf where its loop diverged)."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        e = (ctx.target - prediction)[ctx.split.fit]
-        sse = float(e @ e)
-    return sse if math.isfinite(sse) else math.inf
-
-
 def _beyond_its_start(ctx: Context, cand: Candidate
                       ) -> tuple[bool, tuple[list[FittedEffect], np.ndarray]]:
     """Does ``cand`` pay on top of the base as the candidate's own fit left it? A later
@@ -471,22 +471,10 @@ def _beyond_its_start(ctx: Context, cand: Candidate
     ΔBIC < 0, MIN_REDUCTION) against the better of the round's reference and that refit;
     the held-out SSE of the refit is kept in ``cand.sse_from_its_start``. Returns whether
     it pays, and the base so refitted (effects, contribution)."""
-    test = ctx.split.test
     there = in_the_loop(ctx, cand.base, cand.base)
-    with np.errstate(over="ignore", invalid="ignore"):
-        e = ctx.target[test] - there[1][test]
-        sse_there = float(e @ e)
-    cand.sse_from_its_start = sse_there if math.isfinite(sse_there) else math.inf
+    cand.sse_from_its_start = _sse(ctx, there[1], ctx.split.test)
     reference = min(cand.sse_reference, cand.sse_from_its_start)
-    dof = cand.n_eff - cand.k_total
-    if cand.sse_test >= reference or dof <= 1:
-        return False, there
-    p = float(stats.f.sf(((reference - cand.sse_test) / cand.k) / (cand.sse_test / dof),
-                         cand.k, dof))
-    score = cand.n_eff * math.log(cand.sse_test / reference) + cand.k * math.log(
-        max(cand.n_eff, 2.0))
-    return bool(p < ALPHA and score < 0.0
-                and cand.sse_test <= (1.0 - MIN_REDUCTION) * reference), there
+    return _judged(reference, cand.sse_test, cand.k, cand.k_total, cand.n_eff)[2], there
 
 
 def _fit_set(ctx: Context, names: list[str], base: list[FittedEffect]
@@ -556,10 +544,7 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
         # there without it, E must not do as well (a loop's fit depends on where it starts,
         # and an explanation that only moved the start explains nothing)
         rest = [e for e in chosen if e.name != explain]
-        _, from_there = in_the_loop(ctx, rest, rest)
-        e_there = ctx.target[test] - from_there[test]
-        with np.errstate(over="ignore", invalid="ignore"):
-            sse_there = float(e_there @ e_there)
+        sse_there = _sse(ctx, in_the_loop(ctx, rest, rest)[1], test)
         if math.isfinite(sse_there):
             sse_alone = min(sse_alone, sse_there)
             if names == named:
@@ -648,17 +633,14 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     if not (math.isfinite(sse0) and sse1 < sse0):  # without it the loop diverges, or worse
         return chosen, {"named": False, "pays": False}
     n_eff = effective_samples(e0)
-    k = spring.n_params
-    dof = n_eff - sum(e.n_params for e in chosen)
-    if dof <= 1:
+    k_total = sum(e.n_params for e in chosen)
+    if n_eff - k_total <= 1:
         return chosen, {"named": False, "pays": False}
-    p = float(stats.f.sf(((sse0 - sse1) / k) / (sse1 / dof), k, dof))
-    score = n_eff * math.log(sse1 / sse0) + k * math.log(max(n_eff, 2.0))
+    score, p, pays = _judged(sse0, sse1, spring.n_params, k_total, n_eff)
     check = {"p_value": p, "score": score, "sse_ratio": sse1 / sse0,
              "above_floor": floor_sse is None or sse0 > floor_sse,
              "mode_change": spring.physical.get("mode_change")}
-    check["named"] = bool(p < ALPHA and score < 0.0 and sse1 <= (1.0 - MIN_REDUCTION) * sse0
-                          and check["above_floor"] and check["mode_change"] in MECHANICS)
+    check["named"] = bool(pays and check["above_floor"] and check["mode_change"] in MECHANICS)
     if not check["named"]:
         return chosen, check
     named = replace(spring, name=MECHANICS[check["mode_change"]],

@@ -36,6 +36,7 @@ from fdi_daemon.detect.pipeline import Pipeline
 from fdi_daemon.detect.settings import DetectorSettings
 from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.io.model_file import FdiModel
+from fdi_daemon.io.outputs import finite_or_none
 from fdi_daemon.io.recordings import Recording
 from fdi_daemon.io.sample import Sample
 
@@ -291,7 +292,7 @@ class Monitor:
         (the bin of the window's velocity RMS); None without a baseline."""
         if self.baseline is None:
             return None
-        return _finite(self.baseline_levels(self.pipeline.v_rms))
+        return finite_or_none(self.baseline_levels(self.pipeline.v_rms))
 
     def baseline_levels(self, v_rms_mps):
         """`baseline_level` at each velocity RMS (m/s; array or scalar); NaN without one."""
@@ -473,23 +474,19 @@ class Monitor:
         hist = self._history.points().tolist()
         return {
             "state": det.state if self._samples else "starting",
-            "theta1": _finite(det.theta1),
-            "theta2": _finite(det.theta2),
-            "friction_level": _finite(det.level.level),
-            "friction_level_spread": _finite(det.level.spread),
+            "theta1": finite_or_none(det.theta1),
+            "theta2": finite_or_none(det.theta2),
+            "friction_level": finite_or_none(det.level.level),
+            "friction_level_spread": finite_or_none(det.level.spread),
             "baseline_level": self.baseline_level(),
             "band": det.band,
-            "signature": [1.0, _finite(self.gamma_f)],
-            "residual_rms": _finite(math.sqrt(syy / count)) if count and syy >= 0 else None,
-            "statistic": _finite(det.statistic),
+            "signature": [1.0, finite_or_none(self.gamma_f)],
+            "residual_rms": finite_or_none(math.sqrt(syy / count)) if count and syy >= 0 else None,
+            "statistic": finite_or_none(det.statistic),
             "threshold": float(det.threshold),
-            "history": {"t": [h[0] for h in hist], "theta1": [_finite(h[1]) for h in hist],
-                        "theta2": [_finite(h[2]) for h in hist]},
+            "history": {"t": [h[0] for h in hist], "theta1": [finite_or_none(h[1]) for h in hist],
+                        "theta2": [finite_or_none(h[2]) for h in hist]},
         }
-
-
-def _finite(value: float) -> float | None:
-    return float(value) if value is not None and math.isfinite(value) else None
 
 
 def check_stable(a: np.ndarray, name: str) -> None:

@@ -3,22 +3,17 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
 from fdi_daemon.errors import UserError
+from fdi_daemon.io.outputs import finite_or_none
 
 __all__ = ["replay_summary", "write_summary"]
 
 
 def _first(events: list[dict[str, Any]], kind: str) -> float | None:
     return next((e["t"] for e in events if e["kind"] == kind), None)
-
-
-def _finite_or_none(value: float) -> float | None:
-    value = float(value)
-    return value if math.isfinite(value) else None
 
 
 def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, method: str,
@@ -42,7 +37,7 @@ def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, met
         decided = [e for e in events if e["kind"] in ("friction_isolated", "other_fault")]
         if decided:
             classification = "friction" if decided[0]["kind"] == "friction_isolated" else "other"
-    theta_final = [None if v is None else _finite_or_none(v) for v in theta_final]
+    theta_final = [finite_or_none(v) for v in theta_final]
     counts = {kind: kinds.count(kind) for kind in dict.fromkeys(kinds)}
     return {
         "samples": int(samples),
@@ -58,7 +53,7 @@ def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, met
                                    default=0),
         "other_fault_t": other,
         "method": method,
-        "friction_level_final": None if level_final is None else _finite_or_none(level_final),
+        "friction_level_final": finite_or_none(level_final),
         "event_counts": counts,
         "bad_samples": sum(int(e.get("count", 1)) for e in events if e["kind"] == "bad_sample"),
         "missing_samples": sum(int(e.get("missing_samples", 0)) for e in events

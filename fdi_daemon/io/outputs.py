@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import stat
 from collections.abc import Iterable, Iterator, Mapping
@@ -125,12 +126,37 @@ def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
     return path
 
 
+def finite_or_none(value: float | None) -> float | None:
+    """``value`` as a float if it is finite, else None (JSON has no NaN or infinity)."""
+    return float(value) if value is not None and math.isfinite(value) else None
+
+
+def json_safe(value: Any) -> Any:
+    """The value with NaN/inf replaced by None and numpy scalars made plain (strict JSON)."""
+    if isinstance(value, float):
+        return finite_or_none(value)
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, (str, int, bool)) or value is None:
+        return value
+    item = getattr(value, "item", None)  # numpy scalar
+    if item is not None and getattr(value, "ndim", 1) == 0:
+        return json_safe(item())
+    tolist = getattr(value, "tolist", None)  # numpy array
+    if tolist is not None:
+        return json_safe(tolist())
+    return str(value)
+
+
 def write_json(path: str | Path, data: Any, indent: int = 2) -> Path:
-    """Write ``data`` as JSON text ending in a newline; an unwritable path is a UserError."""
+    """Write ``data`` as strict JSON text (`json_safe`: NaN and infinities become null)
+    ending in a newline; an unwritable path is a UserError."""
     path = Path(path)
     try:
         with open(path, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=indent)
+            json.dump(json_safe(data), fh, indent=indent, allow_nan=False)
             fh.write("\n")
     except OSError as exc:
         raise UserError(f"{path}: cannot write: {exc.strerror or exc}") from None

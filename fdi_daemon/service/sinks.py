@@ -47,6 +47,7 @@ from pymodbus.pdu import ExceptionResponse, ReadCoilsRequest
 from fdi_daemon.alarms.lifecycle import LIFECYCLE_KINDS
 from fdi_daemon.detect.events import ALARM_KINDS as EVENT_ALARM_KINDS
 from fdi_daemon.detect.events import EVENT_SCHEMA
+from fdi_daemon.io.outputs import json_safe
 
 log = logging.getLogger("fdi.sinks")
 
@@ -58,25 +59,6 @@ PRIORITY = {"fault_detected": 4, "friction_isolated": 4, "other_fault": 4, "link
             "calibrated": 6, "alarm_raised": 4, "alarm_priority": 4,
             "alarm_acknowledged": 5, "alarm_shelved": 5, "alarm_unshelved": 5,
             "alarm_returned": 5}
-
-
-def json_safe(value: Any) -> Any:
-    """The value with NaN/inf replaced by None and numpy scalars made plain (strict JSON)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {str(k): json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(v) for v in value]
-    if isinstance(value, (str, int, bool)) or value is None:
-        return value
-    item = getattr(value, "item", None)  # numpy scalar
-    if item is not None and getattr(value, "ndim", 1) == 0:
-        return json_safe(item())
-    tolist = getattr(value, "tolist", None)  # numpy array
-    if tolist is not None:
-        return json_safe(tolist())
-    return str(value)
 
 
 def json_line(value: Any) -> str:

@@ -67,7 +67,8 @@ def test_the_baseline_holds_bins_with_provenance_and_its_source_stays_silent(bas
     assert base["provenance"]["source_sha256"] and "fdi baseline" in base["provenance"]["command"]
     assert base["provenance"]["alarm_episodes_on_source"] == 0
     for b in base["bins"]:
-        assert abs(b["level_median"]) < 0.2 and b["seconds"] >= 20.0
+        assert abs(b["level_median"]) < 0.2 and abs(b["coulomb_median"]) < 0.2
+        assert b["seconds"] >= 20.0
     Baseline.from_mapping(base)
 
 
@@ -122,28 +123,37 @@ def test_fit_baseline_bins_and_refuses_too_little_data():
     rng = np.random.default_rng(0)
     v = rng.uniform(0.01, 0.05, 256 * 100)
     level = 0.05 + 0.5 * v + 0.01 * rng.standard_normal(v.size)  # the level rises with speed
-    bins = fit_baseline(level, v, 256.0, min_seconds=20.0, max_bins=8)
-    assert len(bins) == 5  # 100 s of data, 20 s per bin
+    theta1 = -0.02 + 0.03 * rng.standard_normal(v.size)
+    theta1[::7] = np.nan  # a window where eq. (17) has no solution: left out of both
+    bins = fit_baseline({"coulomb": theta1, "level": level}, v, 256.0, min_seconds=20.0,
+                        max_bins=8)
+    assert len(bins) == 4  # 100 s of data, 6/7 valid, 20 s per bin
     centres = np.array([np.mean(b["v_rms_mps"]) for b in bins])
     medians = np.array([b["level_median"] for b in bins])
     np.testing.assert_allclose(medians, 0.05 + 0.5 * centres, atol=3e-3)
     for b in bins:
         assert b["level_sigma"] == pytest.approx(0.01, rel=0.15)
+        assert b["coulomb_median"] == pytest.approx(-0.02, abs=3e-3)
+        assert b["coulomb_sigma"] == pytest.approx(0.03, rel=0.15)
+    assert sum(b["seconds"] for b in bins) == pytest.approx(np.isfinite(theta1).sum() / 256.0)
     with pytest.raises(ValueError, match="at least 20 s"):
-        fit_baseline(level[:256 * 10], v[:256 * 10], 256.0)
+        fit_baseline({"level": level[:256 * 10]}, v[:256 * 10], 256.0)
 
 
 def test_a_broken_baseline_is_one_clear_error(tmp_path, capsys):
     data = yaml.safe_load(MODEL.read_text())
-    data["baseline"] = {"bins": [{"v_rms_mps": [0.02, 0.01], "level_median": 0.0,
-                                  "level_sigma": 0.01}]}
-    path = tmp_path / "m.yaml"
-    path.write_text(yaml.safe_dump(data))
-    with pytest.raises(ConfigError, match="baseline"):
-        Monitor(load_model(path))
     rec = write_recording(tmp_path / "r.npz", _friction_from_start(SINE, 1.0))
-    assert main(["replay", str(rec), "--model", str(path)]) == 2
-    assert capsys.readouterr().err.count("\n") == 1
+    one = {"v_rms_mps": [0.02, 0.01], "coulomb_median": 0.0, "coulomb_sigma": 0.01,
+           "level_median": 0.0}
+    older = {"v_rms_mps": [0.01, 0.02], "level_median": 0.0, "level_sigma": 0.01}  # θ1 only
+    for bins, message in (([one], "ordered"), ([older], "run it again")):
+        data["baseline"] = {"bins": bins}
+        path = tmp_path / "m.yaml"
+        path.write_text(yaml.safe_dump(data))
+        with pytest.raises(ConfigError, match=message):
+            Monitor(load_model(path))
+        assert main(["replay", str(rec), "--model", str(path)]) == 2
+        assert capsys.readouterr().err.count("\n") == 1
 
 
 def test_friction_present_at_start_and_removed_is_cleared(baseline_model):
@@ -202,7 +212,7 @@ def test_the_status_snapshot_carries_the_baseline_of_the_operating_condition(bas
     mon.run(rec)
     snap = mon.snapshot()
     base = Baseline.from_mapping(baseline_model.extra["baseline"])
-    expect = base.median[int(base.bin_index(mon.pipeline.v_rms))]
+    expect = base.level_median[int(base.bin_index(mon.pipeline.v_rms))]
     assert snap["baseline_level"] == pytest.approx(expect, rel=1e-12)
     assert Monitor(load_model(MODEL)).snapshot()["baseline_level"] is None
 

@@ -57,18 +57,59 @@ def test_level_and_spread_match_a_direct_computation():
     assert np.isnan(got[2000:2600]).all() and np.isfinite(got[2700:3400][valid[2700:3400]]).all()
 
 
+def _window_levels(g1, g2, r, gamma, n):
+    """The window's level by a direct least-squares solve per window: the multiple of
+    s = g1 + γ g2 that best fits r over the last ``n`` samples (NaN before the first full
+    window)."""
+    s = g1 + gamma * g2
+    out = np.full(r.size, np.nan)
+    for k in range(n - 1, r.size):
+        window = slice(k - n + 1, k + 1)
+        out[k] = np.linalg.lstsq(s[window, None], r[window], rcond=None)[0][0]
+    return out
+
+
+def test_the_window_level_is_the_least_squares_multiple_of_the_signature_regressor():
+    """`Pipeline.level` per sample and `Pipeline.levels` of a batch are the same numbers,
+    and both are a direct least-squares solve on the window (numpy, not the kernel's sums)."""
+    from fdi_daemon.detect.pipeline import Pipeline
+
+    model, rec = sim_rig_model(), scenario_recording("test_case_2")
+    n = 256
+    batch_pipeline = Pipeline(model, n)
+    batch = batch_pipeline.run(rec.v_in, rec.accel)
+    levels = batch_pipeline.levels(batch)
+    stepped = Pipeline(model, n)
+    each = np.empty(levels.size)
+    for k, (u, a) in enumerate(zip(rec.v_in, rec.accel)):
+        stepped.step(u, a)
+        each[k] = stepped.level
+    np.testing.assert_array_equal(each, levels)
+    assert stepped.signature_gamma == model.fault_filter.gamma_f
+    direct = _window_levels(batch.g1, batch.g2, batch.residual, model.fault_filter.gamma_f, n)
+    ok = np.isfinite(levels)
+    assert ok.sum() == rec.t.size - (n - 1)  # every full window (no rest floor here)
+    np.testing.assert_allclose(levels[ok], direct[ok], rtol=1e-6, atol=1e-9)
+
+
 def test_the_monitor_reports_the_level_of_a_fault_from_its_own_picks():
     """Test case 2 (2.3x the calibrated fault at 2.9 s): after the detection the level
     restarts, so it reads the fault within a second of the isolation, not a median of the
-    fault-free seconds before; before the fault it reads the fault-free level."""
-    events, trace = Monitor(sim_rig_model()).run(scenario_recording("test_case_2"))
+    fault-free seconds before; before the fault it reads the fault-free level. The reference
+    is the median of the window levels (a direct solve per window) over the same seconds."""
+    from fdi_daemon.detect.pipeline import Pipeline
+
+    model, rec = sim_rig_model(), scenario_recording("test_case_2")
+    events, trace = Monitor(model).run(rec)
     isolated = next(e["t"] for e in events if e["kind"] == "friction_isolated")
     before = trace.friction_level[(trace.t > 2.0) & (trace.t < 2.9)]
     after = trace.friction_level[trace.t > isolated + 1.0]
-    theta1 = trace.theta1[trace.t > isolated + 1.0]
+    batch = Pipeline(model, 256).run(rec.v_in, rec.accel)
+    direct = _window_levels(batch.g1, batch.g2, batch.residual, model.fault_filter.gamma_f,
+                            256)[rec.t > isolated + 1.0]
     assert np.all(np.abs(before[np.isfinite(before)]) < 0.2)
     assert np.isfinite(after).all()
-    assert abs(np.median(after) / np.median(theta1) - 1) < 0.05
+    assert abs(np.median(after) / np.median(direct) - 1) < 0.05
 
 
 def test_events_and_the_replay_summary_carry_the_reported_level_not_theta1(tmp_path):

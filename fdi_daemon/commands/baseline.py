@@ -31,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from fdi_daemon.commands.identify import load_io
-    from fdi_daemon.detect.baseline import fit_baseline
+    from fdi_daemon.detect.baseline import QUANTITIES, fit_baseline
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.errors import UserError
     from fdi_daemon.ident import provenance
@@ -52,19 +52,21 @@ def run(args: argparse.Namespace) -> int:
     monitor = Monitor(model)
     pipeline = monitor.pipeline
     batch = pipeline.run(v_in, accel, position=monitor.position_column(rec))
-    level, _ = pipeline.thetas(batch)
+    quantities = {"coulomb": pipeline.thetas(batch)[0], "level": pipeline.levels(batch)}
+    valid_s = float(np.sum(np.isfinite(quantities["coulomb"]) & np.isfinite(quantities["level"]))
+                    / model.fs)
     try:
-        bins = fit_baseline(level, batch.v_rms, model.fs, args.min_seconds, args.max_bins)
+        bins = fit_baseline(quantities, batch.v_rms, model.fs, args.min_seconds, args.max_bins)
     except ValueError as exc:
         raise UserError(f"{args.recording}: {exc}") from None
     model.extra["baseline"] = {
         "bins": bins,
         "binned_by": "window velocity RMS (m/s)",
-        "level": "theta1 of eq. (17) over the sliding window (1 = the calibrated fault)",
+        "quantities": QUANTITIES,
         "provenance": {**provenance.source_entry(args.recording,
                                                  provenance.command_line("baseline", args)),
                        "samples": int(len(v_in)),
-                       "valid_seconds": float(np.isfinite(level).sum() / model.fs)},
+                       "valid_seconds": valid_s},
     }
     # the fault-free recording replayed against its own baseline: it must stay silent
     events, _ = Monitor(model).run(rec)
@@ -72,12 +74,13 @@ def run(args: argparse.Namespace) -> int:
     model.extra["baseline"]["provenance"]["alarm_episodes_on_source"] = int(episodes)
     save_model(args.output, model)
     print(f"baseline          : {len(bins)} bin(s) of the window velocity RMS, "
-          f"{np.isfinite(level).sum() / model.fs:.0f} s of valid windows")
+          f"{valid_s:.0f} s of valid windows")
     for b in bins:
         lo, hi = b["v_rms_mps"]
         print(f"  v_rms {1000 * lo:7.1f} .. {1000 * hi:7.1f} mm/s: level {b['level_median']:+.3f}"
               f" (σ {b['level_sigma']:.3f}, 5-95 % {b['level_p5_p95'][0]:+.3f}.."
-              f"{b['level_p5_p95'][1]:+.3f}, {b['seconds']:.0f} s)")
+              f"{b['level_p5_p95'][1]:+.3f}), θ1 {b['coulomb_median']:+.3f} "
+              f"(σ {b['coulomb_sigma']:.3f}), {b['seconds']:.0f} s")
     print(f"check             : {episodes} alarm episode(s) replaying the source against it")
     print(f"model written     : {args.output}")
     return 0

@@ -1,9 +1,11 @@
-"""The friction level as reported: θ1 where it measures friction, robust over seconds.
+"""The friction level as reported: the window's level where it measures friction, robust
+over seconds.
 
-θ1 of the sliding window (eq. 17, units of the calibrated signature) measures the Coulomb
-coefficient only where the rig moves and the window's velocity is trusted
-(`detect.kernel.chain_tick`'s *level valid*): elsewhere it reads 0 or below under a friction
-that is there (docs/detector.md §3, "Clearing"). The reported level is the median of θ1
+The window's level (`detect.kernel.chain_tick`: the residual's least-squares multiple of the
+calibrated signature's regressor g1 + γ g2, units of the calibrated fault) measures friction
+only where the rig moves and the window's velocity is trusted (*level valid*): elsewhere it
+reads 0 or below under a friction that is there (docs/detector.md §3, "Clearing"). The
+reported level is the median of the window's level
 picked four times a second at valid windows, over the last ``level_median_s`` worth of
 picks since the last alarm episode began or ended (`level_restart`: a level that jumps at
 a fault is reported at its new value within seconds, not after the median has forgotten the
@@ -32,22 +34,22 @@ LEVEL_INTS = 6
 
 
 @jit(inline=True)
-def level_tick(f, ii, lo, theta1, valid):  # pragma: no cover - jit
-    """One tick: on a pick tick with a valid window, θ1 enters the ring and the median and
-    the 25–75 % spread of the ring are recomputed (`_pick`); on every tick they are
-    reported if the window is valid, else NaN. Inlined into the monitor's tick (as a call it
+def level_tick(f, ii, lo, level, valid):  # pragma: no cover - jit
+    """One tick: on a pick tick with a valid window, the window's level enters the ring and
+    the median and the 25–75 % spread of the ring are recomputed (`_pick`); on every tick
+    they are reported if the window is valid, else NaN. Inlined into the monitor's tick (as a call it
     cost about 12 of its 155 ns); the pick stays a call, made four times a second."""
     cap = ii[lo + L_CAPACITY]
     ring = ii[lo + L_FLOATS]
     out = ring + 2 * cap
-    valid = valid and math.isfinite(theta1)
+    valid = valid and math.isfinite(level)
     wait = ii[lo + L_WAIT]
     if wait > 0:
         ii[lo + L_WAIT] = wait - 1
     else:
         ii[lo + L_WAIT] = ii[lo + L_PICK] - 1
         if valid:
-            _pick(f, ii, lo, ring, cap, out + 2, theta1)
+            _pick(f, ii, lo, ring, cap, out + 2, level)
     f[out] = f[out + 2] if valid else math.nan
     f[out + 1] = f[out + 3] if valid else math.nan
 
@@ -66,8 +68,8 @@ def level_restart(f, ii, lo):  # pragma: no cover - jit
 
 
 @jit
-def _pick(f, ii, lo, ring, cap, held, theta1):  # pragma: no cover - jit
-    """θ1 into the ring and into its sorted copy (in place of the value it overwrites, once
+def _pick(f, ii, lo, ring, cap, held, level):  # pragma: no cover - jit
+    """The level into the ring and into its sorted copy (in place of the value it overwrites, once
     the ring is full: one pass, not a sort); the median and 25–75 % range into f[held],
     f[held + 1]."""
     head = ii[lo + L_HEAD]
@@ -81,13 +83,13 @@ def _pick(f, ii, lo, ring, cap, held, theta1):  # pragma: no cover - jit
         for i in range(j, count - 1):
             f[srt + i] = f[srt + i + 1]
         count -= 1
-    f[ring + head] = theta1
+    f[ring + head] = level
     ii[lo + L_HEAD] = head + 1 if head + 1 < cap else 0
     j = count
-    while j > 0 and f[srt + j - 1] > theta1:
+    while j > 0 and f[srt + j - 1] > level:
         f[srt + j] = f[srt + j - 1]
         j -= 1
-    f[srt + j] = theta1
+    f[srt + j] = level
     count += 1
     ii[lo + L_COUNT] = count
     half = count // 2
@@ -123,8 +125,8 @@ class FrictionLevel:
 
     @property
     def level(self) -> float:
-        """Median θ1 of the last valid picks (units of the signature) while the window is
-        valid; NaN elsewhere and before the first pick."""
+        """Median window level of the last valid picks (units of the calibrated fault) while
+        the window is valid; NaN elsewhere and before the first pick."""
         return float(self.arena.f[self.out])
 
     @property

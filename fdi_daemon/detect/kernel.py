@@ -9,6 +9,8 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
     v̂  = V(q) ẍ | L(q) x̂̈ + V(q) r | P(q) x + A(q) ẍ    the three velocity methods
     g1 = G_e(q)[sign v̂], g2 = G_e(q)[v̂]  eq. (15)
     θ  = argmin Σ_N (r − θ1 g1 − θ2 g2)²  eqs. (16)–(17): six window sums + Σ v̂²
+    level = Σ s·r / Σ s²,  s = g1 + γ g2    the friction level: eq. (17) on the calibrated
+             signature's direction (1, γ), in units of the calibrated fault
     trusted: Σ (LP v̂)² <= share · Σ v̂²   at most that share of the window's velocity energy
              below the frequency where v̂'s phase error exceeds its bound (`Pipeline`)
     sliding: Σ ẍ² >= ½ Σ x̂̈²               the load moves freely (friction holds it little)
@@ -16,7 +18,7 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
              the previous flat top of its sign, less than a window before: the
              accelerometer sits at its rail, and its residual pulses are no evidence of
              friction (clipping slower than one cycle per window is not seen)
-    level valid: moving, trusted and not clipped: θ1 of the window measures friction
+    level valid: moving, trusted and not clipped: the window's level measures friction
 
 ``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
 of v_in (`core.kernels.itest_tick`, phase by phase; their reference fits are pushed and
@@ -60,8 +62,8 @@ CHAIN_INTS = C_OUT + 1
 (O_XHAT, O_R, O_V, O_G1, O_G2, O_T1, O_T2, O_WT1, O_WT2, O_WOK, O_WSSE, O_VRMS, O_MOVING,
  O_TRUSTED, O_SLIDING, O_LEVEL_VALID, O_CLIPPED, O_ACCEL_LAST, O_RUN, O_RAIL_POS, O_RAIL_NEG,
  O_RAIL_AGE_POS, O_RAIL_AGE_NEG, O_CLIP_AGE, O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11,
- O_MIN_S22, O_TRUST_SHARE) = range(30)
-CHAIN_OUT = 30
+ O_MIN_S22, O_TRUST_SHARE, O_GAMMA, O_LEVEL) = range(32)
+CHAIN_OUT = 32
 SUMS_WIDTH = 10  # S11, S12, S22, S1y, S2y, Syy, Σv̂², Σ(LP v̂)², Σẍ², Σx̂̈²
 #: a run of this many equal, non-zero ẍ samples is a flat top; two flat tops at one value
 #: within a window are the accelerometer's rail (clipping)
@@ -166,6 +168,14 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     f[out + O_VRMS] = math.sqrt((0.0 if v2 < 0.0 else v2) / n)
     f[out + O_T1] = t1 if moving else math.nan
     f[out + O_T2] = t2 if moving else math.nan
+    # the friction level: the residual's least-squares multiple of the calibrated fault's
+    # regressor g1 + γ g2 (eq. 17 with θ on the signature's direction (1, γ))
+    gamma = f[out + O_GAMMA]
+    s_level = s11 + gamma * (2.0 * s12 + gamma * s22)
+    if moving and ii[io + C_COUNT] == n and s_level > 0.0:
+        f[out + O_LEVEL] = (s1y + gamma * s2y) / s_level
+    else:
+        f[out + O_LEVEL] = math.nan
     f[out + O_XHAT] = xhat
     f[out + O_R] = r
     f[out + O_V] = v
@@ -371,8 +381,8 @@ def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - 
     chain = ii[io + D_CHAIN]
     chain_tick(f, ii, chain, v_in, accel, position, xext)
     out = ii[chain + C_OUT]
+    level_tick(f, ii, ii[io + D_LEVEL], f[out + O_LEVEL], f[out + O_LEVEL_VALID] != 0.0)
     theta1 = f[out + O_T1]
-    level_tick(f, ii, ii[io + D_LEVEL], theta1, f[out + O_LEVEL_VALID] != 0.0)
     over = math.nan
     nb = ii[io + D_BINS]
     if ii[io + D_HAS_BASELINE]:

@@ -103,12 +103,12 @@ class Monitor:
             self.baseline = Baseline.from_mapping(model.extra["baseline"])
             self.baseline_note = ""
             self._margin = np.maximum(0.5 * self.settings.friction_min_level,
-                                      self.settings.band_k * self.baseline.sigma)
+                                      self.settings.band_k * self.baseline.coulomb_sigma)
         else:
             log.info(self.baseline_note)
         self.arena = Arena()
         bins = (None if self.baseline is None else
-                (self.baseline.edges_mps, self.baseline.median, self._margin))
+                (self.baseline.edges_mps, self.baseline.coulomb_median, self._margin))
         self.detector = Detector(self.settings, self.fs_hz, self.gamma_f,
                                  baseline=self.baseline is not None, arena=self.arena,
                                  baseline_bins=bins)
@@ -298,13 +298,13 @@ class Monitor:
         """`baseline_level` at each velocity RMS (m/s; array or scalar); NaN without one."""
         if self.baseline is None:
             return np.full(np.shape(v_rms_mps), np.nan)
-        return self.baseline.median[self.baseline.bin_index(v_rms_mps)]
+        return self.baseline.level_median[self.baseline.bin_index(v_rms_mps)]
 
     def over_baseline(self, theta1, v_rms):
         """(θ1 − baseline median)/margin of the bin of the window's velocity RMS; margin =
         max(friction_min_level/2, band_k·σ). Above 1: friction beyond the fault-free level."""
         idx = self.baseline.bin_index(v_rms)
-        return (theta1 - self.baseline.median[idx]) / self._margin[idx]
+        return (theta1 - self.baseline.coulomb_median[idx]) / self._margin[idx]
 
     def position_column(self, rec: Recording) -> np.ndarray:
         """The recording's ``position`` (m) when the velocity fuses it, else NaN; a model

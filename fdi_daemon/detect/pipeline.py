@@ -105,7 +105,7 @@ class Pipeline:
 
     __slots__ = ("plant", "velocity", "model_velocity", "needs_position", "ge_sign",
                  "ge_velocity", "wls", "window_samples", "external_plant", "arena", "fo",
-                 "io", "_zo", "_zn", "_out_o", "trusted_from_hz")
+                 "io", "_zo", "_zn", "_out_o", "trusted_from_hz", "signature_gamma")
 
     def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = MIN_RCOND,
                  min_velocity_rms_mps: float = 0.0, arena: Arena | None = None,
@@ -171,6 +171,7 @@ class Pipeline:
         f[out_o + K.O_MIN_V2] = float(min_velocity_rms_mps) ** 2 * n
         f[out_o + K.O_MIN_RCOND] = float(min_rcond)
         f[out_o + K.O_TRUST_SHARE] = float(trust_share)
+        f[out_o + K.O_GAMMA] = self.signature_gamma = model.signature_gamma()
         self.reset()
 
     def _out(self, k: int) -> float:
@@ -203,6 +204,12 @@ class Pipeline:
     @property
     def theta2(self) -> float:
         return self._out(K.O_T2)
+
+    @property
+    def level(self) -> float:
+        """The window's friction level: the residual's least-squares multiple of the
+        calibrated fault's regressor g1 + γ g2 (units of the calibrated fault; NaN at rest)."""
+        return self._out(K.O_LEVEL)
 
     @property
     def moving(self) -> bool:
@@ -283,3 +290,13 @@ class Pipeline:
                          self.wls.min_mean_square)
         return (np.where(batch.moving, sol.theta1, np.nan),
                 np.where(batch.moving, sol.theta2, np.nan))
+
+    def levels(self, batch: PipelineBatch) -> np.ndarray:
+        """The friction level of a batch as ``step`` reports it (`level`; NaN: a window not
+        yet full, or at rest)."""
+        s11, s12, s22, s1y, s2y = batch.sums[:, :5].T
+        gamma = self.signature_gamma
+        s_level = s11 + gamma * (2.0 * s12 + gamma * s22)
+        ok = batch.moving & (batch.counts == self.wls.window_samples) & (s_level > 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(ok, (s1y + gamma * s2y) / s_level, np.nan)

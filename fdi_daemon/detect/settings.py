@@ -85,9 +85,10 @@ class DetectorSettings:
     by maintenance, not within a second; a stretch of operation at which θ under-reads it
     (docs/detector.md §4a) must not end the episode."""
     level_median_s: float = 10.0
-    """The reported friction level is the median of θ1 over this much of the windows where
-    it measures friction (velocity trusted), picked four times a second since the last
-    episode began or ended; NaN where it does not (`detect.friction_level`)."""
+    """The reported friction level is the median of the window's level (the residual's
+    multiple of the calibrated regressor g1 + γ_f g2) over this much of the windows where it
+    measures friction (velocity trusted), picked four times a second since the last episode
+    began or ended; NaN where it does not (`detect.friction_level`)."""
     velocity_trust_phase_deg: float = 30.0
     """The velocity estimate is trusted above the frequency where its phase error against the
     true velocity falls below this (degrees; from its transfer function: 3.9 Hz for the 1 Hz

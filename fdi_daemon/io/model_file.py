@@ -58,6 +58,18 @@ class FdiModel:
     provenance: dict[str, Any] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
 
+    def signature_gamma(self) -> float:
+        """γ of the signature (1, γ) that G_e was fitted at (eq. 11): γ_f, or where γ_f is not
+        identified the least-cost γ of `fdi signature`'s grid (0 if the model does not say)."""
+        ff = self.fault_filter
+        if ff is not None and ff.gamma_f is not None:
+            return float(ff.gamma_f)
+        signature = self.provenance.get("signature")
+        gamma = signature.get("gamma_at_least_cost") if isinstance(signature, dict) else None
+        if isinstance(gamma, bool) or not isinstance(gamma, (int, float)):
+            return 0.0
+        return float(gamma) if math.isfinite(gamma) else 0.0
+
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "fs": float(self.fs),

@@ -33,8 +33,8 @@ class StatusCollector:
     """A prometheus_client collector over the status board (and the loop, once watched)."""
 
     GAUGES = (  # name, help, snapshot path
-        ("fdi_friction_level", "friction level: median θ1 (Coulomb term, eq. 15) of the "
-         "last seconds of trusted windows",
+        ("fdi_friction_level", "friction level (1 = the calibrated fault): median over the "
+         "last seconds of trusted windows of the residual's multiple of g1 + gamma_f g2",
          ("monitor", "friction_level")),
         ("fdi_theta1", "θ1 estimate (Coulomb term, eq. 15)", ("monitor", "theta1")),
         ("fdi_theta2", "θ2 estimate (viscous term, eq. 15)", ("monitor", "theta2")),

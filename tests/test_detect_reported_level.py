@@ -13,10 +13,10 @@ from fdi_daemon.detect.monitor import Monitor
 FS = 256.0
 
 
-def _reference(theta1, valid, pick, capacity, restart_at=()):
-    """Median and 25-75 % range of the last ``capacity`` valid picks (ticks 0, pick, ...
-    counted from the start and from each restart), forgotten at ``restart_at``; reported
-    where valid, NaN elsewhere."""
+def _reference(theta1, valid, pick, capacity, restart_at=(), settle=0):
+    """Median and 25-75 % range of the last ``capacity`` valid picks (the settle-th tick
+    from the start or a restart, counted from 1 (the first for 0), then every ``pick``),
+    forgotten at ``restart_at``; reported where valid, NaN elsewhere."""
     picks, level, spread = [], np.full(theta1.size, np.nan), np.full(theta1.size, np.nan)
     held = (math.nan, math.nan)
     since = 0  # the tick the pick period counts from
@@ -24,7 +24,8 @@ def _reference(theta1, valid, pick, capacity, restart_at=()):
         if k in restart_at:
             picks, held, since = [], (math.nan, math.nan), k
         ok = valid[k] and math.isfinite(theta1[k])
-        if (k - since) % pick == 0 and ok:
+        after = k - since - max(settle - 1, 0)
+        if after >= 0 and after % pick == 0 and ok:
             picks = (picks + [theta1[k]])[-capacity:]
             s = np.sort(picks)
             n = len(s)
@@ -42,7 +43,7 @@ def test_level_and_spread_match_a_direct_computation():
     valid = rng.random(n) > 0.3
     valid[2000:2600] = False  # operation where the velocity is not trusted
     arena = Arena()
-    block = FrictionLevel(10.0, FS, arena)
+    block = FrictionLevel(10.0, FS, arena, settle_samples=100)
     restart = {3500, 4321}  # 4321 - 3500 is not a multiple of the pick period
     got = np.empty((n, 2))
     for k in range(n):
@@ -50,7 +51,8 @@ def test_level_and_spread_match_a_direct_computation():
             level_restart(arena.f, arena.i, block.io)
         level_tick(arena.f, arena.i, block.io, float(theta1[k]), bool(valid[k]))
         got[k] = block.level, block.spread
-    level, spread = _reference(theta1, valid, block.pick_samples, block.capacity, restart)
+    level, spread = _reference(theta1, valid, block.pick_samples, block.capacity, restart,
+                               block.settle_samples)
     assert block.pick_samples == 64 and block.capacity == 40
     np.testing.assert_array_equal(got[:, 0], level)
     np.testing.assert_array_equal(got[:, 1], spread)
@@ -132,8 +134,27 @@ def test_events_and_the_replay_summary_carry_the_reported_level_not_theta1(tmp_p
         assert (event["friction_level"] is None) == (not np.isfinite(reported))
         if event["friction_level"] is not None:
             assert event["friction_level"] == reported
-    isolated = decided[1]
-    assert isolated["friction_level"] is not None and isolated["friction_level"] != isolated["theta1"]
+    detected, isolated = decided
+    assert isolated["t"] - detected["t"] < 1.0  # within a window of the detection: no pick yet
+    assert isolated["friction_level"] is None
     levels = trace.friction_level[np.isfinite(trace.friction_level)]
     assert replay.summary["friction_level_final"] == float(levels[-1])
     assert replay.summary["friction_level_final"] != replay.summary["theta_final"][0]
+
+
+def test_the_level_direction_is_the_gamma_that_g_e_was_fitted_at():
+    """γ_f when identified; where it is not (null in the model), the γ of the grid that
+    `fdi signature` fitted G_e at (its provenance); 0 for a model that does not say."""
+    from dataclasses import replace
+
+    from fdi_daemon.detect.pipeline import Pipeline
+
+    model = sim_rig_model()
+    assert Pipeline(model, 256).signature_gamma == model.fault_filter.gamma_f
+    unidentified = replace(model, fault_filter=replace(model.fault_filter, gamma_f=None))
+    unidentified.provenance = {"signature": {"gamma_at_least_cost": 10.0}}
+    assert Pipeline(unidentified, 256).signature_gamma == 10.0
+    for provenance in ({}, {"signature": {"gamma_at_least_cost": "ten"}},
+                       {"signature": {"gamma_at_least_cost": float("nan")}}):
+        unidentified.provenance = provenance
+        assert Pipeline(unidentified, 256).signature_gamma == 0.0

@@ -144,7 +144,8 @@ class Detector:
                                                    for v in baseline_bins])
         #: the friction level as reported (`detect.friction_level`), restarted by the kernel
         #: when an episode begins or ends; events carry its value at their tick
-        self.level = FrictionLevel(s.level_median_s, fs_hz, arena)
+        self.level = FrictionLevel(s.level_median_s, fs_hz, arena,
+                                   settle_samples=self.window_samples)
         arena.i[io + K.D_LEVEL] = self.level.io
         self.band: dict[str, list[float]] | None = None
         #: θ as reported for the newest tick: eq. (17) over the sliding window, or during an

@@ -5,11 +5,11 @@ The window's level (`detect.kernel.chain_tick`: the residual's least-squares mul
 calibrated signature's regressor g1 + γ g2, units of the calibrated fault) measures friction
 only where the rig moves and the window's velocity is trusted (*level valid*): elsewhere it
 reads 0 or below under a friction that is there (docs/detector.md §3, "Clearing"). The
-reported level is the median of the window's level
-picked four times a second at valid windows, over the last ``level_median_s`` worth of
-picks since the last alarm episode began or ended (`level_restart`: a level that jumps at
-a fault is reported at its new value within seconds, not after the median has forgotten the
-old one). It is reported only while the current window is valid (NaN elsewhere, as at rest:
+reported level is the median of the window's level picked four times a second at valid
+windows, over the last ``level_median_s`` worth of picks since the last alarm episode began
+or ended, the first of them one window after it (`level_restart`: a level that jumps at a
+fault is reported at its new value from one window after the detection, never a mix of the
+windows before and after it). It is reported only while the current window is valid (NaN elsewhere, as at rest:
 a level that cannot be measured is not shown, and the alarm lifecycle and the trend take
 no reading), and NaN before the first pick. Its spread, the 25–75 % range of the same
 picks, is the level's uncertainty.
@@ -28,9 +28,10 @@ __all__ = ["FrictionLevel", "level_tick", "level_restart", "LEVEL_INTS", "PICKS_
 
 PICKS_PER_S = 4.0
 # ints: pick period (ticks), capacity (picks), countdown to the next pick, picks held, next
-# slot, float base (ring, sorted copy, then level and spread as reported, then as held)
-L_PICK, L_CAPACITY, L_WAIT, L_COUNT, L_HEAD, L_FLOATS = range(6)
-LEVEL_INTS = 6
+# slot, float base (ring, sorted copy, then level and spread as reported, then as held),
+# the countdown a restart sets (the first pick on the window's length-th tick after it)
+L_PICK, L_CAPACITY, L_WAIT, L_COUNT, L_HEAD, L_FLOATS, L_SETTLE = range(7)
+LEVEL_INTS = 7
 
 
 @jit(inline=True)
@@ -57,9 +58,10 @@ def level_tick(f, ii, lo, level, valid):  # pragma: no cover - jit
 @jit
 def level_restart(f, ii, lo):  # pragma: no cover - jit
     """Forget the picks (an alarm episode begins or ends); the level is NaN until the next.
-    The pick period restarts here (the next pick at the next tick): the level after a fault
-    depends on the data, not on the sample the monitor started at."""
-    ii[lo + L_WAIT] = 0
+    The first pick comes one window after the restart, from the first window that holds
+    none of the data before it, and the pick period counts from there: the level after a
+    fault depends on the data, not on the sample the monitor started at."""
+    ii[lo + L_WAIT] = ii[lo + L_SETTLE]
     ii[lo + L_COUNT] = 0
     ii[lo + L_HEAD] = 0
     held = ii[lo + L_FLOATS] + 2 * ii[lo + L_CAPACITY] + 2
@@ -100,17 +102,23 @@ def _pick(f, ii, lo, ring, cap, held, level):  # pragma: no cover - jit
 class FrictionLevel:
     """State of the reported friction level in an `Arena` (see the module docstring)."""
 
-    __slots__ = ("arena", "fo", "io", "pick_samples", "capacity")
+    __slots__ = ("arena", "fo", "io", "pick_samples", "capacity", "settle_samples")
 
-    def __init__(self, level_median_s: float, fs_hz: float, arena: Arena) -> None:
+    def __init__(self, level_median_s: float, fs_hz: float, arena: Arena,
+                 settle_samples: int = 0) -> None:
+        """``settle_samples``: the first pick comes on the settle_samples-th tick after a
+        restart (the next one for 0): with the sliding window's length, no pick mixes data
+        from before the restart."""
         self.arena = arena
         self.pick_samples = max(1, int(round(fs_hz / PICKS_PER_S)))
         self.capacity = max(1, int(round(level_median_s * PICKS_PER_S)))
+        self.settle_samples = max(0, int(settle_samples))
         self.fo, self.io = arena.alloc(2 * self.capacity + 4, LEVEL_INTS)
         ii = arena.i
         ii[self.io + L_PICK] = self.pick_samples
         ii[self.io + L_CAPACITY] = self.capacity
         ii[self.io + L_FLOATS] = self.fo
+        ii[self.io + L_SETTLE] = max(0, self.settle_samples - 1)
         self.reset()
 
     @property

@@ -65,9 +65,9 @@ def replay_figure(trace: MonitorTrace, events: list[dict[str, Any]], gamma_f: fl
     """The figure (matplotlib Figure, not yet saved)."""
     plt = pyplot()
     sl = _thin(trace.t.size)
-    t, accel, theta1, theta2, residual, stat = _broken_at_gaps(
+    t, accel, theta1, theta2, residual, stat, level = _broken_at_gaps(
         trace.t[sl], trace.accel[sl], trace.theta1[sl], trace.theta2[sl], trace.residual[sl],
-        trace.statistic[sl])
+        trace.statistic[sl], trace.friction_level[sl])
     period_s = _sample_period(trace)
     fig, axes = plt.subplots(5, 1, figsize=(11, 11.5), sharex=True, constrained_layout=True)
     ax_a, ax_1, ax_2, ax_r, ax_s = axes
@@ -103,12 +103,16 @@ def replay_figure(trace: MonitorTrace, events: list[dict[str, Any]], gamma_f: fl
             ax_a.text(1.01, 0.0, textwrap.fill(CALIBRATION_NOTE, 34), transform=ax_a.transAxes,
                       ha="left", va="bottom", fontsize=7.5, color="tab:red")
 
-    for ax, values, name, sig, key in ((ax_1, theta1, "θ1 (Coulomb)", 1.0, "theta1"),
-                                       (ax_2, theta2, "θ2 (viscous)", gamma_f, "theta2")):
+    # the reported friction level (calibrated faults) beside θ1, in the dashboard's magenta
+    ax_1.plot(t, level, lw=1.6, color="magenta", label="friction level (reported)")
+    for ax, values, name, sig, key in (
+            (ax_1, theta1, "θ1 (Coulomb), friction level\n(calibrated faults)", 1.0, "theta1"),
+            (ax_2, theta2, "θ2 (viscous)", gamma_f, "theta2")):
         ax.plot(t, values, lw=0.8, color="tab:purple", label=name.split()[0])
         ax.axhline(sig, color="tab:green", ls=":", lw=1.2, label=f"signature {sig:.3g}")
         span = list(band[key]) if band is not None else []
-        finite = values[np.isfinite(values)]
+        shown = np.concatenate([values, level]) if ax is ax_1 else values
+        finite = shown[np.isfinite(shown)]
         if finite.size:
             lo_q, hi_q = np.percentile(finite, [1, 99])
             limits = [min(lo_q, sig, *span), max(hi_q, sig, *span)]

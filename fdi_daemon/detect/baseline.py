@@ -4,7 +4,7 @@
 the model file's ``baseline`` key, per bin of the window's velocity RMS (the operating
 condition the monitor knows on every tick) two quantities of the sliding window: the
 Coulomb coefficient θ1 of eq. (17) (``coulomb_*``: the level path's evidence of friction)
-and the friction level (``level_*``, `LEVEL`: what the monitor reports). Per bin and
+and the friction level (``level_*``: what the monitor reports; `QUANTITIES`). Per bin and
 quantity: its median and a robust spread σ = 1.4826·MAD, with the 5th/95th percentiles; and
 the time the bin holds. Bins are quantiles of the data, as many as hold ``min_seconds`` each
 (at most ``max_bins``). The monitor then compares θ1 with the bin of the current velocity

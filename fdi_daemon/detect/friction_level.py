@@ -9,9 +9,9 @@ reported level is the median of the window's level picked four times a second at
 windows, over the last ``level_median_s`` worth of picks since the last alarm episode began
 or ended, the first of them one window after it (`level_restart`: a level that jumps at a
 fault is reported at its new value from one window after the detection, never a mix of the
-windows before and after it). It is reported only while the current window is valid (NaN elsewhere, as at rest:
-a level that cannot be measured is not shown, and the alarm lifecycle and the trend take
-no reading), and NaN before the first pick. Its spread, the 25–75 % range of the same
+windows before and after it). It is reported only while the current window is valid (NaN
+elsewhere, as at rest: a level that cannot be measured is not shown, and the alarm
+lifecycle and the trend take no reading), and NaN before the first pick. Its spread, the 25–75 % range of the same
 picks, is the level's uncertainty.
 
 ``level_tick`` is compiled and inlined into `detect.kernel.monitor_tick`, so
@@ -38,8 +38,9 @@ LEVEL_INTS = 7
 def level_tick(f, ii, lo, level, valid):  # pragma: no cover - jit
     """One tick: on a pick tick with a valid window, the window's level enters the ring and
     the median and the 25–75 % spread of the ring are recomputed (`_pick`); on every tick
-    they are reported if the window is valid, else NaN. Inlined into the monitor's tick (as a call it
-    cost about 12 of its 155 ns); the pick stays a call, made four times a second."""
+    they are reported if the window is valid, else NaN. Inlined into the monitor's tick (as
+    a call it cost about 12 of its 155 ns); the pick stays a call, made four times a
+    second."""
     cap = ii[lo + L_CAPACITY]
     ring = ii[lo + L_FLOATS]
     out = ring + 2 * cap
@@ -71,9 +72,9 @@ def level_restart(f, ii, lo):  # pragma: no cover - jit
 
 @jit
 def _pick(f, ii, lo, ring, cap, held, level):  # pragma: no cover - jit
-    """The level into the ring and into its sorted copy (in place of the value it overwrites, once
-    the ring is full: one pass, not a sort); the median and 25–75 % range into f[held],
-    f[held + 1]."""
+    """The level into the ring and into its sorted copy (in place of the value it
+    overwrites, once the ring is full: one pass, not a sort); the median and 25–75 % range
+    into f[held], f[held + 1]."""
     head = ii[lo + L_HEAD]
     count = ii[lo + L_COUNT]
     srt = ring + cap

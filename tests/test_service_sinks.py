@@ -50,6 +50,9 @@ def test_stdout_lines_with_and_without_journald_priorities():
     assert "missing=3" in format_event({"t": 1.0, "kind": "data_gap", "missing": 3})
     lost = format_event({"t": None, "kind": "link_lost", "reason": "refused", "time": 1e9})
     assert "LINK LOST" in lost and "reason=refused" in lost and "time=" not in lost
+    isolated = format_event({"t": 20.5, "kind": "friction_isolated", "friction_level": None,
+                             "coulomb_change": 1.6})  # the level is not measured yet
+    assert "friction_level" not in isolated and "coulomb_change=1.6" in isolated
 
 
 def test_worker_drops_non_critical_items_but_never_alarms():

@@ -217,7 +217,8 @@ def journald_attached() -> bool:
 
 
 def format_event(event: dict) -> str:
-    """One human line for an event: sample time, kind, the numbers that matter."""
+    """One human line for an event: sample time, kind, the numbers that matter (a value
+    that was not measured, None, is left out)."""
     kind = str(event.get("kind", "?"))
     t = event.get("t")
     when = f"t={t:10.3f} s" if isinstance(t, (int, float)) else "t=         - s"
@@ -227,7 +228,8 @@ def format_event(event: dict) -> str:
         if isinstance(value, (int, float)) and math.isfinite(value):
             parts.append(f"{label}={value:+.4g}")
     for key, value in event.items():
-        if key in ("t", "kind", "theta1", "theta2", "time") or isinstance(value, (dict, list)):
+        if (key in ("t", "kind", "theta1", "theta2", "time") or value is None
+                or isinstance(value, (dict, list))):
             continue
         if isinstance(value, float):
             value = f"{value:.4g}"

@@ -23,12 +23,13 @@ isolation window after the detection: a knock or glitch does not persist); gain 
 friction evidence within ``isolation_timeout_s``, are another fault.
 
 The level path catches friction that creeps in (wear), that starts while the guard holds,
-or that is there from the start: the friction level θ1 (eq. 17) above its fault-free value
-by more than its margin for ``slow_persistence_s`` -> fault_detected, and the level itself
-is the evidence. The fault-free value is the commissioning baseline of the operating
-condition (``fdi baseline``; margin max(friction_min_level/2, band_k·σ), computed by the
-monitor) or, without one, the median level of the calibration (margin friction_min_level).
-A friction episode is cleared when the level has been back within half its margin for
+or that is there from the start: the Coulomb coefficient θ1 (eq. 17) above its fault-free
+value by more than its margin for ``slow_persistence_s`` -> fault_detected, and θ1 itself is
+the evidence. The fault-free value is the commissioning baseline of the operating condition
+(``fdi baseline``; margin max(friction_min_level/2, band_k·σ), computed by the monitor) or,
+without one, the median θ1 of the calibration (margin friction_min_level). (The reported
+friction level, `detect.friction_level`, is another quantity: θ held to the signature.)
+A friction episode is cleared when θ1 has been back within half its margin for
 ``friction_clear_s`` while the rig moves.
 
 The per-tick arithmetic (both innovation tests, the guard, the level's excess, the quiet

@@ -68,7 +68,7 @@ class DetectorSettings:
     """Increase of the Coulomb coefficient (units of the calibrated signature) that counts
     as friction."""
     slow_persistence_s: float = 2.0
-    """Level path: the friction level θ1 above its fault-free value (the commissioning
+    """Level path: the Coulomb coefficient θ1 above its fault-free value (the commissioning
     baseline, else the calibration's median) by more than its margin for this long is a fault
     (friction that creeps in, starts while the guard holds, or is there from the start)."""
     track_tolerance: float = 0.15

@@ -28,8 +28,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import math
 
-    import numpy as np
-
     from fdi_daemon.commands.identify import load_io
     from fdi_daemon.detect.baseline import QUANTITIES, fit_baseline
     from fdi_daemon.detect.monitor import Monitor
@@ -53,12 +51,11 @@ def run(args: argparse.Namespace) -> int:
     pipeline = monitor.pipeline
     batch = pipeline.run(v_in, accel, position=monitor.position_column(rec))
     quantities = {"coulomb": pipeline.thetas(batch)[0], "level": pipeline.levels(batch)}
-    valid_s = float(np.sum(np.isfinite(quantities["coulomb"]) & np.isfinite(quantities["level"]))
-                    / model.fs)
     try:
         bins = fit_baseline(quantities, batch.v_rms, model.fs, args.min_seconds, args.max_bins)
     except ValueError as exc:
         raise UserError(f"{args.recording}: {exc}") from None
+    valid_s = sum(b["seconds"] for b in bins)  # the windows where both are measured
     model.extra["baseline"] = {
         "bins": bins,
         "binned_by": "window velocity RMS (m/s)",

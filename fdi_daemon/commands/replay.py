@@ -41,10 +41,9 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from fdi_daemon.detect.summary import write_summary
     from fdi_daemon.errors import UserError
     from fdi_daemon.fleet.replay_one import replay_recording
-    from fdi_daemon.io.outputs import check_outputs
+    from fdi_daemon.io.outputs import check_outputs, write_json
 
     if args.dashboard and not args.realtime:
         raise UserError("--dashboard needs --realtime (a batch replay is over before a "
@@ -87,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
 
         write_events(args.events, events)
     if args.summary:
-        write_summary(args.summary, summary)
+        write_json(args.summary, summary)
     if args.trace:
         from fdi_daemon.detect.trace_file import write_trace
 

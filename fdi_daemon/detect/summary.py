@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 from typing import Any
 
-from fdi_daemon.errors import UserError
 from fdi_daemon.io.outputs import finite_or_none
 
-__all__ = ["replay_summary", "write_summary"]
+__all__ = ["replay_summary"]
 
 
 def _first(events: list[dict[str, Any]], kind: str) -> float | None:
@@ -60,10 +57,3 @@ def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, met
                                if e["kind"] == "data_gap"),
     }
 
-
-def write_summary(path: str | Path, summary: dict[str, Any]) -> None:
-    path = Path(path)
-    try:
-        path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write the summary: {exc.strerror or exc}") from None

@@ -206,3 +206,23 @@ def test_an_input_that_never_leaves_its_median_names_nothing():
     rec = simulate_recording(MsdParams(accel_noise_width=0.2), u, seed=2)
     b, a = nominal_model()
     assert run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a).named == []
+
+
+def test_a_constant_force_is_no_candidate_where_the_acceleration_has_no_dc_response():
+    # the §V mass hangs on a spring: its acceleration model has two zeros at z = 1, and a
+    # constant force only moves it to a new rest (zero acceleration again). A free mass
+    # (force → acceleration 1/m, no zero at DC) keeps the candidate.
+    from fdi_daemon.diagnose.baseline import prepare, zero_at_dc
+
+    rec = recording(None)
+    b, a = nominal_model()
+    ctx, _ = prepare(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    assert "force_offset" not in ctx.candidates and "sensor_offset" in ctx.candidates
+    free_mass = (np.array([0.1, 0.05]), np.array([1.0, -0.5]))
+    ctx, _ = prepare(rec.v_in, rec.accel, FS, "acceleration", *free_mass)
+    assert "force_offset" in ctx.candidates
+    # a zero near 1 counts when the data cannot tell it from one at 1 (below the DC block)
+    zero_at = np.exp(-2 * np.pi * 0.1 / 256.0)  # 0.1 Hz at 256 Hz
+    assert zero_at_dc(np.poly([zero_at, 0.3]), 256.0, below_hz=0.2)
+    assert not zero_at_dc(np.poly([zero_at, 0.3]), 256.0, below_hz=0.05)
+    assert not zero_at_dc(np.poly([-0.9, 0.3]), 256.0, below_hz=0.2)

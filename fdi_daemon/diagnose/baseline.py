@@ -92,6 +92,17 @@ def drift(e: np.ndarray, u: np.ndarray, fs_hz: float) -> dict:
     return {"band_low_hz": f_low, "error_share_below": share}
 
 
+def zero_at_dc(b: np.ndarray, fs_hz: float, below_hz: float) -> bool:
+    """Whether B̂ has a real zero at z = 1, or so near it (below ``below_hz``, the DC block's
+    cut-off) that the data cannot tell it from one at 1. An acceleration model with such a
+    zero answers no constant input with a constant acceleration: the mechanism holds its
+    position (a spring, a chamber's air, a position loop), and a constant force on its mass
+    moves it to a new rest, where the acceleration is zero again."""
+    zeros = np.roots(np.trim_zeros(np.asarray(b, float), "f"))
+    real = zeros[(np.abs(zeros.imag) < 1e-9) & (zeros.real > 0)].real
+    return bool(np.any(np.abs(np.log(real)) * fs_hz / (2 * math.pi) < below_hz))
+
+
 #: a model mode this many times slower than the DC block is marginally stable for the test
 MARGINAL = 1.5
 
@@ -138,8 +149,11 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
     limit = len(u) // 4
     warmup = max(signals.settle_samples(nominal.a_dom, limit), min(hp_settle, limit))
     split = signals.make_split(len(u), warmup)
-    # a DC block removes an offset; a baseline fitted here already holds the linear effects
+    # a DC block removes an offset; a constant force moves no steady acceleration of a
+    # mechanism that holds its position; a baseline fitted here already holds the linear
+    # effects
     skip = ({"sensor_offset"} if n_kind else set()) | (
+        {"force_offset"} if not n_kind and zero_at_dc(nominal.b_dom, fs_hz, hp) else set()) | (
         {"viscous_friction", "dead_time", "stiffness_change"}
         if info["baseline"] != "model file" else set())
     candidates = tuple(e for e in EFFECT_NAMES if e not in skip and e not in NAMED_BY_MODE)

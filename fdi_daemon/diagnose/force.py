@@ -465,15 +465,17 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
         for e in out:
             if e.name == "viscous_friction" and linear is not None:
                 # a viscous friction is a damper: the loop's linear part must move the mode
-                # by damping (`mode_shift`, with the spring beside it), not by stiffness
+                # by damping (`mode_shift`, with the spring beside it), not by stiffness,
+                # and add damping, not remove it
                 e.physical["mode_change"] = linear.physical.get("mode_change")
                 # its size per unit mass, Δ(c/m), read from the mode like the damping: the
                 # split of the damping between the spring's and the viscous column's free
                 # numerators is not determined by the data
-                e.physical["damping_change_per_s"] = linear.physical.get(
-                    "damping_change_per_s")
+                added = linear.physical.get("damping_change_per_s")
+                e.physical["damping_change_per_s"] = added
                 e.physical["plausible"] = bool(e.physical["plausible"]
-                                               and e.physical["mode_change"] not in MECHANICS)
+                                               and e.physical["mode_change"] not in MECHANICS
+                                               and (added is None or added >= 0.0))
         return out
 
     best, best_ff, best_nums, y, phi, v = min(fits, key=lambda f: f[0])

@@ -101,15 +101,13 @@ def test_rig_payload_is_a_mass_change(bearing_mass_kg, excitation):
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_a_rig_variant_without_fault_names_no_friction_its_seal_lacks(tmp_path):
+def test_a_rig_variant_without_fault_names_no_friction_its_seal_lacks(tmp_path, monkeypatch):
     # rig variant v1 (`test_detect_other_rig.rig_variant(1)`: another load, valve, seal),
     # with its own `fdi identify` model, 40 s at 0.8 V. Its seal has Coulomb friction with a
     # little stiction and no viscous part; a viscous friction was named second (its loop took
     # damping out of the mode, Δ(c/m) −1.45 /s: a negative damper) until a viscous friction
     # had to add damping (docs/diagnose.md §4.3)
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent))
     from diagnose_rig_variants import identified_model
     from test_detect_other_rig import rig_variant
 

@@ -18,6 +18,7 @@ from scipy import signal
 from fdi_daemon.diagnose import signals
 from fdi_daemon.diagnose.augment import AugmentedPlant
 from fdi_daemon.diagnose.effects import EFFECT_NAMES, NAMED_BY_MODE, Context
+from fdi_daemon.diagnose.force import s_roots
 from fdi_daemon.errors import UserError
 
 
@@ -98,9 +99,8 @@ def zero_at_dc(b: np.ndarray, fs_hz: float, below_hz: float) -> bool:
     zero answers no constant input with a constant acceleration: the mechanism holds its
     position (a spring, a chamber's air, a position loop), and a constant force on its mass
     moves it to a new rest, where the acceleration is zero again."""
-    zeros = np.roots(np.trim_zeros(np.asarray(b, float), "f"))
-    real = zeros[(np.abs(zeros.imag) < 1e-9) & (zeros.real > 0)].real
-    return bool(np.any(np.abs(np.log(real)) * fs_hz / (2 * math.pi) < below_hz))
+    s = s_roots(np.asarray(b, float), fs_hz)  # a real zero z > 0: a real s
+    return bool(np.any((np.abs(s.imag) < 1e-9 * fs_hz) & (np.abs(s) < 2 * math.pi * below_hz)))
 
 
 #: a model mode this many times slower than the DC block is marginally stable for the test

@@ -593,11 +593,11 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
     loop = _minus(np.convolve(a, den), np.convolve(b_x, num_x))
     if b_v is not None:
         loop = _minus(loop, np.convolve(b_v, num_v))
-    nominal = [s for s in _s_poles(a, fs) if s.imag > 0]
+    nominal = [s for s in s_roots(a, fs) if s.imag > 0]
     if not nominal:
         return {"mode_change": "unknown"}
     s0 = min(nominal, key=lambda s: -s.real / abs(s))  # the least damped pair
-    s1 = min((s for s in _s_poles(loop, fs) if s.imag > 0), key=lambda s: abs(s - s0),
+    s1 = min((s for s in s_roots(loop, fs) if s.imag > 0), key=lambda s: abs(s - s0),
              default=None)
     if s1 is None:
         return {"mode_change": "unknown"}
@@ -646,8 +646,9 @@ def _minus(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out
 
 
-def _s_poles(poly: np.ndarray, fs: float) -> np.ndarray:
-    """Roots of a polynomial in z⁻¹ as continuous-time poles (1/s)."""
+def s_roots(poly: np.ndarray, fs: float) -> np.ndarray:
+    """Roots of a polynomial in z⁻¹ (poles or zeros) in continuous time, s = fs·ln z (1/s);
+    roots at z = 0 are left out."""
     z = np.roots(poly).astype(complex)
     return np.log(z[z != 0]) * fs
 

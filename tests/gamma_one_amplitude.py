@@ -75,19 +75,18 @@ def _measured(fault: dict, window: slice):
     """What `fdi signature` has instead: r = ẍ − Ĝ v_in of the measured acceleration over the
     window (the shipped Ĝ, made on this rig), and (label, velocity, stuck rows) with the
     true velocity and stuck flag, and with the model observer's v̂ and the rows where the
-    accelerometer is quiet (|ẍ| < 0.1 m/s² on two samples running, and the two before)."""
+    accelerometer is quiet (`stick_window_oracle.quiet_rows`)."""
     from fdi_daemon.core.velocity_observer import velocity_from_settings
     from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.ident.signature import plant_residual
     from fdi_daemon.io.model_file import load_model
+    from stick_window_oracle import quiet_rows
 
     accel = np.asarray(fault["accel"], float)
     model = load_model(REPO / "fdi_daemon" / "data" / "model_sim_rig.yaml")
     residual = plant_residual(nominal_plant(model), fault["v_in"], accel)
     observer = velocity_from_settings({"method": "model_observer"}, fs_hz=FS)
-    quiet = np.abs(accel) < 0.1
-    pair = quiet & np.r_[quiet[1:], False]
-    found = pair | np.r_[False, pair[:-1]] | np.r_[pair[1:], False] | np.r_[pair[2:], False, False]
+    found = quiet_rows(accel)
     return residual[window], (
         ("measured r, true v and stuck, hold free", fault["velocity_true"],
          fault["stuck"][window] > 0.5),

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import re
 import signal
 import sys
@@ -73,7 +74,20 @@ class Terminated(Exception):
     for SIGTERM ends the process at once and leaves its children running)."""
 
 
+#: seconds after which a SIGTERM that came during an import is delivered again
+TERMINATE_RETRY_S = 0.05
+
+
 def _terminate(signum, frame):
+    """Raise `Terminated`, except inside the import machinery: an exception raised there
+    breaks the module being imported (numpy prints its own traceback and fails with
+    "numpy._core.multiarray failed to import"). There the signal is sent again a moment
+    later, once the import is done."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            threading.Timer(TERMINATE_RETRY_S, os.kill, (os.getpid(), signum)).start()
+            return
+        frame = frame.f_back
     raise Terminated
 
 

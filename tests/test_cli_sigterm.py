@@ -33,3 +33,30 @@ def test_a_command_leaves_the_sigterm_handler_as_it_found_it(tmp_path, capsys):
     assert main(["replay", str(tmp_path / "missing.csv"), "--model",
                  str(tmp_path / "missing.yaml")]) != 0
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+def test_a_sigterm_during_an_import_ends_the_command_after_the_import(tmp_path):
+    # raised inside the import machinery, `Terminated` broke the module being imported: a
+    # SIGTERM to `fdi sim serve` while it imported numpy printed numpy's traceback and
+    # "numpy._core.multiarray failed to import". The signal is delivered again after it
+    import subprocess
+    import sys
+
+    (tmp_path / "slow_module.py").write_text(
+        "import os, signal, time\n"
+        "os.kill(os.getpid(), signal.SIGTERM)\n"
+        "time.sleep(0.3)\n"
+        "print('imported', flush=True)\n")
+    script = ("import signal, sys, time\n"
+              "from fdi_daemon.cli import Terminated, _terminate\n"
+              "signal.signal(signal.SIGTERM, _terminate)\n"
+              "try:\n"
+              "    import slow_module\n"
+              "    time.sleep(5)\n"
+              "    print('not terminated', flush=True)\n"
+              "except Terminated:\n"
+              "    print('terminated', flush=True)\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=30)
+    assert done.stdout.split() == ["imported", "terminated"], (done.stdout, done.stderr)
+    assert "Traceback" not in done.stderr

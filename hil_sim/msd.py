@@ -144,11 +144,18 @@ def _zoh_tf(a, b, c, d, fs_hz) -> tuple[np.ndarray, np.ndarray]:
 
 def _input_chain(v_in: np.ndarray, p: MsdParams) -> np.ndarray:
     """The held input of every internal step after dead time, dead zone, backlash, saturation."""
-    n_sub = p.substeps
-    u = np.repeat(np.asarray(v_in, dtype=float), n_sub)
-    eff = p.effects
+    return input_effects(np.repeat(np.asarray(v_in, dtype=float), p.substeps), p.effects,
+                         p.fs_hz * p.substeps)
+
+
+def input_effects(u: np.ndarray, effects: dict, rate_hz: float) -> np.ndarray:
+    """The input samples ``u`` (V, at ``rate_hz``) after the input effects among
+    ``effects`` (name -> parameters, as `MsdParams.effects`), in the order a drive meets
+    them: dead time, dead zone, backlash, saturation. Other effects are not applied."""
+    u = np.asarray(u, dtype=float)
+    eff = effects
     if "dead_time" in eff:
-        d = int(round(eff["dead_time"]["delay_s"] * p.fs_hz * n_sub))
+        d = int(round(eff["dead_time"]["delay_s"] * rate_hz))
         if d > 0:
             u = np.concatenate([np.full(d, u[0]), u[:-d]])
     if "dead_zone" in eff:

@@ -146,14 +146,28 @@ def rig_model() -> tuple[np.ndarray, np.ndarray]:
     return model.plant_b, model.plant_a
 
 
+#: input effects hidden between the recorded command and the rig's valve (`rig_recording`):
+#: two samples of dead time at 256 Hz, a dead zone, a saturation and a backlash of the drive
+RIG_INPUT_EFFECTS = {
+    "dead_time": {"delay_s": 2 / RIG_FS},
+    "dead_zone": {"half_width_v": 0.15},
+    "input_saturation": {"level_v": 1.2},
+    "backlash": {"gap_v": 0.2},
+}
+
+
 @lru_cache(maxsize=None)
 def rig_recording(fault: str | None = None, value: float = 0.0, rms_v: float = 0.4,
-                  duration_s: float = 30.0, variant: tuple[tuple[str, float], ...] = ()):
+                  duration_s: float = 30.0, variant: tuple[tuple[str, float], ...] = (),
+                  input_effect: str | None = None):
     """(v_in, accel) of the simulated pneumatic rig (`hil_sim.rig.Rig`, seed 4) driven by a
     1–12 Hz multisine of ``rms_v`` after 1 s at rest, with ``fault`` switched on from the
     start: ``bearing_supply`` (a fraction of nominal: below ≈ 0.8 the block touches and
     Coulomb contact friction acts on the load) or one of `hil_sim.rig.FAULTS`. variant:
-    `RigParams` overrides, as (name, value) pairs (a rig with other physics)."""
+    `RigParams` overrides, as (name, value) pairs (a rig with other physics). input_effect:
+    one of `RIG_INPUT_EFFECTS`, acting on the command before the valve; the recorded v_in
+    is the command (as measured)."""
+    from hil_sim.msd import input_effects
     from hil_sim.rig import Rig, RigParams
 
     rig = Rig(RigParams(**dict(variant)), seed=4)
@@ -162,6 +176,11 @@ def rig_recording(fault: str | None = None, value: float = 0.0, rms_v: float = 0
     elif fault is not None:
         rig.set_fault(fault, value)
     rig.run(np.zeros(int(RIG_FS)))
-    out = rig.run(multisine(duration_s, RIG_FS, 1.0, 12.0, rms_v, seed=3))
-    return out["v_in"], out["accel"]
+    command = multisine(duration_s, RIG_FS, 1.0, 12.0, rms_v, seed=3)
+    hidden = {input_effect: RIG_INPUT_EFFECTS[input_effect]} if input_effect else {}
+    applied = input_effects(command, hidden, RIG_FS)
+    out = rig.run(applied)
+    # the rig measures the voltage its valve gets (with the converter's error): recorded is
+    # the command with that error, the effect hidden between them
+    return command + (out["v_in"] - applied), out["accel"]
 

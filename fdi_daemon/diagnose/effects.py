@@ -79,6 +79,9 @@ class EffectSpec:
     build: Callable[[float | None, float], Regressor]  # (parameter, centre) -> regressor
     grid: Callable[["Context"], np.ndarray] | None = None
     integer_coarse: bool = False
+    #: the parameter is searched with the regressor's coefficient held at 1 (a pure
+    #: shift: a coefficient fitted beside it trades with the delay), then fitted freely
+    searched_at_unit_weight: bool = False
 
 
 def _q(values: np.ndarray, qs, centre: float = 0.0) -> np.ndarray:
@@ -105,7 +108,8 @@ SPECS: dict[str, EffectSpec] = {
                                   lambda p, c: Static(lambda u, v, x, y0: [x ** 3])),
     "dead_time": EffectSpec(
         "dead_time", "output", False, "dead_time_s", "s",
-        lambda p, c: DelayedOutputRegressor(p), _delays, integer_coarse=True),
+        lambda p, c: DelayedOutputRegressor(p), _delays, integer_coarse=True,
+        searched_at_unit_weight=True),
     "gain_fault": EffectSpec("gain_fault", "output", False, None, "",
                              lambda p, c: Static(lambda u, v, x, y0: [y0])),
     "input_saturation": EffectSpec(
@@ -321,6 +325,14 @@ class _SearchFit:
         theta = solve_gram(gram, rhs)
         return max(self.yy - float(theta @ rhs), 0.0)  # Σe² at the least-squares optimum
 
+    def sse_at_unit_weight(self, x: np.ndarray) -> float:
+        """Σe² of y − x (one column, coefficient 1) with the base fitted to it."""
+        e = self.y - x[self.fit, 0]
+        if self.base is None:
+            return float(e @ e)
+        bte = self.base.T @ e
+        return max(float(e @ e) - float(solve_gram(self.gbb, bte) @ bte), 0.0)
+
 
 class NotApplicable(Exception):
     """The data do not allow this effect (e.g. an input that never leaves its median)."""
@@ -335,13 +347,14 @@ def search_param(spec: EffectSpec, ctx: Context, base: np.ndarray | None = None)
     if grid.size == 0:
         raise NotApplicable(f"{spec.name}: the data give no {spec.param} to search")
     search = _SearchFit(ctx, base)
-    costs = np.array([search.sse(columns(spec, g, ctx)) for g in grid])
+    cost = search.sse_at_unit_weight if spec.searched_at_unit_weight else search.sse
+    costs = np.array([cost(columns(spec, g, ctx)) for g in grid])
     best = int(np.argmin(costs))
     lo = grid[best - 1] if best > 0 else grid[best] * (0.5 if not spec.integer_coarse else 0.0)
     hi = grid[best + 1] if best + 1 < grid.size else grid[best] * 1.5
     if spec.integer_coarse:
         lo, hi = max(lo, 0.0), hi
-    res = minimize_scalar(lambda p: search.sse(columns(spec, p, ctx)),
+    res = minimize_scalar(lambda p: cost(columns(spec, p, ctx)),
                           bounds=(lo, hi), method="bounded",
                           options={"xatol": max(1e-6, 0.01 * (hi - lo)), "maxiter": 25})
     return float(res.x) if res.fun < costs[best] else float(grid[best])

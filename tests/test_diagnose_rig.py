@@ -56,8 +56,8 @@ _INPUT_SIZE = {"dead_time": ("dead_time_s", "delay_s"), "dead_zone": ("half_widt
 def test_rig_input_effect_is_named_first_with_its_size(effect):
     # the drive between the recorded command and the valve: a dead time (two samples), a
     # dead zone, a saturation or a backlash. The dead time is a pure shift: its value was
-    # read 1.5 samples while a coefficient fitted beside the shift traded with it (1.46);
-    # it is now searched as a shift (docs/diagnose.md §4.1)
+    # read 1.5 samples while the coefficient fitted beside the shift traded with it (1.46);
+    # the value reported is now the pure shift's (docs/diagnose.md §4.1)
     u, y = rig_recording(input_effect=effect, **STRONG)
     b, a = rig_model()
     result = run_diagnose(u, y, RIG_FS, "acceleration", b, a)

@@ -79,9 +79,10 @@ class EffectSpec:
     build: Callable[[float | None, float], Regressor]  # (parameter, centre) -> regressor
     grid: Callable[["Context"], np.ndarray] | None = None
     integer_coarse: bool = False
-    #: the parameter is searched with the regressor's coefficient held at 1 (a pure
-    #: shift: a coefficient fitted beside it trades with the delay), then fitted freely
-    searched_at_unit_weight: bool = False
+    #: the value reported is searched again with the regressor's coefficient held at 1 (a
+    #: pure shift: the free coefficient of the fit trades with the delay, and its size is
+    #: what tells a shift from a linear change that only looks like one)
+    reported_at_unit_weight: bool = False
 
 
 def _q(values: np.ndarray, qs, centre: float = 0.0) -> np.ndarray:
@@ -109,7 +110,7 @@ SPECS: dict[str, EffectSpec] = {
     "dead_time": EffectSpec(
         "dead_time", "output", False, "dead_time_s", "s",
         lambda p, c: DelayedOutputRegressor(p), _delays, integer_coarse=True,
-        searched_at_unit_weight=True),
+        reported_at_unit_weight=True),
     "gain_fault": EffectSpec("gain_fault", "output", False, None, "",
                              lambda p, c: Static(lambda u, v, x, y0: [y0])),
     "input_saturation": EffectSpec(
@@ -338,8 +339,10 @@ class NotApplicable(Exception):
     """The data do not allow this effect (e.g. an input that never leaves its median)."""
 
 
-def search_param(spec: EffectSpec, ctx: Context, base: np.ndarray | None = None) -> float | None:
-    """Nonlinear parameter by search on the training part: grid, then bounded refinement."""
+def search_param(spec: EffectSpec, ctx: Context, base: np.ndarray | None = None,
+                 unit_weight: bool = False) -> float | None:
+    """Nonlinear parameter by search on the training part: grid, then bounded refinement.
+    unit_weight: the effect's one column enters with coefficient 1 (not fitted)."""
     if spec.param is None:
         return None
     grid = np.asarray(spec.grid(ctx), float)
@@ -347,7 +350,7 @@ def search_param(spec: EffectSpec, ctx: Context, base: np.ndarray | None = None)
     if grid.size == 0:
         raise NotApplicable(f"{spec.name}: the data give no {spec.param} to search")
     search = _SearchFit(ctx, base)
-    cost = search.sse_at_unit_weight if spec.searched_at_unit_weight else search.sse
+    cost = search.sse_at_unit_weight if unit_weight else search.sse
     costs = np.array([cost(columns(spec, g, ctx)) for g in grid])
     best = int(np.argmin(costs))
     lo = grid[best - 1] if best > 0 else grid[best] * (0.5 if not spec.integer_coarse else 0.0)
@@ -367,12 +370,8 @@ def fit_effect(name: str, ctx: Context, base: list[FittedEffect] | None = None,
     Returns the new effect and the refitted base effects.
     """
     spec = SPECS[name]
-    n_search = ctx.split.warmup + SEARCH_SAMPLES
-    if ctx.split.train_end > n_search:  # long records: search on the first part only
-        param = search_param(spec, ctx.head(n_search),
-                             None if base_columns is None else base_columns[:n_search])
-    else:
-        param = search_param(spec, ctx, base_columns)
+    part, n_search = _search_part(ctx)
+    param = search_param(spec, part, None if base_columns is None else base_columns[:n_search])
     x_new = columns(spec, param, ctx, ctx.regressors(spec, param))
     xx = x_new if base_columns is None else np.column_stack([base_columns, x_new])
     theta = least_squares(xx[ctx.split.fit], ctx.target[ctx.split.fit])
@@ -384,6 +383,14 @@ def fit_effect(name: str, ctx: Context, base: list[FittedEffect] | None = None,
         pos += k
     new = _with_theta(name, param, theta[pos:], ctx)
     return new, refitted
+
+
+def _search_part(ctx: Context) -> tuple[Context, int]:
+    """The context a parameter is searched on, and its length: a long record's first part."""
+    n_search = ctx.split.warmup + SEARCH_SAMPLES
+    if ctx.split.train_end > n_search:
+        return ctx.head(n_search), n_search
+    return ctx, len(ctx.u)
 
 
 def _with_theta(name: str, param: float | None, theta: np.ndarray, ctx: Context) -> FittedEffect:
@@ -452,6 +459,11 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
     elif eff.name == "dead_time":  # y = ŷ₀ + c (ŷ₀(t − τ) − ŷ₀(t)); a pure shift has c = 1
         out["shift_share"] = float(eff.coefficients[0][0])
         plausible = 0.5 <= out["shift_share"] <= 1.5
+        # the delay itself is the pure shift's (c held at 1): beside the free c it trades
+        # with c (c·τ is the first-order shift)
+        out["fitted_shift_s"] = out[spec.param]
+        out[spec.param] = stored_param(spec, search_param(spec, _search_part(ctx)[0],
+                                                          unit_weight=True), ctx.fs_hz)
     else:
         key = "offset" if eff.name == "sensor_offset" else "gain"
         out[key] = float(eff.coefficients[0][0])

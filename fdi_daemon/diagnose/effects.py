@@ -327,12 +327,9 @@ class _SearchFit:
         return max(self.yy - float(theta @ rhs), 0.0)  # Σe² at the least-squares optimum
 
     def sse_at_unit_weight(self, x: np.ndarray) -> float:
-        """Σe² of y − x (one column, coefficient 1) with the base fitted to it."""
+        """Σe² of y − x: the one column x with coefficient 1, against y alone."""
         e = self.y - x[self.fit, 0]
-        if self.base is None:
-            return float(e @ e)
-        bte = self.base.T @ e
-        return max(float(e @ e) - float(solve_gram(self.gbb, bte) @ bte), 0.0)
+        return float(e @ e)
 
 
 class NotApplicable(Exception):
@@ -342,7 +339,8 @@ class NotApplicable(Exception):
 def search_param(spec: EffectSpec, ctx: Context, base: np.ndarray | None = None,
                  unit_weight: bool = False) -> float | None:
     """Nonlinear parameter by search on the training part: grid, then bounded refinement.
-    unit_weight: the effect's one column enters with coefficient 1 (not fitted)."""
+    unit_weight: the effect's one column enters with coefficient 1 (not fitted), against the
+    target alone (``base`` is not used)."""
     if spec.param is None:
         return None
     grid = np.asarray(spec.grid(ctx), float)
@@ -459,8 +457,8 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
     elif eff.name == "dead_time":  # y = ŷ₀ + c (ŷ₀(t − τ) − ŷ₀(t)); a pure shift has c = 1
         out["shift_share"] = float(eff.coefficients[0][0])
         plausible = 0.5 <= out["shift_share"] <= 1.5
-        # the delay itself is the pure shift's (c held at 1): beside the free c it trades
-        # with c (c·τ is the first-order shift)
+        # the delay itself is the pure shift's (c held at 1), read against the nominal
+        # model: beside the free c it trades with c (c·τ is the first-order shift)
         out["fitted_shift_s"] = out[spec.param]
         out[spec.param] = stored_param(spec, search_param(spec, _search_part(ctx)[0],
                                                           unit_weight=True), ctx.fs_hz)

@@ -81,7 +81,7 @@ def positioner_recording(coulomb_n: float = 20.0, offset_n: float = -3.0, seed: 
 
 #: the ratio each named linear change reports
 NAMED_RATIOS = {"mass_change": "mass_ratio", "stiffness_change": "stiffness_ratio",
-                "gain_fault": "gain_ratio"}
+                "gain_fault": "gain_ratio", "viscous_friction": "damping_change_per_s"}
 
 
 def noise_input(duration_s: float, corner_hz: float, rms: float, seed: int = 5):

@@ -25,7 +25,7 @@ it does to the mechanical mode (`force.mode_shift`): ``stiffness_change`` when t
 moved, ``mass_change`` (the same fit) when the mass did, ``viscous_friction`` (its own fit)
 when damping was added. After each round the spring a named force effect left in the base
 is named too when it pays on top of it (`spring_check`: a stiffness change behind a
-friction). Then every remaining candidate is tried on top of it (jointly refitted) for a
+friction, or a damper, fitted in its own column beside the spring, where that pays). Then every remaining candidate is tried on top of it (jointly refitted) for a
 second effect, with the same test, against the base given the same loop fit; the one named
 must also beat the base refitted from its own fit without it (`_beyond_its_start`: a loop's
 fit depends on where it starts). No accepted candidate: "no significant missing effect".
@@ -361,8 +361,8 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
       refit's place (``explain``); the effects then named on top of it are fitted again
       without it (`_without_explanation`), and when it does not pay on top of them it is
       theirs and not named (``held_by``);
-    - effects E named on top of the refit: the match is named first, E refitted on top
-      of it, when it still matches on top of E (`_explanation_on_top`, ``on_top_of``);
+    - effects E named on top of the refit, fewer than ``max_effects``: the match is named
+      first, E refitted on top of it, when it still matches on top of E (`_explanation_on_top`, ``on_top_of``);
       otherwise E holds it (a friction's describing function or a static map's Bussgang
       gain also looks like a gain change) and the refit stays in the base.
     """
@@ -427,14 +427,14 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
             chosen, prediction = reference
             break
         by_mode = [mechanics_name(e) for e in best.base + [best.effect]]
-        chosen, check = spring_check(ctx, by_mode, best.prediction, floor_sse)
+        chosen, prediction, check = spring_check(ctx, by_mode, best.prediction, floor_sse)
         spring = check or spring
         cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
                 for e in chosen]
         base_cols = np.column_stack(cols)
-        prediction = best.prediction
     named = [e.name for e in chosen if e.name not in BASE_TERMS]
-    if linear.get("matching") and explain is None:
+    if linear.get("matching") and explain is None and len(named) < max_effects:
+        # (with as many effects as allowed named on top of the refit, it stays in the base)
         if not named:  # nothing but the refit: name what it matches
             return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
                                   explain=linear["matching"])
@@ -605,25 +605,29 @@ def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
 
 
 def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray,
-                 floor_sse: float | None) -> tuple[list[FittedEffect], dict]:
-    """The loop's spring never swallows a stiffness or mass change silently.
+                 floor_sse: float | None
+                 ) -> tuple[list[FittedEffect], np.ndarray, dict]:
+    """The loop's spring never swallows a change of the mechanics silently.
 
     Every force effect brings the loop's spring (``loop_stiffness``, §4.3), unnamed. After
     a round that leaves it in ``chosen``, the other effects are fitted again without it
-    (`force.in_the_loop`, ``spring=False``): the spring is named (``stiffness_change`` or
-    ``mass_change``, by the mode) when it pays on top of them as a candidate
-    would (F-test at ALPHA, ΔBIC < 0, at least MIN_REDUCTION of the held-out error energy),
-    the error without it is above the noise floor, there is room for one more effect
-    (MAX_EFFECTS), and the loop's linear part moves the mode by stiffness or mass
-    (`force.mode_shift`). With a fitted baseline the spring stays in the base, as
-    ``stiffness_change`` is not a candidate there (the baseline holds the linear effects).
-    Returns ``chosen`` (the spring renamed when named) and the figures of the check ({}
-    when there was nothing to check)."""
+    (`force.in_the_loop`, ``spring=False``); when the spring pays on top of them as a
+    candidate would (F-test at ALPHA, ΔBIC < 0, at least MIN_REDUCTION of the held-out
+    error energy), the error without it is above the noise floor and there is room for one
+    more effect (MAX_EFFECTS), it is a change of the mechanics, named as in a round
+    (`_choose`): ``viscous_friction`` (its own fit, the spring beside it, as every force
+    effect has) when that is physically possible (adds damping, moves the mode by damping)
+    and pays on top of the spring's fit; otherwise the spring by what it does to the mode
+    (`force.mode_shift`): ``stiffness_change`` or ``mass_change``. With a fitted baseline the
+    spring stays in the base, as ``stiffness_change`` is not a candidate there (the
+    baseline holds the linear effects). Returns ``chosen`` (the spring renamed, or the
+    damper added, when named), its prediction and the figures of the check ({} when there
+    was nothing to check)."""
     spring = next((e for e in chosen if e.name == "loop_stiffness"), None)
     if (spring is None or "stiffness_change" not in ctx.candidates
             or ctx.form != "simulation"
             or len([e for e in chosen if e.name not in BASE_TERMS]) >= MAX_EFFECTS):
-        return chosen, {}
+        return chosen, prediction, {}
     rest = [e for e in chosen if e is not spring]
     _, without = in_the_loop(ctx, rest, rest, spring=False)
     test = ctx.split.test
@@ -631,18 +635,42 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     e1 = ctx.target[test] - prediction[test]
     sse0, sse1 = float(e0 @ e0), float(e1 @ e1)
     if not (math.isfinite(sse0) and sse1 < sse0):  # without it the loop diverges, or worse
-        return chosen, {"named": False, "pays": False}
+        return chosen, prediction, {"named": False, "pays": False}
     n_eff = effective_samples(e0)
     k_total = sum(e.n_params for e in chosen)
     if n_eff - k_total <= 1:
-        return chosen, {"named": False, "pays": False}
+        return chosen, prediction, {"named": False, "pays": False}
     score, p, pays = _judged(sse0, sse1, spring.n_params, k_total, n_eff)
     check = {"p_value": p, "score": score, "sse_ratio": sse1 / sse0,
              "above_floor": floor_sse is None or sse0 > floor_sse,
              "mode_change": spring.physical.get("mode_change")}
-    check["named"] = bool(pays and check["above_floor"] and check["mode_change"] in MECHANICS)
+    if not (pays and check["above_floor"]):
+        check["named"] = False
+        return chosen, prediction, check
+    damper = _damper_beside_the_spring(ctx, rest, sse1, n_eff, k_total)
+    if damper is not None:
+        check.update(named=True, damper=True)
+        return damper[0], damper[1], check
+    check["named"] = check["mode_change"] in MECHANICS
     if not check["named"]:
-        return chosen, check
+        return chosen, prediction, check
     named = replace(spring, name=MECHANICS[check["mode_change"]],
                     physical={**spring.physical, "plausible": True})
-    return rest + [named], check
+    return rest + [named], prediction, check
+
+
+def _damper_beside_the_spring(ctx: Context, rest: list[FittedEffect], sse_spring: float,
+                              n_eff: float, k_total: int
+                              ) -> tuple[list[FittedEffect], np.ndarray] | None:
+    """``rest`` with a viscous friction in the loop (the spring beside it), when that is
+    physically possible and pays on top of the spring's fit (held-out SSE ``sse_spring``,
+    ``k_total`` parameters): the spring's free numerator can carry a damper, and the
+    friction's free path beside it can bend its mode towards another reading (the rig's
+    load damping × 2 read as a mass × 0.835, docs/diagnose.md §9)."""
+    width = len(ctx.a_dom)
+    damper = FittedEffect("viscous_friction", None, [np.zeros(width)], n_linear=width,
+                          n_free=width)
+    effects, prediction = in_the_loop(ctx, rest + [damper], rest)
+    _, _, pays = _judged(sse_spring, _sse(ctx, prediction, ctx.split.test), damper.n_params,
+                         k_total + damper.n_params, n_eff)
+    return (effects, prediction) if pays and possible(effects) else None

@@ -48,7 +48,8 @@ def test_rig_fault_is_named_first_and_gap_halves(fault, value, right, excitation
 
 
 #: an input effect's size as `fdi diagnose` reports it, and the simulator's
-_INPUT_SIZE = {"dead_time": ("dead_time_s", "delay_s"), "dead_zone": ("half_width", "half_width_v"),
+_INPUT_SIZE = {"dead_time": ("dead_time_s", "delay_s"),
+               "dead_zone": ("half_width", "half_width_v"),
                "input_saturation": ("level", "level_v"), "backlash": ("gap", "gap_v")}
 
 

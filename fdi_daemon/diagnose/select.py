@@ -25,8 +25,9 @@ it does to the mechanical mode (`force.mode_shift`): ``stiffness_change`` when t
 moved, ``mass_change`` (the same fit) when the mass did, ``viscous_friction`` (its own fit)
 when damping was added. After each round the spring a named force effect left in the base
 is named too when it pays on top of it (`spring_check`: a stiffness change behind a
-friction, or a damper, fitted in its own column beside the spring, where that pays). Then every remaining candidate is tried on top of it (jointly refitted) for a
-second effect, with the same test, against the base given the same loop fit; the one named
+friction, or a damper, fitted in its own column beside the spring, where that pays). Then
+every remaining candidate is tried on top of it (jointly refitted) for a second effect,
+with the same test, against the base given the same loop fit; the one named
 must also beat the base refitted from its own fit without it (`_beyond_its_start`: a loop's
 fit depends on where it starts). No accepted candidate: "no significant missing effect".
 """
@@ -362,7 +363,8 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
       without it (`_without_explanation`), and when it does not pay on top of them it is
       theirs and not named (``held_by``);
     - effects E named on top of the refit, fewer than ``max_effects``: the match is named
-      first, E refitted on top of it, when it still matches on top of E (`_explanation_on_top`, ``on_top_of``);
+      first, E refitted on top of it, when it still matches on top of E
+      (`_explanation_on_top`, ``on_top_of``);
       otherwise E holds it (a friction's describing function or a static map's Bussgang
       gain also looks like a gain change) and the refit stays in the base.
     """

@@ -153,16 +153,15 @@ def input_effects(u: np.ndarray, effects: dict, rate_hz: float) -> np.ndarray:
     ``effects`` (name -> parameters, as `MsdParams.effects`), in the order a drive meets
     them: dead time, dead zone, backlash, saturation. Other effects are not applied."""
     u = np.asarray(u, dtype=float)
-    eff = effects
-    if "dead_time" in eff:
-        d = int(round(eff["dead_time"]["delay_s"] * rate_hz))
+    if "dead_time" in effects:
+        d = int(round(effects["dead_time"]["delay_s"] * rate_hz))
         if d > 0:
             u = np.concatenate([np.full(d, u[0]), u[:-d]])
-    if "dead_zone" in eff:
-        w = eff["dead_zone"]["half_width_v"]
+    if "dead_zone" in effects:
+        w = effects["dead_zone"]["half_width_v"]
         u = np.sign(u) * np.maximum(np.abs(u) - w, 0.0)
-    if "backlash" in eff:
-        half = 0.5 * eff["backlash"]["gap_v"]
+    if "backlash" in effects:
+        half = 0.5 * effects["backlash"]["gap_v"]
         out = np.empty_like(u)
         y = u[0]
         for i, x in enumerate(u.tolist()):
@@ -172,8 +171,8 @@ def input_effects(u: np.ndarray, effects: dict, rate_hz: float) -> np.ndarray:
                 y = x + half
             out[i] = y
         u = out
-    if "input_saturation" in eff:
-        level = eff["input_saturation"]["level_v"]
+    if "input_saturation" in effects:
+        level = effects["input_saturation"]["level_v"]
         u = np.clip(u, -level, level)
     return u
 

@@ -71,19 +71,17 @@ def _free_stick_profile(accel: np.ndarray, velocity: np.ndarray, stuck: np.ndarr
     return np.array(sse)
 
 
-def _measured(fault: dict, window: slice):
+def _measured(fault: dict, window: slice, model):
     """What `fdi signature` has instead: r = ẍ − Ĝ v_in of the measured acceleration over the
-    window (the shipped Ĝ, made on this rig), and (label, velocity, stuck rows) with the
+    window (``model``: the shipped model, made on this rig), and (label, velocity, stuck rows) with the
     true velocity and stuck flag, and with the model observer's v̂ and the rows where the
     accelerometer is quiet (`stick_window_oracle.quiet_rows`)."""
     from fdi_daemon.core.velocity_observer import velocity_from_settings
     from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.ident.signature import plant_residual
-    from fdi_daemon.io.model_file import load_model
     from stick_window_oracle import quiet_rows
 
     accel = np.asarray(fault["accel"], float)
-    model = load_model(REPO / "fdi_daemon" / "data" / "model_sim_rig.yaml")
     residual = plant_residual(nominal_plant(model), fault["v_in"], accel)
     observer = velocity_from_settings({"method": "model_observer"}, fs_hz=FS)
     found = quiet_rows(accel)
@@ -103,6 +101,7 @@ def main() -> None:
     from fdi_daemon.io.model_file import load_model
     from hil_sim.scenarios import scenario_from_dict, simulate
 
+    model = load_model(REPO / "fdi_daemon" / "data" / "model_sim_rig.yaml")
     fault = simulate(scenario_from_dict(LOW_FREQUENCY_CALIBRATION)).columns
     spec = copy.deepcopy(LOW_FREQUENCY_CALIBRATION)
     spec["events"] = []
@@ -119,13 +118,13 @@ def main() -> None:
     coarse = GRID[::2]
     sse = _free_stick_profile(by_fault[window], v[window], fault["stuck"][window] > 0.5, coarse)
     print(_profile_line("... the holding force free while stuck", coarse, sse, spread))
-    residual, rows = _measured(fault, window)
+    residual, rows = _measured(fault, window, model)
     for label, velocity, stuck in rows:
         sse = _free_stick_profile(residual, velocity[window], stuck, coarse)
         r_spread = float(np.sum((residual - residual.mean()) ** 2))
         print(_profile_line(label, coarse, sse, r_spread))
 
-    g_e = load_model(REPO / "fdi_daemon" / "data" / "model_sim_rig.yaml").fault_filter
+    g_e = model.fault_filter
     noise = np.random.default_rng(0).standard_normal(len(v))
     stuck = fault["stuck"] > 0.5
     contact = fault["contact_force"]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hil_sim.msd import MsdParams, simulate_recording
-from fdi_daemon.diagnose.effects import EFFECT_NAMES, FittedEffect
+from fdi_daemon.diagnose.effects import EFFECT_NAMES, FittedEffect, friction_form
 from fdi_daemon.diagnose.select import map_share
 from fdi_daemon.diagnose.workflow import run_diagnose
 from tests.diagnose_cases import FS, HIDDEN, changed_recording, nominal_model, recording
@@ -45,6 +45,21 @@ def test_a_map_is_possible_only_with_its_own_gain(gain, refit_gain, plausible):
     map_share([refit, clip])
     assert clip.physical["map_share"] == pytest.approx(gain / (1.0 + refit_gain))
     assert clip.physical["plausible"] is plausible
+
+
+@pytest.mark.parametrize("coulomb, excess, possible, named_as", [
+    (0.3, 0.7, True, "stribeck_friction"),   # static 1.0 above the Coulomb level 0.3
+    (-0.3, -0.7, True, "stribeck_friction"),  # the same in the other sign convention
+    (-0.27, 0.18, True, "coulomb_friction"),  # 0.09 at rest, 0.27 in motion: built up
+    (0.3, -0.3, True, "coulomb_friction"),   # none at rest: a smooth sign
+    (0.3, -0.5, False, None)])               # −0.2 at rest: the friction reversed
+def test_a_stribeck_form_is_named_by_its_level_at_rest(coulomb, excess, possible, named_as):
+    out: dict = {}
+    assert friction_form(out, coulomb, excess) is possible
+    if possible:
+        assert out.get("named_as", "stribeck_friction") == named_as
+    fit = FittedEffect("stribeck_friction", 0.01, [np.zeros(3)] * 2, physical=out)
+    assert fit.named_as == (named_as or "stribeck_friction")
 
 
 @pytest.mark.parametrize("effect", ["cubic_stiffness", "output_saturation"])

@@ -102,6 +102,21 @@ def test_rig_added_viscous_damping_is_named_viscous_friction(damping_n_s_per_m):
     assert result.gap_after <= 0.5 * result.gap_before
 
 
+@pytest.mark.parametrize("coulomb_n,excitation", [
+    (0.5, STRONG), (2.0, STRONG), (0.5, {"rms_v": 0.4, "duration_s": 30.0})])
+def test_rig_hidden_coulomb_friction_is_named_coulomb_friction(coulomb_n, excitation):
+    # the rod seal's friction raised to a pure Coulomb friction (no stiction: static =
+    # Coulomb). Its loop fits best a Stribeck form whose excess takes friction away near
+    # rest (a force that builds up after each reversal), which is named by what it is:
+    # Coulomb friction (`effects.friction_form`; it was named stribeck_friction)
+    u, y = rig_recording(variant=(("seal_coulomb_n", coulomb_n), ("seal_static_n", coulomb_n)),
+                         **excitation)
+    b, a = rig_model()
+    result = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+    assert result.named == ["coulomb_friction"]
+    assert result.gap_after <= 0.5 * result.gap_before
+
+
 def test_rig_without_fault_names_nothing_or_its_seal_friction():
     result = _diagnose(None, 0.0, **STRONG)
     assert set(result.named) <= SEAL

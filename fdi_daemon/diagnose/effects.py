@@ -234,6 +234,13 @@ class FittedEffect:
         return SPECS[self.name].build(self.param, self.centre)
 
     @property
+    def named_as(self) -> str:
+        """The effect the fit stands for, by its size (``physical["named_as"]``: a Stribeck
+        form that takes friction away at rest is a Coulomb friction, `friction_form`);
+        otherwise its own name."""
+        return self.physical.get("named_as", self.name)
+
+    @property
     def n_params(self) -> int:
         free = self.n_linear if self.n_free is None else self.n_free
         return free + (0 if self.param is None else 1)
@@ -413,6 +420,22 @@ _LABELS = {"coulomb_friction": ["coulomb_level"],
 FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 
 
+def friction_form(out: dict, coulomb_level: float, stribeck_excess: float) -> bool:
+    """Whether a Stribeck form sign(v)·(F_c + E·exp(−(v/v_s)²)) is physical, from its
+    Coulomb level F_c and excess E (any common scale and sign convention), and what it
+    stands for. An excess that adds friction at rest is the Stribeck effect (static
+    friction above the Coulomb level). One that takes friction away, down to none at rest,
+    is a Coulomb friction whose force builds up after each reversal over v_s (a reversal
+    that the model resolves only smoothly, or presliding): ``out["named_as"]`` is then
+    ``coulomb_friction``. One that reverses the friction at rest is not physical."""
+    if coulomb_level * stribeck_excess > 0.0:
+        return True
+    if abs(stribeck_excess) <= abs(coulomb_level):
+        out["named_as"] = "coulomb_friction"
+        return True
+    return False
+
+
 def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
     """Fitted physical parameters.
 
@@ -422,9 +445,10 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
     Coulomb friction, c_v/gain for viscous). Where the effect's force does not enter like the
     input (a pneumatic actuator between valve and piston) this is only an order of magnitude.
 
-    ``plausible``: a Stribeck term must raise friction at low speed (Fs > Fc): its excess
-    and its Coulomb part, both referred to the input the same way, must have the same sign.
-    The sign of a single friction term cannot be judged without knowing how force enters.
+    ``plausible``: a Stribeck form's excess and its Coulomb part, both referred to the input
+    the same way, must give a friction of the Coulomb level's sign at rest
+    (`friction_form`; ``named_as`` when the form is a Coulomb friction). The sign of a
+    single friction term cannot be judged without knowing how force enters.
     """
     spec = SPECS[eff.name]
     if ctx.form == "inverse_dynamics":
@@ -450,8 +474,8 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
             else:
                 out[label] = c
         if eff.name == "stribeck_friction":
-            plausible = (out["coulomb_level_input_equivalent"]
-                         * out["stribeck_excess_input_equivalent"]) > 0.0
+            plausible = friction_form(out, out["coulomb_level_input_equivalent"],
+                                      out["stribeck_excess_input_equivalent"])
     elif eff.name == "gain_fault":  # y = (1 + g) ŷ₀
         out["gain_ratio"] = 1.0 + float(eff.coefficients[0][0])
     elif eff.name == "dead_time":  # y = ŷ₀ + c (ŷ₀(t − τ) − ŷ₀(t)); a pure shift has c = 1

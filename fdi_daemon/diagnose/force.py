@@ -42,6 +42,7 @@ from scipy import signal
 from scipy.optimize import least_squares as least_squares_nl
 
 from fdi_daemon.core.compiled import jit
+from fdi_daemon.diagnose.effects import friction_form
 
 #: effects that are forces on the moving mass
 FORCE_EFFECTS = ("coulomb_friction", "viscous_friction", "stribeck_friction",
@@ -527,9 +528,11 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
     0.137 V/V³ for 0.435).
     Friction must take energy out of the motion: the velocity w_j that regressor j causes
     (its output contribution G_Fj φ_j, turned into velocity) must oppose the motion,
-    P_j = ⟨w_j, v⟩/⟨v, v⟩ < 0 (``*_power_ratio``); a Stribeck excess must too (friction
-    higher near v = 0). Otherwise the fit is not ``plausible`` and is never named. The
-    power test needs no knowledge of how force enters, unlike the sign of c.
+    P_j = ⟨w_j, v⟩/⟨v, v⟩ < 0 (``*_power_ratio``); a Stribeck excess must too, and with
+    the Coulomb level it must give a friction of that level's sign at rest
+    (`effects.friction_form`: an excess that takes friction away near v = 0 makes the form
+    a Coulomb friction, ``named_as``). Otherwise the fit is not ``plausible`` and is never
+    named. The power test needs no knowledge of how force enters, unlike the sign of c.
     """
     if not np.all(np.isfinite(y)):
         return {"diverged": True, "plausible": False}
@@ -558,6 +561,9 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
             power = float(w[fit] @ v[fit]) / vv
             out[f"{label}_power_ratio"] = power
             plausible = plausible and power < 0.0
+    if eff.name == "stribeck_friction":
+        plausible = plausible and friction_form(out, out["coulomb_level_input_equivalent"],
+                                                out["stribeck_excess_input_equivalent"])
     if eff.name in SPRINGS:  # the base's spring is reported too (`report`: loop_spring)
         out.update(mode_shift(ctx, eff.coefficients[0], b_v))
         plausible = plausible and (eff.name == "loop_stiffness"

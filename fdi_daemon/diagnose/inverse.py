@@ -25,6 +25,7 @@ import numpy as np
 from scipy import signal
 
 from fdi_daemon.diagnose import signals
+from fdi_daemon.diagnose.effects import friction_form
 from fdi_daemon.diagnose.floor import quiet_variance
 
 #: effects that can be tested in this form (forces on the mass from the measured motion)
@@ -124,8 +125,9 @@ def baseline(u, y, output_kind: str, fs_hz: float, split: signals.Split) -> dict
 
 
 def physical(name: str, theta: np.ndarray, param: float | None, ctx=None) -> dict:
-    """Forces in input units; friction (Coulomb level, Stribeck excess) must be positive;
-    the force balance's mass positive and its damping not negative."""
+    """Forces in input units; the Coulomb level must be positive and a Stribeck excess
+    leave a positive friction at rest (`effects.friction_form`); the force balance's mass
+    positive and its damping not negative."""
     out: dict = {}
     if name == "force_balance":
         values = [ctx.inverse_base[k] + float(t) for k, t in zip(ctx.inverse_base, theta)]
@@ -135,7 +137,7 @@ def physical(name: str, theta: np.ndarray, param: float | None, ctx=None) -> dic
         out["stribeck_velocity"] = float(param)
         out["stribeck_velocity_unit"] = "velocity units"
         out["coulomb_level"], out["stribeck_excess"] = float(theta[0]), float(theta[1])
-        out["plausible"] = bool(theta[0] > 0 and theta[1] > 0)
+        out["plausible"] = bool(theta[0] > 0) and friction_form(out, *theta[:2])
     elif name == "coulomb_friction":
         out["coulomb_level"] = float(theta[0])
         out["plausible"] = bool(theta[0] > 0)

@@ -26,14 +26,15 @@ def build_report(result, source: str = "") -> dict[str, Any]:
         rounds.append(rows)
     where = result.where_before
     report = {
-        "effect": named[0].name if named else None,
+        "effect": named[0].named_as if named else None,
         "gap_before": result.gap_before,
         "gap_after": result.gap_after,
         "gap_metric": "nrmse",
         "ranking": rounds[0] if rounds else [],
         "params": dict(named[0].physical) if named else {},
         "regions": where["regions"],
-        "effects": [{"effect": e.name, "params": dict(e.physical)} for e in named],
+        "effects": [{"effect": e.named_as, "form": e.name, "params": dict(e.physical)}
+                    for e in named],
         "rounds": rounds,
         "test": {"held_out_from_s": ctx.split.train_end / ctx.fs_hz,
                  "samples": ctx.split.n - ctx.split.train_end, "alpha": ALPHA,
@@ -117,7 +118,8 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
                                   if k + "_unit" in e["params"] else "")
                 for k, v in e["params"].items()
                 if isinstance(v, (int, float)) and not isinstance(v, bool))
-            lines.append(f"missing effect: {e['effect']}  ({params})")
+            form = f"fitted as {e['form']}: " if e["form"] != e["effect"] else ""
+            lines.append(f"missing effect: {e['effect']}  ({form}{params})")
     spring = report.get("loop_spring", {})
     if "resonance_hz" in spring:
         lines.append(f"the force loop's linear part (its spring, in the base) moves the mode "
@@ -133,7 +135,8 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     lines.append("ranking:")
     for row in report["ranking"][:5]:
         mark = "*" if row["accepted"] else " "
-        lines.append(f" {mark} {row['effect']:<18} gap {row['gap_after']:.4g}  "
+        name = row["effect"] + (f" ({row['form']} form)" if row["form"] != row["effect"] else "")
+        lines.append(f" {mark} {name:<18} gap {row['gap_after']:.4g}  "
                      f"score {row['score']:.1f}  p {row['p_value']:.2g}")
     seg = [r for r in report["regions"] if r["kind"] == "time"][:1]
     st = [r for r in report["regions"] if r["kind"] == "state"][:1]

@@ -78,8 +78,10 @@ class Candidate:
 
     def ranking_entry(self, gap_after: float) -> dict:
         """The candidate as the report ranks it (a linear change of the mechanics by the
-        name of the mode it moves, `force.mechanics_name`)."""
-        entry = {"effect": mechanics_name(self.effect).name, "gap_after": gap_after,
+        name of the mode it moves, `force.mechanics_name`; a friction form by the friction
+        it stands for, `FittedEffect.named_as`)."""
+        effect = mechanics_name(self.effect)
+        entry = {"effect": effect.named_as, "form": effect.name, "gap_after": gap_after,
                  "score": self.score, "p_value": self.p_value, "accepted": self.accepted,
                  "params": dict(self.effect.physical)}
         if self.sse_from_its_start is not None:
@@ -402,8 +404,10 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
             break  # what is left is noise
         n_eff = effective_samples(e0)
         has_spring = any(e.name in SPRINGS for e in chosen)  # the loop's spring is in
+        # a candidate that a chosen effect contains (`NESTS`) adds nothing it lacks
+        taken = {e.name for e in chosen} | {NESTS.get(e.name) for e in chosen}
         remaining = [c for c in ctx.candidates
-                     if c not in {e.name for e in chosen} and c not in skip
+                     if c not in taken and c not in skip
                      and not (has_spring and c == "stiffness_change")]
         results = []
         for name in remaining:
@@ -445,7 +449,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                                    floor_sse)
         if held is not None:
             held.linear = {**linear, "named": linear["matching"],
-                           "on_top_of": [e.name for e in held.named
+                           "on_top_of": [e.named_as for e in held.named
                                          if e.name != linear["matching"]]}
             held.linear.pop("matching")
             held.rounds = rounds + held.rounds

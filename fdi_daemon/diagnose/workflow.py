@@ -39,7 +39,7 @@ class DiagnoseResult:
 
     @property
     def named(self) -> list[str]:
-        return [e.name for e in self.selection.chosen if e.name not in BASE_TERMS]
+        return [e.named_as for e in self.selection.chosen if e.name not in BASE_TERMS]
 
 
 def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = "acceleration",

@@ -7,8 +7,9 @@ and contact friction): `fdi identify` on its identification chirp, then one blin
 `run_diagnose` per fault switched on from the start of a 40 s, 0.8 V RMS multisine
 (`diagnose_cases.rig_recording` on the variant): none, contact friction (bearing supply 65 %), supply
 pressure 80 % (a softer air spring), valve gain 80 %, accelerometer bias 0.3 m/s², a
-payload (the bearing block 0.5 kg heavier: a mass the model does not know) and the load's
-linear damping doubled (a damper).
+payload (the bearing block 0.5 kg heavier: a mass the model does not know), the load's
+linear damping doubled (a damper) and the rod seal's friction raised to a pure Coulomb
+friction of 0.5 N (static = Coulomb).
 Prints the names, the held-out gap before and after, the noise floor and the fitted ratio
 of a gain fault, a stiffness change or a mass change, or the damping a viscous friction
 adds per unit mass (Δ(c/m), 1/s), with the truth.
@@ -24,9 +25,12 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 FAULTS = ((None, 0.0), ("bearing_supply", 0.65), ("supply_pressure", 0.8),
-          ("valve_gain", 0.8), ("accel_bias", 0.3), ("payload_kg", 0.5), ("damping_x", 2.0))
+          ("valve_gain", 0.8), ("accel_bias", 0.3), ("payload_kg", 0.5), ("damping_x", 2.0),
+          ("seal_coulomb_n", 0.5))
 #: what a variant's fault changes in its `RigParams` (the others are `rig_recording` faults)
-CHANGES = {"payload_kg": "bearing_mass_kg", "damping_x": "viscous_damping_n_s_per_m"}
+CHANGES = {"payload_kg": ("bearing_mass_kg",),
+           "damping_x": ("viscous_damping_n_s_per_m",),
+           "seal_coulomb_n": ("seal_coulomb_n", "seal_static_n")}
 
 
 def identified_model(rig: dict, folder: Path):
@@ -66,6 +70,8 @@ def main(indices: list[int]) -> None:
                 params["viscous_damping_n_s_per_m"] = nominal.viscous_damping_n_s_per_m * value
                 added = (value - 1.0) * nominal.viscous_damping_n_s_per_m / nominal.moving_mass_kg
                 truth = f" (damping per unit mass + {added:.1f} /s)"
+            elif fault == "seal_coulomb_n":
+                params.update(seal_coulomb_n=value, seal_static_n=value)
             u, y = rig_recording(None if fault in CHANGES else fault, value, rms_v=0.8,
                                  duration_s=40.0, variant=tuple(sorted(params.items())))
             r = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)

@@ -27,7 +27,9 @@ when damping was added. After each round the spring a named force effect left in
 is named too when it pays on top of it (`spring_check`: a stiffness change behind a
 friction, or a damper, fitted in its own column beside the spring, where that pays). Then
 every remaining candidate is tried on top of it (jointly refitted) for a second effect,
-with the same test, against the base given the same loop fit; the one named
+with the same test, against the base given the same loop fit (not one that a named effect
+contains, nor a fit that stands for an effect already named: a Stribeck form named
+``coulomb_friction`` on top of Coulomb friction, `FittedEffect.named_as`); the one named
 must also beat the base refitted from its own fit without it (`_beyond_its_start`: a loop's
 fit depends on where it starts). No accepted candidate: "no significant missing effect".
 """
@@ -404,7 +406,6 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
             break  # what is left is noise
         n_eff = effective_samples(e0)
         has_spring = any(e.name in SPRINGS for e in chosen)  # the loop's spring is in
-        # a candidate that a chosen effect contains (`NESTS`) adds nothing it lacks
         taken = {e.name for e in chosen} | {NESTS.get(e.name) for e in chosen}
         remaining = [c for c in ctx.candidates
                      if c not in taken and c not in skip
@@ -417,6 +418,8 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 pass
             if progress is not None:
                 progress(name)
+        for c in results:
+            c.accepted = c.accepted and c.effect.named_as not in {e.named_as for e in chosen}
         results.sort(key=lambda c: c.score)
         rounds.append(results)
         best = _choose(results, n_eff)

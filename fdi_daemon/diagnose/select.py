@@ -407,6 +407,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         n_eff = effective_samples(e0)
         has_spring = any(e.name in SPRINGS for e in chosen)  # the loop's spring is in
         taken = {e.name for e in chosen} | {NESTS.get(e.name) for e in chosen}
+        named_so_far = {e.named_as for e in chosen}
         remaining = [c for c in ctx.candidates
                      if c not in taken and c not in skip
                      and not (has_spring and c == "stiffness_change")]
@@ -419,7 +420,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
             if progress is not None:
                 progress(name)
         for c in results:
-            c.accepted = c.accepted and c.effect.named_as not in {e.named_as for e in chosen}
+            c.accepted = c.accepted and c.effect.named_as not in named_so_far
         results.sort(key=lambda c: c.score)
         rounds.append(results)
         best = _choose(results, n_eff)

@@ -37,8 +37,8 @@ def mechanics() -> None:
             rec = simulate_recording(MsdParams(**{parameter: value}, **NOISE), u, seed=2)
             for kind, column in (("acceleration", "accel"), ("position", "position")):
                 r = run_diagnose(rec.v_in, rec[column], FS, kind, b, a)
-                read = {e.name: round(float(e.physical[NAMED_RATIOS[e.name]]), 3)
-                        for e in r.selection.named if e.name in NAMED_RATIOS}
+                read = {e.named_as: round(float(e.physical[NAMED_RATIOS[e.named_as]]), 3)
+                        for e in r.selection.named if e.named_as in NAMED_RATIOS}
                 print(f"{label}, {parameter} x {ratio:g}, {kind}: {r.named} "
                       f"{r.gap_before:.4f} -> {r.gap_after:.4f} "
                       f"(floor {r.info['noise_floor']['floor']:.4f}) {read}", flush=True)

@@ -74,8 +74,8 @@ def main(indices: list[int]) -> None:
             u, y = rig_recording(None if fault in CHANGES else fault, value, rms_v=0.8,
                                  duration_s=40.0, variant=tuple(sorted(params.items())))
             r = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
-            ratios = {e.name: round(float(e.physical[NAMED_RATIOS[e.name]]), 3)
-                      for e in r.selection.named if e.name in NAMED_RATIOS}
+            ratios = {e.named_as: round(float(e.physical[NAMED_RATIOS[e.named_as]]), 3)
+                      for e in r.selection.named if e.named_as in NAMED_RATIOS}
             print(f"v{index} {fault or 'none'} {value:g}: {r.named} {r.gap_before:.4f} -> "
                   f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {ratios}"
                   + truth, flush=True)

@@ -12,7 +12,7 @@ from fdi_daemon.diagnose.workflow import run_diagnose
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.model_file import FdiModel, model_from_dict
 from hil_sim.msd import MsdParams, friction_tf
-from tests.diagnose_cases import FS, nominal_model, recording
+from tests.diagnose_cases import FS, changed_recording, nominal_model, recording
 
 
 def _plant(kind: str = "acceleration") -> AugmentedPlant:
@@ -33,7 +33,8 @@ def _plant(kind: str = "acceleration") -> AugmentedPlant:
     for name, param in [("coulomb_friction", None), ("stribeck_friction", 0.05),
                         ("cubic_stiffness", None), ("stiffness_change", None),
                         ("mass_change", None),
-                        ("dead_time", 2.6), ("backlash", 0.1),
+                        ("dead_time", 2.6), ("mode_damping", 1.7), ("mode_mass", 1.2),
+                        ("backlash", 0.1),
                         ("dead_zone", 0.05), ("output_saturation", 5.0), ("sensor_offset", None)]:
         spec = SPECS[name]
         n_reg = 2 if name == "stribeck_friction" else 1
@@ -97,10 +98,15 @@ def test_model_file_round_trip(kind):
     np.testing.assert_allclose(back.run(u), _plant(kind).run(u), rtol=1e-12, atol=1e-12)
 
 
-def test_augmented_plant_reproduces_the_workflow():
-    rec = recording("coulomb_friction")
+@pytest.mark.parametrize("hidden,named", [
+    (lambda: recording("coulomb_friction"), "coulomb_friction"),
+    # the refit's damping line (`mode_lines`), an output effect with its own filter
+    (lambda: changed_recording("damping_n_s_per_m", 1.5), "mode_damping")])
+def test_augmented_plant_reproduces_the_workflow(hidden, named):
+    rec = hidden()
     b, a = nominal_model()
     result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    assert named in [e.name for e in result.selection.named]
     model = FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": result.plant.to_extra()})
     plant = AugmentedPlant.from_model(model_from_dict(model.to_dict()))
     np.testing.assert_allclose(plant.run(rec.v_in), result.y_after, rtol=1e-9,

@@ -74,7 +74,7 @@ class AugmentedPlant:
             outs = [IIRFilter(b, self.a_dom) for b in eff.coefficients]
         else:
             outs = [float(g) for g in np.atleast_1d(eff.coefficients[0])]
-        return [eff.regressor(), spec.dynamic, outs]
+        return [eff.regressor(self.a_dom), spec.dynamic, outs]
 
     # -- streaming --------------------------------------------------------------------------
 
@@ -122,7 +122,7 @@ class AugmentedPlant:
         self._plant.reset()
         self._chain.reset()
         for eff, block in zip(self._fed, self._blocks):
-            block[0] = eff.regressor()
+            block[0] = eff.regressor(self.a_dom)
             if block[1]:
                 for f in block[2]:
                     f.reset()

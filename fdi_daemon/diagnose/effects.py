@@ -25,9 +25,15 @@ by search) and linear coefficients (least squares). Where it enters (``source``)
 | gain_fault         | output | ŷ₀                                   | —                     |
 | output_saturation  | output | sat_L(ŷ₀) − ŷ₀                       | level L               |
 | sensor_offset      | output | 1                                    | —                     |
+| mode_damping       | output | ŷ_r − ŷ₀, the mode's c/m × r          | ratio r = c₁/c₀       |
+| mode_stiffness     | output | ŷ_r − ŷ₀, the mode's k/m × r          | ratio r = k₁/k₀       |
+| mode_mass          | output | ŷ_r − ŷ₀, the mode's c/m, k/m, 1/m ÷ r | ratio r = m₁/m₀      |
 
 ``mass_change`` is not fitted on its own: it is the name of ``stiffness_change``'s fit when
 the mode it moves scales its stiffness and damping per unit mass alike (`force.mode_shift`).
+The ``mode_*`` lines (`mode_lines`) are the numerator refit's explanations, not candidates of
+the rounds (`select.linear_round`); each is named as the effect it stands for
+(``named_as``: viscous friction, a stiffness or a mass change).
 
 Base terms, never named: ``linear_refit`` (B_e/Â on u), ``loop_stiffness`` (x in the force
 loop), ``force_balance`` (mass and damping of the inverse-dynamics form). In the
@@ -46,6 +52,7 @@ from scipy import signal
 from scipy.optimize import minimize_scalar
 
 from fdi_daemon.diagnose.input_effects import BacklashRegressor, dead_zone, saturate
+from fdi_daemon.diagnose.mode_lines import LINES, ModeLineRegressor, mode_report, nominal_pole
 from fdi_daemon.diagnose.output_effects import DelayedOutputRegressor, out_saturate
 from fdi_daemon.diagnose.regressors import Regressor, Static
 
@@ -76,13 +83,31 @@ class EffectSpec:
     dynamic: bool  # through B_e/Â (True) or a static gain (False)
     param: str | None  # name of the nonlinear parameter (searched), None if none
     unit: str  # of the searched parameter
-    build: Callable[[float | None, float], Regressor]  # (parameter, centre) -> regressor
+    #: (parameter, centre, Â of the domain) -> regressor
+    build: Callable[[float | None, float, np.ndarray], Regressor]
     grid: Callable[["Context"], np.ndarray] | None = None
     integer_coarse: bool = False
     #: the value reported is searched again with the regressor's coefficient held at 1 (a
     #: pure shift: the free coefficient of the fit trades with the delay, and its size is
     #: what tells a shift from a linear change that only looks like one)
     reported_at_unit_weight: bool = False
+    #: the parameter is searched with the coefficient held at 1 (a mode line: near ratio 1
+    #: a free coefficient times a small move is any derivative of the response), the
+    #: coefficient fitted at the value found tells a pure change (≈ 1) from another
+    searched_at_unit_weight: bool = False
+
+
+def _ratios(c: "Context") -> np.ndarray:
+    """Ratios of a mode line, 1/4 to 4 (log-spaced, 1 among them); none without a mode."""
+    return np.geomspace(0.25, 4.0, 25) if nominal_pole(c.a_dom) is not None else np.array([])
+
+
+def _mode_line(line: str, param: str, unit: str) -> "EffectSpec":
+    """The spec of one line of `mode_lines` (``mode_<line>``), a linear explanation of the
+    numerator refit (`select.linear_round`)."""
+    return EffectSpec(f"mode_{line}", "output", False, param, unit,
+                      lambda p, c, a: ModeLineRegressor(line, p, a), _ratios,
+                      searched_at_unit_weight=True)
 
 
 def _q(values: np.ndarray, qs, centre: float = 0.0) -> np.ndarray:
@@ -98,61 +123,71 @@ def _delays(c: "Context") -> np.ndarray:
 
 SPECS: dict[str, EffectSpec] = {
     "coulomb_friction": EffectSpec("coulomb_friction", "state", True, None, "",
-                                   lambda p, c: Static(lambda u, v, x, y0: [np.sign(v)])),
+                                   lambda p, c, a: Static(lambda u, v, x, y0: [np.sign(v)])),
     "viscous_friction": EffectSpec("viscous_friction", "state", True, None, "",
-                                   lambda p, c: Static(lambda u, v, x, y0: [v])),
+                                   lambda p, c, a: Static(lambda u, v, x, y0: [v])),
     "stribeck_friction": EffectSpec(
         "stribeck_friction", "state", True, "stribeck_velocity", "velocity units",
-        lambda p, c: Static(_stribeck(p), 2),
+        lambda p, c, a: Static(_stribeck(p), 2),
         lambda c: _q(c.v[c.split.fit], [0.02, 0.05, 0.1, 0.2, 0.3, 0.5])),
     "cubic_stiffness": EffectSpec("cubic_stiffness", "state", True, None, "",
-                                  lambda p, c: Static(lambda u, v, x, y0: [x ** 3])),
+                                  lambda p, c, a: Static(lambda u, v, x, y0: [x ** 3])),
     "dead_time": EffectSpec(
         "dead_time", "output", False, "dead_time_s", "s",
-        lambda p, c: DelayedOutputRegressor(p), _delays, integer_coarse=True,
+        lambda p, c, a: DelayedOutputRegressor(p), _delays, integer_coarse=True,
         reported_at_unit_weight=True),
     "gain_fault": EffectSpec("gain_fault", "output", False, None, "",
-                             lambda p, c: Static(lambda u, v, x, y0: [y0])),
+                             lambda p, c, a: Static(lambda u, v, x, y0: [y0])),
     "input_saturation": EffectSpec(
         "input_saturation", "input", True, "level", "input units",
-        lambda p, c: Static(saturate(p, c)),
+        lambda p, c, a: Static(saturate(p, c)),
         lambda c: _q(c.u[c.split.fit], [0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.94, 0.97, 0.99,
                                         0.995], c.u_centre)),
     "output_saturation": EffectSpec(
         "output_saturation", "output", False, "level", "output units",
-        lambda p, c: Static(out_saturate(p, c)),
+        lambda p, c, a: Static(out_saturate(p, c)),
         lambda c: _q(c.y0[c.split.fit], [0.8, 0.9, 0.95, 0.97, 0.98, 0.99, 0.995, 0.999])),
     "dead_zone": EffectSpec(
         "dead_zone", "input", True, "half_width", "input units",
-        lambda p, c: Static(dead_zone(p, c)),
+        lambda p, c, a: Static(dead_zone(p, c)),
         lambda c: _q(c.u[c.split.fit], [0.01, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5],
                      c.u_centre)),
     "backlash": EffectSpec(
         "backlash", "input", True, "gap", "input units",
-        lambda p, c: BacklashRegressor(p),
+        lambda p, c, a: BacklashRegressor(p),
         lambda c: np.ptp(c.u[c.split.fit]) * np.array([0.005, 0.01, 0.02, 0.04, 0.07, 0.1,
                                                        0.15, 0.2, 0.3])),
     "force_offset": EffectSpec("force_offset", "state", True, None, "",
-                               lambda p, c: Static(lambda u, v, x, y0: [np.ones_like(u)])),
+                               lambda p, c, a: Static(lambda u, v, x, y0: [np.ones_like(u)])),
     "sensor_offset": EffectSpec("sensor_offset", "output", False, None, "",
-                                lambda p, c: Static(lambda u, v, x, y0: [np.ones_like(u)])),
+                                lambda p, c, a: Static(lambda u, v, x, y0: [np.ones_like(u)])),
     # the loop's spring alone (`force.mode_shift` says what it changes)
     "stiffness_change": EffectSpec("stiffness_change", "state", True, None, "",
-                                   lambda p, c: Static(lambda u, v, x, y0: [x])),
+                                   lambda p, c, a: Static(lambda u, v, x, y0: [x])),
     # not a candidate: corrections of the inverse-dynamics form's mass, damping [, stiffness]
     # refitted with every candidate (columns from `Context.base_columns`)
-    "force_balance": EffectSpec("force_balance", "state", False, None, "", lambda p, c: None),
+    "force_balance": EffectSpec("force_balance", "state", False, None, "", lambda p, c, a: None),
     # not a candidate: in the force loop with any force effect (`force.in_the_loop`)
     "loop_stiffness": EffectSpec("loop_stiffness", "state", True, None, "",
-                                 lambda p, c: Static(lambda u, v, x, y0: [x])),
+                                 lambda p, c, a: Static(lambda u, v, x, y0: [x])),
     # not a candidate: with a fitted linear baseline, the baseline's numerator is refitted
     # together with every candidate (the baseline absorbed part of the missing effect)
     "linear_refit": EffectSpec("linear_refit", "input", True, None, "",
-                               lambda p, c: Static(lambda u, v, x, y0: [u])),
+                               lambda p, c, a: Static(lambda u, v, x, y0: [u])),
 }
 
 #: the same fit as stiffness_change, named by the mode it moves (`force.mechanics_name`)
 SPECS["mass_change"] = replace(SPECS["stiffness_change"], name="mass_change")
+#: a change of one parameter of the nominal mode (`mode_lines`), named by the effect it is
+#: (``LINES``): damping c₁/c₀, stiffness k₁/k₀, mass m₁/m₀
+MODE_LINES = {f"mode_{line}": line for line in LINES}
+SPECS.update({"mode_damping": _mode_line("damping", "damping_scale", "c1/c0"),
+              "mode_stiffness": _mode_line("stiffness", "stiffness_ratio", "k1/k0"),
+              "mode_mass": _mode_line("mass", "mass_ratio", "m1/m0")})
+
+#: the share of a pure change a linear explanation's coefficient may have (a dead time's
+#: shift, a mode line's move; `select.map_share` holds a static map to it too)
+SHARE_RANGE = (0.5, 1.5)
 
 #: terms of the base, never named: the nominal numerator refit and the force loop's spring
 BASE_TERMS = ("linear_refit", "loop_stiffness", "force_balance")
@@ -199,8 +234,8 @@ class Context:
         if key not in self.cache:
             if len(self.cache) >= 8:
                 self.cache.pop(next(iter(self.cache)))
-            self.cache[key] = spec.build(param, self.centre(spec)).run(self.u, self.v, self.x,
-                                                                       self.y0)
+            self.cache[key] = spec.build(param, self.centre(spec), self.a_dom).run(
+                self.u, self.v, self.x, self.y0)
         return self.cache[key]
 
     def head(self, n: int) -> "Context":
@@ -229,9 +264,10 @@ class FittedEffect:
     centre: float = 0.0  # operating point of a centred static map
     n_free: int | None = None  # fitted numbers when fewer than the coefficients (force loop)
 
-    def regressor(self) -> Regressor:
-        """A fresh streaming regressor block with this effect's parameters."""
-        return SPECS[self.name].build(self.param, self.centre)
+    def regressor(self, a_dom: np.ndarray) -> Regressor:
+        """A fresh streaming regressor block with this effect's parameters (a_dom: Â of the
+        domain plant, whose mode a mode line moves)."""
+        return SPECS[self.name].build(self.param, self.centre, a_dom)
 
     @property
     def named_as(self) -> str:
@@ -266,7 +302,7 @@ def columns(spec: EffectSpec, param: float | None, ctx: Context,
     if spec.name == "force_balance":
         return ctx.base_columns
     if phi is None:
-        phi = spec.build(param, ctx.centre(spec)).run(ctx.u, ctx.v, ctx.x, ctx.y0)
+        phi = spec.build(param, ctx.centre(spec), ctx.a_dom).run(ctx.u, ctx.v, ctx.x, ctx.y0)
     if ctx.form == "inverse_dynamics":  # L φ at the moving samples: one force per regressor
         return signal.lfilter(*ctx.lowpass, phi, axis=0) * (ctx.base_columns[:, :1] != 0)
     if not spec.dynamic:
@@ -376,7 +412,8 @@ def fit_effect(name: str, ctx: Context, base: list[FittedEffect] | None = None,
     """
     spec = SPECS[name]
     part, n_search = _search_part(ctx)
-    param = search_param(spec, part, None if base_columns is None else base_columns[:n_search])
+    param = search_param(spec, part, None if base_columns is None else base_columns[:n_search],
+                         unit_weight=spec.searched_at_unit_weight)
     x_new = columns(spec, param, ctx, ctx.regressors(spec, param))
     xx = x_new if base_columns is None else np.column_stack([base_columns, x_new])
     theta = least_squares(xx[ctx.split.fit], ctx.target[ctx.split.fit])
@@ -480,12 +517,21 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
         out["gain_ratio"] = 1.0 + float(eff.coefficients[0][0])
     elif eff.name == "dead_time":  # y = ŷ₀ + c (ŷ₀(t − τ) − ŷ₀(t)); a pure shift has c = 1
         out["shift_share"] = float(eff.coefficients[0][0])
-        plausible = 0.5 <= out["shift_share"] <= 1.5
+        plausible = SHARE_RANGE[0] <= out["shift_share"] <= SHARE_RANGE[1]
         # the delay itself is the pure shift's (c held at 1), read against the nominal
         # model: beside the free c it trades with c (c·τ is the first-order shift)
         out["fitted_shift_s"] = out[spec.param]
         out[spec.param] = stored_param(spec, search_param(spec, _search_part(ctx)[0],
                                                           unit_weight=True), ctx.fs_hz)
+    elif eff.name in MODE_LINES:  # y = ŷ₀ + c (ŷ_r − ŷ₀); a pure change has c = 1
+        line = MODE_LINES[eff.name]
+        out.update(mode_report(nominal_pole(ctx.a_dom), line, eff.param, ctx.fs_hz))
+        out["mode_change"] = line  # as `force.mode_shift` reads the loop's spring
+        out["line_share"] = float(eff.coefficients[0][0])
+        out["named_as"] = LINES[line]
+        # a viscous friction adds damping (lost damping is no friction)
+        plausible = (SHARE_RANGE[0] <= out["line_share"] <= SHARE_RANGE[1]
+                     and (line != "damping" or eff.param > 1.0))
     else:
         key = "offset" if eff.name == "sensor_offset" else "gain"
         out[key] = float(eff.coefficients[0][0])

@@ -34,6 +34,7 @@ The loop is a streaming block (`ForceLoop`: `run` and `step` run the same compil
 
 from __future__ import annotations
 
+import cmath
 import math
 from dataclasses import replace
 
@@ -43,6 +44,7 @@ from scipy.optimize import least_squares as least_squares_nl
 
 from fdi_daemon.core.compiled import jit
 from fdi_daemon.diagnose.effects import friction_form
+from fdi_daemon.diagnose.mode_lines import nominal_pole
 
 #: effects that are forces on the moving mass
 FORCE_EFFECTS = ("coulomb_friction", "viscous_friction", "stribeck_friction",
@@ -599,10 +601,10 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
     loop = _minus(np.convolve(a, den), np.convolve(b_x, num_x))
     if b_v is not None:
         loop = _minus(loop, np.convolve(b_v, num_v))
-    nominal = [s for s in s_roots(a, fs) if s.imag > 0]
-    if not nominal:
+    pole = nominal_pole(a)
+    if pole is None:
         return {"mode_change": "unknown"}
-    s0 = min(nominal, key=lambda s: -s.real / abs(s))  # the least damped pair
+    s0 = cmath.log(pole) * fs  # the least damped pair
     s1 = min((s for s in s_roots(loop, fs) if s.imag > 0), key=lambda s: abs(s - s0),
              default=None)
     if s1 is None:

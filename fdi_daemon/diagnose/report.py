@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from fdi_daemon.diagnose.effects import BASE_TERMS
-
 from typing import Any
 
+from fdi_daemon.diagnose.effects import BASE_TERMS, MODE_LINES
+from fdi_daemon.diagnose.mode_lines import LINES
 from fdi_daemon.diagnose.select import ALPHA
 from fdi_daemon.diagnose.signals import nrmse
 from fdi_daemon.io.plain import json_data
@@ -83,6 +83,12 @@ def _ratio(gap: float, floor: dict):
     return gap / floor["floor"] if floor.get("floor") else None
 
 
+def _explanation(name: str) -> str:
+    """A linear explanation of the refit in words: a mode line by the effect it stands for."""
+    line = MODE_LINES.get(name)
+    return name if line is None else f"{LINES[line]} (the mode's {line} line)"
+
+
 def summary_lines(report: dict[str, Any]) -> list[str]:
     """A short human-readable summary for the terminal."""
     lines = [f"baseline: {report['model']['baseline']}  "
@@ -98,17 +104,18 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     check = report["linear_check"]
     if check.get("matching"):
         held = check.get("held_by")
-        lines.append(f"the numerator refit is mostly a {check['matching']}"
+        lines.append(f"the numerator refit is mostly a {_explanation(check['matching'])}"
                      + (f", held by {', '.join(held)}" if held else
                         ", held by the named effects" if report["effect"] else "")
                      + ": not named (see linear_check)")
     elif check.get("named") and check.get("on_top_of"):
-        lines.append(f"the numerator refit is mostly a {check['named']}, also on top of "
-                     f"{', '.join(check['on_top_of'])}: named")
+        lines.append(f"the numerator refit is mostly a {_explanation(check['named'])}, also "
+                     f"on top of {', '.join(check['on_top_of'])}: named")
     if report["linear_check"].get("unexplained"):
         lines.append("the numerator refit alone is significant (a missing effect's linear "
-                     "part, or a numerator that is off) and is neither a gain change nor a "
-                     "dead time: it stays in the base")
+                     "part, or a numerator that is off) and is neither a gain change, a "
+                     "dead time nor a change of one parameter of the mode: it stays in the "
+                     "base")
     if report["effect"] is None:
         lines.append("no significant missing effect")
     else:

@@ -17,6 +17,8 @@ a discretisation mismatch of a few per cent, say — are not a missing effect) a
 physical coefficients are plausible (`effects.physical_report`); the best accepted (lowest
 score) is named — unless it is one of a nested pair and the nested F-test at ALPHA says
 otherwise: the larger only when it is significantly better than the smaller (`_choose`).
+Before the rounds, a significant numerator refit is checked for a gain, a shift or a change
+of one parameter of the nominal mode that it may be (`linear_round`).
 Nested pairs: Stribeck contains Coulomb, a force offset a sensor offset, and every force
 effect contains ``stiffness_change``, the loop's free linear force of x that comes with it
 (`force.in_the_loop`): a friction, a cubic spring or a constant force is named only where
@@ -42,8 +44,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import stats
 
-from fdi_daemon.diagnose.effects import (BASE_TERMS, SPECS, Context, FittedEffect,
-                                         NotApplicable, columns, fit_effect)
+from fdi_daemon.diagnose.effects import (BASE_TERMS, MODE_LINES, SHARE_RANGE, SPECS, Context,
+                                         FittedEffect, NotApplicable, columns, fit_effect)
 from fdi_daemon.diagnose.force import (FORCE_EFFECTS, LOOPED, MECHANICS, SPRINGS, in_the_loop,
                                        mechanics_name, possible)
 
@@ -167,8 +169,6 @@ def _sse(ctx: Context, prediction: np.ndarray, part: np.ndarray) -> float:
 #: key of its fitted coefficient in ``physical``
 MAPS = {"input_saturation": "input_gain", "dead_zone": "input_gain", "backlash": "input_gain",
         "output_saturation": "gain"}
-#: the share of the full map a fitted map may have (as a dead time's shift share)
-SHARE_RANGE = (0.5, 1.5)
 
 
 def map_share(effects: list[FittedEffect]) -> None:
@@ -278,11 +278,18 @@ class Selection:
         return [e for e in self.chosen if e.name not in BASE_TERMS]
 
 
-#: what a significant numerator refit may be: a pure gain change or a pure shift
-LINEAR_EXPLANATIONS = ("gain_fault", "dead_time")
+#: what a significant numerator refit may be: a pure gain change, a pure shift, or a change
+#: of one parameter of the nominal mode (`mode_lines`: damping, stiffness, mass)
+LINEAR_EXPLANATIONS = ("gain_fault", "dead_time", "mode_damping", "mode_stiffness",
+                       "mode_mass")
 #: share of the refit's improvement a gain or a shift must account for to be what the refit
 #: is (more than half: the refit's main content)
 MATCH_SHARE = 0.5
+#: the same for a mode line: nearly all of it. The nominal model's own mismatch at another
+#: excitation moves the mode too (the rig's fault-free records: the mass line takes 55–68 %
+#: of the refit), a real change of the mechanics accounts for the refit (the rig's dampers
+#: and payloads on five rig variants: 94–123 %)
+LINE_MATCH_SHARE = 0.9
 
 
 def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | None = None
@@ -290,8 +297,10 @@ def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | No
     """The refit never swallows an effect silently.
 
     The nominal numerator refit (``linear_refit``) is judged like a candidate. When it is
-    significant, a pure gain change (``gain_fault``, y = (1 + g) ŷ₀) and a pure shift
-    (``dead_time``, ŷ₀(t − τ)) are tried: the best one that the refit does not beat
+    significant, a pure gain change (``gain_fault``, y = (1 + g) ŷ₀), a pure shift
+    (``dead_time``, ŷ₀(t − τ)) and a change of one parameter of the nominal mode
+    (``mode_damping``, ``mode_stiffness``, ``mode_mass``: `mode_lines`) are tried: the
+    best one that the refit does not beat
     (nested F-test at ALPHA) and that leaves no more than the noise floor (floor_sse; a
     dead zone or a saturation also looks like a lower gain, but leaves its nonlinear part)
     is named with its value and replaces the refit. Otherwise the refit stays in the base and
@@ -299,7 +308,8 @@ def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | No
     their values).
 
     An explanation that is accepted like a candidate and accounts for more than
-    MATCH_SHARE of what the refit removes (``refit_share``) is the refit's main content
+    MATCH_SHARE of what the refit removes (``refit_share``; a mode line LINE_MATCH_SHARE)
+    is the refit's main content
     even when the refit beats it (the rest: the nominal model's own imperfection, or a
     nonlinearity of the plant the linear model lacks); it is reported as ``matching``, and
     `select_effects` names it (``explain``: named here, in the refit's place).
@@ -333,7 +343,7 @@ def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | No
         if (c.accepted and p_refit >= ALPHA
                 and (floor_sse is None or c.sse_test <= floor_sse)):
             simple.append(c)
-        elif c.accepted and share > MATCH_SHARE:
+        elif c.accepted and share > (LINE_MATCH_SHARE if name in MODE_LINES else MATCH_SHARE):
             matching.append(c)
     if simple:
         best = min(simple, key=lambda c: c.sse_test)
@@ -360,17 +370,18 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     at the noise floor (`floor`); once the remaining error is there, no further effect is
     looked for.
 
-    When the refit check found a gain or a shift that matches the refit without replacing
-    it (``matching``), the refit never swallows it:
+    When the refit check found a gain, a shift or a mode line that matches the refit
+    without replacing it (``matching``), the refit never swallows it:
     - nothing named on top of the refit: the rounds run again with the match named in the
       refit's place (``explain``); the effects then named on top of it are fitted again
       without it (`_without_explanation`), and when it does not pay on top of them it is
       theirs and not named (``held_by``);
-    - effects E named on top of the refit, fewer than ``max_effects``: the match is named
-      first, E refitted on top of it, when it still matches on top of E
-      (`_explanation_on_top`, ``on_top_of``);
-      otherwise E holds it (a friction's describing function or a static map's Bussgang
-      gain also looks like a gain change) and the refit stays in the base.
+    - an effect E named in the first round on top of the refit: right after that round
+      (before the base's spring check, which could take a change of the mechanics that a
+      mode line reads), the match is named first, E refitted on top of it, when it still
+      matches on top of E (`_explanation_on_top`, ``on_top_of``); otherwise E holds it (a
+      friction's describing function or a static map's Bussgang gain also looks like a
+      gain change) and the refit stays in the base.
     """
     chosen: list[FittedEffect] = []
     base_cols = None
@@ -437,27 +448,32 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
             chosen, prediction = reference
             break
         by_mode = [mechanics_name(e) for e in best.base + [best.effect]]
+        named = [e.name for e in by_mode if e.name not in BASE_TERMS]
+        if linear.get("matching") and explain is None and len(rounds) == 1:
+            # the first effect named on top of the refit, whose main content the check found
+            # to be a gain, a shift or a mode line: is it still, on top of that effect?
+            # (before the base's spring is checked: it can take a change of the mechanics
+            # that a mode line reads, and then no room is left for the line)
+            refit = next(e for e in by_mode if e.name == "linear_refit")
+            held = _explanation_on_top(ctx, named, linear["matching"], best.prediction,
+                                       refit.n_params, floor_sse)
+            if held is not None:
+                held.linear = {**linear, "named": linear["matching"],
+                               "on_top_of": [e.named_as for e in held.named
+                                             if e.name != linear["matching"]]}
+                held.linear.pop("matching")
+                held.rounds = rounds + held.rounds
+                return held
         chosen, prediction, check = spring_check(ctx, by_mode, best.prediction, floor_sse)
         spring = check or spring
         cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
                 for e in chosen]
         base_cols = np.column_stack(cols)
-    named = [e.name for e in chosen if e.name not in BASE_TERMS]
-    if linear.get("matching") and explain is None and len(named) < max_effects:
-        # (with as many effects as allowed named on top of the refit, it stays in the base)
-        if not named:  # nothing but the refit: name what it matches
-            return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
-                                  explain=linear["matching"])
-        refit = next(e for e in chosen if e.name == "linear_refit")
-        held = _explanation_on_top(ctx, named, linear["matching"], prediction, refit.n_params,
-                                   floor_sse)
-        if held is not None:
-            held.linear = {**linear, "named": linear["matching"],
-                           "on_top_of": [e.named_as for e in held.named
-                                         if e.name != linear["matching"]]}
-            held.linear.pop("matching")
-            held.rounds = rounds + held.rounds
-            return held
+    if linear.get("matching") and explain is None and not any(
+            e.name not in BASE_TERMS for e in chosen):
+        # nothing but the refit: name what it matches
+        return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
+                              explain=linear["matching"])
     others = [e.name for e in chosen if e.name not in BASE_TERMS and e.name != explain]
     if explain is not None and others:
         alone = _without_explanation(ctx, others, prediction, explain, floor_sse)

@@ -287,9 +287,16 @@ LINEAR_EXPLANATIONS = ("gain_fault", "dead_time", "mode_damping", "mode_stiffnes
 MATCH_SHARE = 0.5
 #: the same for a mode line: nearly all of it. The nominal model's own mismatch at another
 #: excitation moves the mode too (the rig's fault-free records: the mass line takes 55–68 %
-#: of the refit), a real change of the mechanics accounts for the refit (the rig's dampers
-#: and payloads on five rig variants: 94–123 %)
+#: of the refit), and so does a heavy friction's describing function (on top of the
+#: friction, the damping line takes 56–73 % of what the refit adds on rig variant v1); a
+#: real change of the mechanics accounts for the refit (the rig's dampers and payloads on
+#: five rig variants: 94–123 %; on top of the seal's friction 97–100 %)
 LINE_MATCH_SHARE = 0.9
+
+
+def match_share(name: str) -> float:
+    """The share of the refit's improvement the explanation ``name`` must exceed to match."""
+    return LINE_MATCH_SHARE if name in MODE_LINES else MATCH_SHARE
 
 
 def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | None = None
@@ -343,7 +350,7 @@ def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | No
         if (c.accepted and p_refit >= ALPHA
                 and (floor_sse is None or c.sse_test <= floor_sse)):
             simple.append(c)
-        elif c.accepted and share > (LINE_MATCH_SHARE if name in MODE_LINES else MATCH_SHARE):
+        elif c.accepted and share > match_share(name):
             matching.append(c)
     if simple:
         best = min(simple, key=lambda c: c.sse_test)
@@ -464,7 +471,8 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 held.linear.pop("matching")
                 held.rounds = rounds + held.rounds
                 return held
-        chosen, prediction, check = spring_check(ctx, by_mode, best.prediction, floor_sse)
+        chosen, prediction, check = spring_check(ctx, by_mode, best.prediction, floor_sse,
+                                                 linear.get("explanations", []))
         spring = check or spring
         cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
                 for e in chosen]
@@ -538,7 +546,8 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
     explanation ⊂ E + refit on the held-out part: the explanation is named (a Selection of
     it and E, E refitted on top of it) when the refit adds to E significantly (F-test at
     ALPHA: a share of next to nothing is no match), and the explanation pays on top of E
-    (F-test at ALPHA) and accounts for more than MATCH_SHARE of what the refit adds to E.
+    (F-test at ALPHA) and accounts for more than `match_share` of what the refit adds to E
+    (MATCH_SHARE; a mode line LINE_MATCH_SHARE, as alone).
     E alone is also E's loop as fitted on top of the explanation, refitted from there
     without it (an explanation that only moved the loop's start explains nothing). E on
     top of the explanation is refitted as the rounds name effects (`_physical_on_top`):
@@ -546,7 +555,7 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
     smaller (a Stribeck excess that pushes the motion once the gain has taken its part:
     Coulomb friction). The share is always
     of what the refit adds to E as named: the smaller effect with the explanation must
-    account for more than MATCH_SHARE of the way from E alone to E with the refit (the
+    account for more than that share of the way from E alone to E with the refit (the
     smaller effect alone starts further away and would make any pair look like a match).
     Otherwise (None) E holds the apparent gain or shift (a friction's describing function,
     a static map's Bussgang gain) and the refit stays in the base."""
@@ -585,7 +594,7 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
                                / (sse_refit / dof_refit), refit_params, dof_refit))
     p = float(stats.f.sf(((sse_alone - sse_with) / k) / (sse_with / dof), k, dof))
     share = (sse_named - sse_with) / (sse_named - sse_refit)
-    if p_refit >= ALPHA or p >= ALPHA or share <= MATCH_SHARE:
+    if p_refit >= ALPHA or p >= ALPHA or share <= match_share(explain):
         return None
     return Selection(chosen, [], pred, {})
 
@@ -631,7 +640,7 @@ def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
 
 
 def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray,
-                 floor_sse: float | None
+                 floor_sse: float | None, explanations: list[dict] = ()
                  ) -> tuple[list[FittedEffect], np.ndarray, dict]:
     """The loop's spring never swallows a change of the mechanics silently.
 
@@ -644,7 +653,10 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     (`_choose`): ``viscous_friction`` (its own fit, the spring beside it, as every force
     effect has) when that is physically possible (adds damping, moves the mode by damping)
     and pays on top of the spring's fit; otherwise the spring by what it does to the mode
-    (`force.mode_shift`): ``stiffness_change`` or ``mass_change``. With a fitted baseline the
+    (`force.mode_shift`): ``stiffness_change`` or ``mass_change``, when the data's linear
+    part moves the mode the same way (``explanations``: the refit check's mode lines,
+    `linear_round`; a spring softer where the stiffness line reads the mode stiffer is the
+    friction loop's correction, not a change of the mechanics). With a fitted baseline the
     spring stays in the base, as ``stiffness_change`` is not a candidate there (the
     baseline holds the linear effects). Returns ``chosen`` (the spring renamed, or the
     damper added, when named), its prediction and the figures of the check ({} when there
@@ -678,6 +690,12 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
         check.update(named=True, damper=True)
         return damper[0], damper[1], check
     check["named"] = check["mode_change"] in MECHANICS
+    if check["named"]:
+        key = f"{check['mode_change']}_ratio"
+        line = next((x["params"][key] for x in explanations
+                     if x["effect"] == f"mode_{check['mode_change']}"), None)
+        check["line_ratio"] = line
+        check["named"] = line is None or (line - 1.0) * (spring.physical[key] - 1.0) > 0.0
     if not check["named"]:
         return chosen, prediction, check
     named = replace(spring, name=MECHANICS[check["mode_change"]],

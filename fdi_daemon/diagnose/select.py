@@ -290,7 +290,7 @@ MATCH_SHARE = 0.5
 #: of the refit), and so does a heavy friction's describing function (on top of the
 #: friction, the damping line takes 56–73 % of what the refit adds on rig variant v1); a
 #: real change of the mechanics accounts for the refit (the rig's dampers and payloads on
-#: five rig variants: 94–123 %; on top of the seal's friction 97–100 %)
+#: five rig variants: 99–123 %; on top of the seal's friction 97–100 %)
 LINE_MATCH_SHARE = 0.9
 
 

@@ -121,6 +121,12 @@ def test_bad_effects_section_is_a_config_error():
         with pytest.raises(ConfigError):
             AugmentedPlant.from_model(FdiModel(fs=FS, plant_b=b, plant_a=a,
                                                extra={"effects": section}))
+    # a mode line on a plant that has no mode (a first-order plant)
+    line = {"items": [{"name": "mode_damping", "param": {"name": "damping_scale", "value": 2.0},
+                       "coefficients": [[1.0]]}]}
+    with pytest.raises(ConfigError, match="no pole pair"):
+        AugmentedPlant.from_model(FdiModel(fs=FS, plant_b=[0.1], plant_a=[1.0, -0.9],
+                                           extra={"effects": line}))
 
 
 def test_monitor_pipeline_uses_the_augmented_model_and_its_residual_shrinks(tmp_path):

@@ -183,7 +183,10 @@ class AugmentedPlant:
         loop = section.get("force_loop", False)
         if not isinstance(loop, bool):
             raise ConfigError(f"{where}.force_loop must be true or false")
-        return cls(model.fs, model.plant_b, model.plant_a, kind, hp, effects, domain, loop)
+        try:
+            return cls(model.fs, model.plant_b, model.plant_a, kind, hp, effects, domain, loop)
+        except ValueError as exc:  # e.g. a mode line on a plant without a pole pair
+            raise ConfigError(f"{where}: {exc}") from None
 
 
 def _items(effects: list[FittedEffect], fs_hz: float) -> list[dict[str, Any]]:

@@ -180,18 +180,24 @@ def test_rig_payload_is_a_mass_change(bearing_mass_kg, excitation):
     assert result.gap_after <= 0.5 * result.gap_before
 
 
+def _variant_and_its_model(index, tmp_path, monkeypatch):
+    """Rig variant ``index`` (`test_detect_other_rig.rig_variant`: another load, valve, seal)
+    and its own `fdi identify` model (`diagnose_rig_variants.identified_model`)."""
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent))
+    from diagnose_rig_variants import identified_model
+    from test_detect_other_rig import rig_variant
+
+    rig = rig_variant(index)
+    return rig, identified_model(rig, tmp_path)
+
+
 def test_a_rig_variant_without_fault_names_no_friction_its_seal_lacks(tmp_path, monkeypatch):
     # rig variant v1 (`test_detect_other_rig.rig_variant(1)`: another load, valve, seal),
     # with its own `fdi identify` model, 40 s at 0.8 V. Its seal has Coulomb friction with a
     # little stiction and no viscous part; a viscous friction was named second (its loop took
     # damping out of the mode, Δ(c/m) −1.45 /s: a negative damper) until a viscous friction
     # had to add damping (docs/diagnose.md §4.3)
-    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent))
-    from diagnose_rig_variants import identified_model
-    from test_detect_other_rig import rig_variant
-
-    rig = rig_variant(1)
-    model = identified_model(rig, tmp_path)
+    rig, model = _variant_and_its_model(1, tmp_path, monkeypatch)
     u, y = rig_recording(variant=tuple(sorted(rig.items())), **STRONG)
     result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
     assert set(result.named) <= SEAL, result.named
@@ -202,13 +208,9 @@ def test_a_rig_variant_damper_is_named_viscous_friction(tmp_path, monkeypatch):
     # load's damping doubled, 40 s at 0.8 V: the seal's friction was named with its loop's
     # spring, read as a mass × 0.828, until the refit's damping line was checked on top of
     # the first effect named, before the spring (docs/diagnose.md §4.1)
-    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent))
-    from diagnose_rig_variants import identified_model
-    from test_detect_other_rig import rig_variant
     from hil_sim.rig import RigParams
 
-    rig = rig_variant(0)
-    model = identified_model(rig, tmp_path)
+    rig, model = _variant_and_its_model(0, tmp_path, monkeypatch)
     nominal = RigParams(**rig)
     damped = {**rig, "viscous_damping_n_s_per_m": 2.0 * nominal.viscous_damping_n_s_per_m}
     u, y = rig_recording(variant=tuple(sorted(damped.items())), **STRONG)
@@ -227,12 +229,7 @@ def test_a_rig_variant_heavy_friction_is_named_coulomb_friction_alone(tmp_path, 
     # damping, and the refit's damping line on top of the friction was named
     # viscous_friction first until a line had to account for nearly all of what the refit
     # adds there too (docs/diagnose.md §4.1)
-    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent))
-    from diagnose_rig_variants import identified_model
-    from test_detect_other_rig import rig_variant
-
-    rig = rig_variant(1)
-    model = identified_model(rig, tmp_path)
+    rig, model = _variant_and_its_model(1, tmp_path, monkeypatch)
     seal = {**rig, "seal_coulomb_n": 1.0, "seal_static_n": 1.0}
     u, y = rig_recording(variant=tuple(sorted(seal.items())), rms_v=0.4, duration_s=30.0)
     result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)

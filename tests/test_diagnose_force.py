@@ -305,3 +305,30 @@ def test_a_long_records_parameter_search_sees_the_force_balance_of_its_own_sampl
     assert cut.base_columns.shape == (head, 2)
     assert np.array_equal(cut.base_columns, ctx.base_columns[:head])
     assert cut.split.train_end == head
+
+
+@pytest.mark.parametrize("mean_x,possible", [(0.3, False), (0.0, True)])
+def test_a_force_that_is_mostly_a_constant_acceleration_is_not_a_force_of_the_motion(
+        mean_x, possible):
+    # the mean acceleration of a bounded motion is zero: a force effect whose output is
+    # mostly its mean is a sensor's offset (`force.STEADY_SHARE`). A cubic spring on a
+    # position that sits at 0.3 with a small swing, against one that swings about 0
+    from types import SimpleNamespace
+
+    from fdi_daemon.diagnose.effects import FittedEffect
+    from fdi_daemon.diagnose.force import force_report
+
+    n = int(20 * FS)
+    swing = 0.02 if mean_x else 1.0
+    x = mean_x + swing * np.sin(2 * np.pi * 3.0 * np.arange(n) / FS)
+    ctx = SimpleNamespace(chain=StateChain(0, FS, 0.2).coefficients, a_dom=A,
+                          split=make_split(n, 0))
+    b = np.array([0.1, 0.05, 0.0])
+    eff = FittedEffect("cubic_stiffness", None, [b], n_linear=3)
+    out = force_report(eff, ctx, np.zeros(n), (x ** 3)[:, None], np.zeros(n), b)
+    # the output's mean square against its energy, the output filtered by scipy
+    steady = signal.lfilter(b, A, x ** 3)
+    expected = np.mean(steady[ctx.split.fit]) ** 2 / np.mean(steady[ctx.split.fit] ** 2)
+    assert out["steady_share"] == pytest.approx(expected, rel=1e-9)
+    assert (out["steady_share"] > 0.9) == (not possible)
+    assert out["plausible"] is possible

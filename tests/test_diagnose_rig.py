@@ -47,6 +47,16 @@ def test_rig_fault_is_named_first_and_gap_halves(fault, value, right, excitation
     assert result.gap_after <= 0.5 * result.gap_before
 
 
+def test_rig_accelerometer_bias_is_a_sensor_offset_alone_with_its_size():
+    # a spring fitted beside the offset once held a steady acceleration (−1.76 m/s²) that
+    # traded with the offset (read 2.27) and was named a mass change (× 1.018) second: a
+    # force of the motion holds no steady acceleration (`force.STEADY_SHARE`)
+    result = _diagnose("accel_bias", 0.5, **STRONG)
+    assert result.named[:1] == ["sensor_offset"]
+    assert set(result.named[1:]) <= SEAL, result.named
+    assert result.selection.named[0].physical["offset"] == pytest.approx(0.5, rel=0.05)
+
+
 #: an input effect's size as `fdi diagnose` reports it, and the simulator's
 _INPUT_SIZE = {"dead_time": ("dead_time_s", "delay_s"),
                "dead_zone": ("half_width", "half_width_v"),

@@ -506,6 +506,11 @@ _FORCE_LABELS = {"coulomb_friction": ["coulomb_level"],
                  "loop_stiffness": ["stiffness"], "stiffness_change": ["stiffness"],
                  "mass_change": ["stiffness"]}
 _FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
+#: the largest share of a force effect's output energy (acceleration) that may be its
+#: mean: an effect that is mostly a constant acceleration is not a force of the motion (on
+#: the rig, a spring fitted beside an accelerometer bias: 0.9996; friction, springs and
+#: masses where the simulator has them: below 0.001)
+STEADY_SHARE = 0.5
 
 
 def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
@@ -566,6 +571,14 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
     if eff.name == "stribeck_friction":
         plausible = plausible and friction_form(out, out["coulomb_level_input_equivalent"],
                                                 out["stribeck_excess_input_equivalent"])
+    if n == 0 and eff.name != "force_offset":
+        # a force of the motion holds no steady acceleration: the mean acceleration of a
+        # bounded motion is zero, a constant one is a sensor's offset
+        total = sum(signal.lfilter(b, ctx.a_dom, phi[:, j])
+                    for j, b in enumerate(eff.coefficients))[fit]
+        energy = float(total @ total) * total.size
+        out["steady_share"] = float(np.sum(total)) ** 2 / energy if energy > 0 else 0.0
+        plausible = plausible and out["steady_share"] <= STEADY_SHARE
     if eff.name in SPRINGS:  # the base's spring is reported too (`report`: loop_spring)
         out.update(mode_shift(ctx, eff.coefficients[0], b_v))
         plausible = plausible and (eff.name == "loop_stiffness"

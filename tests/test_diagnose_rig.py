@@ -245,3 +245,20 @@ def test_a_rig_variant_heavy_friction_is_named_coulomb_friction_alone(tmp_path, 
     result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
     assert result.named == ["coulomb_friction"]
     assert result.gap_after <= 0.5 * result.gap_before
+
+
+def test_a_rig_variant_dead_time_is_named_with_its_size(tmp_path, monkeypatch):
+    # rig variant v0 with its own model, a dead time of two samples in the drive, 40 s at
+    # 0.8 V: the refit is a pure shift (98 % of what it removes), but beside the seal's
+    # friction the shift's coefficient traded to 1.57, outside a shift's range, and the
+    # refit swallowed the delay (Stribeck friction alone) until the explanation kept the
+    # judgement it had alone (docs/diagnose.md §4.1)
+    rig, model = _variant_and_its_model(0, tmp_path, monkeypatch)
+    u, y = rig_recording(variant=tuple(sorted(rig.items())), input_effect="dead_time",
+                         **STRONG)
+    result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
+    assert result.named[:1] == ["dead_time"]
+    assert set(result.named[1:]) <= SEAL
+    delay = result.selection.named[0].physical["dead_time_s"]
+    assert delay == pytest.approx(RIG_INPUT_EFFECTS["dead_time"]["delay_s"], abs=0.25 / RIG_FS)
+    assert result.gap_after <= 0.5 * result.gap_before

@@ -249,7 +249,7 @@ def test_a_rig_variant_heavy_friction_is_named_coulomb_friction_alone(tmp_path, 
 
 def test_a_rig_variant_dead_time_is_named_with_its_size(tmp_path, monkeypatch):
     # rig variant v0 with its own model, a dead time of two samples in the drive, 40 s at
-    # 0.8 V: the refit is a pure shift (98 % of what it removes), but beside the seal's
+    # 0.8 V: the refit is a pure shift (99.8 % of what it removes), but beside the seal's
     # friction the shift's coefficient traded to 1.57, outside a shift's range, and the
     # refit swallowed the delay (Stribeck friction alone) until the explanation kept the
     # judgement it had alone (docs/diagnose.md §4.1)

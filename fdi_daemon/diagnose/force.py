@@ -540,6 +540,9 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
     (`effects.friction_form`: an excess that takes friction away near v = 0 makes the form
     a Coulomb friction, ``named_as``). Otherwise the fit is not ``plausible`` and is never
     named. The power test needs no knowledge of how force enters, unlike the sign of c.
+    On an acceleration output (``steady_share``): a force of the motion holds no steady
+    acceleration (a bounded motion's mean acceleration is zero); an effect whose output is
+    mostly its mean (mean² above half its mean square, `STEADY_SHARE`) is a sensor's offset.
     """
     if not np.all(np.isfinite(y)):
         return {"diverged": True, "plausible": False}
@@ -576,8 +579,8 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
         # bounded motion is zero, a constant one is a sensor's offset
         total = sum(signal.lfilter(b, ctx.a_dom, phi[:, j])
                     for j, b in enumerate(eff.coefficients))[fit]
-        energy = float(total @ total) * total.size
-        out["steady_share"] = float(np.sum(total)) ** 2 / energy if energy > 0 else 0.0
+        mean_square = float(np.mean(total ** 2))
+        out["steady_share"] = float(np.mean(total)) ** 2 / mean_square if mean_square > 0 else 0.0
         plausible = plausible and out["steady_share"] <= STEADY_SHARE
     if eff.name in SPRINGS:  # the base's spring is reported too (`report`: loop_spring)
         out.update(mode_shift(ctx, eff.coefficients[0], b_v))

@@ -557,6 +557,9 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
     of what the refit adds to E as named: the smaller effect with the explanation must
     account for more than that share of the way from E alone to E with the refit (the
     smaller effect alone starts further away and would make any pair look like a match).
+    On top of E the explanation must change the model the way it did alone (`_direction`):
+    a gain that turns from a loss into a rise is a remainder of E's fit, not the change the
+    check found (a dead zone's Bussgang gain: 0.867 alone, 1.018 on top of the map).
     Otherwise (None) E holds the apparent gain or shift (a friction's describing function,
     a static map's Bussgang gain) and the refit stays in the base."""
     test = ctx.split.test
@@ -570,6 +573,8 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
         if on_top is None:
             return None
         names, chosen, pred, sse_with = on_top
+        if _direction(next(e for e in chosen if e.name == explain)) != _direction(first[0]):
+            return None  # E took the change the check found, and more: E holds it
         _, _, sse_alone = _fit_set(ctx, names, [])
         sse_named = sse_alone if names == named else _fit_set(ctx, named, [])[2]
     except NotApplicable:
@@ -597,6 +602,16 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
     if p_refit >= ALPHA or p >= ALPHA or share <= match_share(explain):
         return None
     return Selection(chosen, [], pred, {})
+
+
+def _direction(explanation: FittedEffect) -> float:
+    """Which way an explanation of the refit changes the model: a gain up or down, a mode
+    line's parameter up or down (+1, −1); a shift is always a delay."""
+    if explanation.name == "gain_fault":
+        return float(np.sign(explanation.physical["gain_ratio"] - 1.0))
+    if explanation.name in MODE_LINES:
+        return float(np.sign(explanation.param - 1.0))
+    return 1.0
 
 
 def _physical_on_top(ctx: Context, named: list[str], first: list[FittedEffect]

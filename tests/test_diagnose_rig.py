@@ -247,34 +247,31 @@ def test_a_rig_variant_heavy_friction_is_named_coulomb_friction_alone(tmp_path, 
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_a_rig_variant_dead_time_is_named_with_its_size(tmp_path, monkeypatch):
-    # rig variant v0 with its own model, a dead time of two samples in the drive, 40 s at
-    # 0.8 V: the refit is a pure shift (99.8 % of what it removes), but beside the seal's
+
+@pytest.mark.parametrize("index,effect", [
+    # v0: the refit is a pure shift (99.8 % of what it removes), but beside the seal's
     # friction the shift's coefficient traded to 1.57, outside a shift's range, and the
     # refit swallowed the delay (Stribeck friction alone) until the explanation kept the
     # judgement it had alone (docs/diagnose.md §4.1)
-    rig, model = _variant_and_its_model(0, tmp_path, monkeypatch)
-    u, y = rig_recording(variant=tuple(sorted(rig.items())), input_effect="dead_time",
-                         **STRONG)
+    (0, "dead_time"),
+    # v1: the refit alone is the map's Bussgang gain (0.867); on top of the map a gain of
+    # 1.018 was named first, a remainder of the map's fit, until an explanation on top had
+    # to change the model the way it did alone (docs/diagnose.md §4.1)
+    (1, "dead_zone"),
+])
+def test_a_rig_variant_input_effect_is_named_first_with_its_size(index, effect, tmp_path,
+                                                                 monkeypatch):
+    # a rig variant with its own model, the drive's effect of the default rig's test
+    # (a dead time of two samples, a dead zone of ±0.15 V), 40 s at 0.8 V
+    rig, model = _variant_and_its_model(index, tmp_path, monkeypatch)
+    u, y = rig_recording(variant=tuple(sorted(rig.items())), input_effect=effect, **STRONG)
     result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
-    assert result.named[:1] == ["dead_time"]
+    assert result.named[:1] == [effect]
     assert set(result.named[1:]) <= SEAL
-    delay = result.selection.named[0].physical["dead_time_s"]
-    assert delay == pytest.approx(RIG_INPUT_EFFECTS["dead_time"]["delay_s"], abs=0.25 / RIG_FS)
-    assert result.gap_after <= 0.5 * result.gap_before
-
-
-def test_a_rig_variant_dead_zone_is_named_first_with_its_size(tmp_path, monkeypatch):
-    # rig variant v1 with its own model, a dead zone of ±0.15 V in the drive, 40 s at 0.8 V:
-    # the refit alone is the map's Bussgang gain (0.867); on top of the map a gain of 1.018
-    # was named first, a remainder of the map's fit, until an explanation on top had to
-    # change the model the way it did alone (docs/diagnose.md §4.1)
-    rig, model = _variant_and_its_model(1, tmp_path, monkeypatch)
-    u, y = rig_recording(variant=tuple(sorted(rig.items())), input_effect="dead_zone",
-                         **STRONG)
-    result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
-    assert result.named[:1] == ["dead_zone"]
-    assert set(result.named[1:]) <= SEAL
-    width = result.selection.named[0].physical["half_width"]
-    assert width == pytest.approx(RIG_INPUT_EFFECTS["dead_zone"]["half_width_v"], rel=0.2)
+    read, true = _INPUT_SIZE[effect]
+    size = result.selection.named[0].physical[read]
+    if effect == "dead_time":  # within a quarter of a sample
+        assert size == pytest.approx(RIG_INPUT_EFFECTS[effect][true], abs=0.25 / RIG_FS)
+    else:
+        assert size == pytest.approx(RIG_INPUT_EFFECTS[effect][true], rel=0.2)
     assert result.gap_after <= 0.5 * result.gap_before

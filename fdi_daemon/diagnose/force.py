@@ -554,8 +554,10 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
         out["stribeck_velocity_unit"] = "velocity units"
     plausible = True
     vv = float(v[fit] @ v[fit]) or 1.0
+    total = np.zeros(len(y))  # the effect's own output, its columns together
     for j, (label, b) in enumerate(zip(_FORCE_LABELS[eff.name], eff.coefficients)):
         c = signal.lfilter(b, ctx.a_dom, phi[:, j])
+        total += c
         if eff.name == "viscous_friction" and spring is not None:
             c = c + signal.lfilter(spring[0], ctx.a_dom, spring[1])
         g = signal.lfilter(b_input, ctx.a_dom, phi[:, j])[fit]
@@ -577,10 +579,9 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
     if n == 0 and eff.name != "force_offset":
         # a force of the motion holds no steady acceleration: the mean acceleration of a
         # bounded motion is zero, a constant one is a sensor's offset
-        total = sum(signal.lfilter(b, ctx.a_dom, phi[:, j])
-                    for j, b in enumerate(eff.coefficients))[fit]
-        mean_square = float(np.mean(total ** 2))
-        out["steady_share"] = float(np.mean(total)) ** 2 / mean_square if mean_square > 0 else 0.0
+        mean_square = float(np.mean(total[fit] ** 2))
+        out["steady_share"] = (float(np.mean(total[fit])) ** 2 / mean_square
+                               if mean_square > 0 else 0.0)
         plausible = plausible and out["steady_share"] <= STEADY_SHARE
     if eff.name in SPRINGS:  # the base's spring is reported too (`report`: loop_spring)
         out.update(mode_shift(ctx, eff.coefficients[0], b_v))

@@ -84,10 +84,14 @@ NAMED_RATIOS = {"mass_change": "mass_ratio", "stiffness_change": "stiffness_rati
                 "gain_fault": "gain_ratio", "viscous_friction": "damping_change_per_s"}
 
 
-def noise_input(duration_s: float, corner_hz: float, rms: float, seed: int = 5):
-    """Gaussian noise at FS low-passed at corner_hz (4th-order Butterworth), scaled to rms."""
-    u = signal.lfilter(*signal.butter(4, corner_hz, fs=FS),
-                       np.random.default_rng(seed).standard_normal(int(duration_s * FS)))
+def noise_input(duration_s: float, corner_hz: float, rms: float, seed: int = 5,
+                fs_hz: float = FS, low_hz: float | None = None):
+    """Gaussian noise at fs_hz low-passed at corner_hz (4th-order Butterworth; band-passed
+    from low_hz when given: no content at DC to drift an integrating plant), scaled to rms."""
+    band = corner_hz if low_hz is None else [low_hz, corner_hz]
+    u = signal.lfilter(*signal.butter(4, band, btype="lowpass" if low_hz is None else "bandpass",
+                                      fs=fs_hz),
+                       np.random.default_rng(seed).standard_normal(int(duration_s * fs_hz)))
     return u * rms / np.std(u)
 
 
@@ -156,14 +160,25 @@ RIG_INPUT_EFFECTS = {
 }
 
 
+#: the rig's command signals (duration s, RMS V) -> V at RIG_FS: the tests' multisine, and
+#: two unlike it (a random signal, and a multisine reaching past the model's 18.75 Hz band)
+#: that keep the piston off its end stops (no content at DC: the cylinder integrates)
+RIG_EXCITATIONS = {
+    "multisine 1-12 Hz": lambda d, rms: multisine(d, RIG_FS, 1.0, 12.0, rms, seed=3),
+    "noise 1-15 Hz": lambda d, rms: noise_input(d, 15.0, rms, fs_hz=RIG_FS, low_hz=1.0),
+    "multisine 2-25 Hz": lambda d, rms: multisine(d, RIG_FS, 2.0, 25.0, rms, seed=3),
+}
+
+
 @lru_cache(maxsize=None)
 def rig_recording(fault: str | None = None, value: float = 0.0, rms_v: float = 0.4,
                   duration_s: float = 30.0, variant: tuple[tuple[str, float], ...] = (),
-                  input_effect: str | None = None):
-    """(v_in, accel) of the simulated pneumatic rig (`hil_sim.rig.Rig`, seed 4) driven by a
-    1–12 Hz multisine of ``rms_v`` after 1 s at rest, with ``fault`` switched on from the
-    start: ``bearing_supply`` (a fraction of nominal: below ≈ 0.8 the block touches and
-    Coulomb contact friction acts on the load) or one of `hil_sim.rig.FAULTS`. variant:
+                  input_effect: str | None = None, excitation: str = "multisine 1-12 Hz"):
+    """(v_in, accel) of the simulated pneumatic rig (`hil_sim.rig.Rig`, seed 4) driven by
+    ``excitation`` (`RIG_EXCITATIONS`) of ``rms_v`` after 1 s at rest, with ``fault``
+    switched on from the start: ``bearing_supply`` (a fraction of nominal: below ≈ 0.8 the
+    block touches and Coulomb contact friction acts on the load) or one of
+    `hil_sim.rig.FAULTS`. variant:
     `RigParams` overrides, as (name, value) pairs (a rig with other physics). input_effect:
     one of `RIG_INPUT_EFFECTS`, acting on the command before the valve; the recorded v_in
     is the command (as measured)."""
@@ -176,7 +191,7 @@ def rig_recording(fault: str | None = None, value: float = 0.0, rms_v: float = 0
     elif fault is not None:
         rig.set_fault(fault, value)
     rig.run(np.zeros(int(RIG_FS)))
-    command = multisine(duration_s, RIG_FS, 1.0, 12.0, rms_v, seed=3)
+    command = RIG_EXCITATIONS[excitation](duration_s, rms_v)
     hidden = {input_effect: RIG_INPUT_EFFECTS[input_effect]} if input_effect else {}
     applied = input_effects(command, hidden, RIG_FS)
     out = rig.run(applied)

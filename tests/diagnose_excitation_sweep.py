@@ -1,6 +1,6 @@
 """`fdi diagnose` under excitations other than the tests' multisine (docs/diagnose.md §9).
-Run: ``python tests/diagnose_excitation_sweep.py [mechanics] [duffing]`` (both by default;
-about five minutes each).
+Run: ``python tests/diagnose_excitation_sweep.py [mechanics] [duffing] [rig]`` (all three
+by default; about five minutes each, the rig fifteen).
 
 mechanics: the §V model with its nominal model file, one parameter changed (mass × 0.8 and
 × 1.25, spring × 0.8, damper × 1.5), 24 s, under band-limited Gaussian noise to 15 Hz, a
@@ -8,6 +8,11 @@ mechanics: the §V model with its nominal model file, one parameter changed (mas
 and position outputs. duffing: the Duffing oscillator of `diagnose_cases.duffing_recording`
 (no model file: a fitted linear baseline), k₃ 3·10⁴, 10⁵ and 3·10⁵ N/m³, under the 0.3–12 Hz
 multisine, 15 Hz noise and a 0.3–4 Hz multisine (40 s, 1 V RMS), position output.
+rig: the simulated pneumatic rig with its model file (`diagnose_cases.rig_recording`, 0.8 V
+RMS, 40 s), fault-free and with one effect (a pure Coulomb friction of 1 N and of 3.4 N,
+an accelerometer bias, a valve gain, a payload, the supply pressure, the air bearing's
+contact friction, the four drive effects), under the excitations of `RIG_EXCITATIONS` other
+than the tests' multisine: band-passed noise 1–15 Hz and a 2–25 Hz multisine.
 Prints the names, the held-out gap before and after, the form and the ratios or the k₃ read.
 """
 
@@ -68,8 +73,38 @@ def duffing() -> None:
                   f"k3 read {read:.3g} N/m^3", flush=True)
 
 
+def rig() -> None:
+    from fdi_daemon.diagnose.workflow import run_diagnose
+    from tests.diagnose_cases import (NAMED_RATIOS, RIG_EXCITATIONS, RIG_FS, RIG_INPUT_EFFECTS,
+                                      rig_model, rig_recording)
+
+    def pure(coulomb_n: float) -> dict:  # the rod seal's friction, static = Coulomb
+        return {"variant": (("seal_coulomb_n", coulomb_n), ("seal_static_n", coulomb_n))}
+
+    b, a = rig_model()
+    cases = {"fault-free": {}, "Coulomb 1 N": pure(1.0), "Coulomb 3.4 N": pure(3.4),
+             "accel bias 0.5": {"fault": "accel_bias", "value": 0.5},
+             "valve gain 0.8": {"fault": "valve_gain", "value": 0.8},
+             "payload +0.5 kg": {"variant": (("bearing_mass_kg", 1.5),)},
+             "supply 0.8": {"fault": "supply_pressure", "value": 0.8},
+             "bearing supply 0.75": {"fault": "bearing_supply", "value": 0.75},
+             **{effect: {"input_effect": effect} for effect in RIG_INPUT_EFFECTS}}
+    for excitation in list(RIG_EXCITATIONS)[1:]:
+        for label, case in cases.items():
+            u, y = rig_recording(rms_v=0.8, duration_s=40.0, excitation=excitation, **case)
+            r = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+            read = {f"{e.named_as}:{key}": round(float(e.physical[key]), 4)
+                    for e in r.selection.named
+                    for key in (NAMED_RATIOS.get(e.named_as), "dead_time_s", "half_width",
+                                "level", "gap", "offset")
+                    if key in e.physical and isinstance(e.physical[key], float)}
+            print(f"{excitation}, {label}: {r.named} {r.gap_before:.4f} -> "
+                  f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {read}",
+                  flush=True)
+
+
 if __name__ == "__main__":
     sys.path.insert(0, str(REPO))
-    parts = sys.argv[1:] or ["mechanics", "duffing"]
+    parts = sys.argv[1:] or ["mechanics", "duffing", "rig"]
     for part in parts:
-        {"mechanics": mechanics, "duffing": duffing}[part]()
+        {"mechanics": mechanics, "duffing": duffing, "rig": rig}[part]()

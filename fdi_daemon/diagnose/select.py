@@ -26,8 +26,9 @@ it does more than a linear change of the mechanics would. That change is named a
 it does to the mechanical mode (`force.mode_shift`): ``stiffness_change`` when the spring
 moved, ``mass_change`` (the same fit) when the mass did, ``viscous_friction`` (its own fit)
 when damping was added. After each round the spring a named force effect left in the base
-is named too when it pays on top of it (`spring_check`: a stiffness change behind a
-friction, or a damper, fitted in its own column beside the spring, where that pays). Then
+is named too when it pays on top of it and the record's linear part moves the mode that
+way (`spring_check`: a stiffness change behind a friction, or a damper, fitted in its own
+column beside the spring, where that pays). Then
 every remaining candidate is tried on top of it (jointly refitted) for a second effect,
 with the same test, against the base given the same loop fit (not one that a named effect
 contains, nor a fit that stands for an effect already named: a Stribeck form named
@@ -461,6 +462,12 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
             # to be a gain, a shift or a mode line: is it still, on top of that effect?
             # (before the base's spring is checked: it can take a change of the mechanics
             # that a mode line reads, and then no room is left for the line)
+            if _stands_for(linear, linear["matching"]) in {e.named_as for e in by_mode}:
+                # the effect named is the change the check found, read by the loop's free
+                # path (the loop's spring reading a mass): one effect, one name, read on
+                # the line, which has no free numerator to bend the mode with
+                return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
+                                      explain=linear["matching"])
             refit = next(e for e in by_mode if e.name == "linear_refit")
             held = _explanation_on_top(ctx, named, linear["matching"], best.prediction,
                                        refit.n_params, floor_sse)
@@ -472,7 +479,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 held.rounds = rounds + held.rounds
                 return held
         chosen, prediction, check = spring_check(ctx, by_mode, best.prediction, floor_sse,
-                                                 linear.get("explanations", []))
+                                                 linear)
         spring = check or spring
         cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
                 for e in chosen]
@@ -493,6 +500,13 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
     return Selection(chosen, rounds, prediction, linear, spring)
+
+
+def _stands_for(linear: dict, explanation: str) -> str:
+    """The effect an explanation of the refit check (``linear``, `linear_round`) is named
+    as: a mode line the change of the mechanics it reads, a gain or a shift itself."""
+    params = next(x["params"] for x in linear["explanations"] if x["effect"] == explanation)
+    return params.get("named_as", explanation)
 
 
 def _beyond_its_start(ctx: Context, cand: Candidate
@@ -664,7 +678,7 @@ def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
 
 
 def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray,
-                 floor_sse: float | None, explanations: list[dict] = ()
+                 floor_sse: float | None, linear: dict | None = None
                  ) -> tuple[list[FittedEffect], np.ndarray, dict]:
     """The loop's spring never swallows a change of the mechanics silently.
 
@@ -678,9 +692,11 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     effect has) when that is physically possible (adds damping, moves the mode by damping)
     and pays on top of the spring's fit; otherwise the spring by what it does to the mode
     (`force.mode_shift`): ``stiffness_change`` or ``mass_change``, when the data's linear
-    part moves the mode the same way (``explanations``: the refit check's mode lines,
-    `linear_round`; a spring softer where the stiffness line reads the mode stiffer is the
-    friction loop's correction, not a change of the mechanics). With a fitted baseline the
+    part moves the mode along that line and the same way (``linear``: the refit check,
+    `linear_round`; a spring softer where the stiffness line reads the mode stiffer, or a
+    mass where the refit is the damping line that a heavy friction's describing function
+    holds, is the friction loop's correction, not a change of the mechanics), and when
+    that change is not named already (one effect, one name). With a fitted baseline the
     spring stays in the base, as ``stiffness_change`` is not a candidate there (the
     baseline holds the linear effects). Returns ``chosen`` (the spring renamed, or the
     damper added, when named), its prediction and the figures of the check ({} when there
@@ -713,10 +729,15 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     if damper is not None:
         check.update(named=True, damper=True)
         return damper[0], damper[1], check
-    check["named"] = check["mode_change"] in MECHANICS
+    linear = linear or {}
+    matching = linear.get("matching")
+    check["named"] = (check["mode_change"] in MECHANICS
+                      and MECHANICS[check["mode_change"]] not in {e.named_as for e in rest}
+                      and (matching not in MODE_LINES
+                           or matching == f"mode_{check['mode_change']}"))
     if check["named"]:
         key = f"{check['mode_change']}_ratio"
-        line = next((x["params"][key] for x in explanations
+        line = next((x["params"][key] for x in linear.get("explanations", [])
                      if x["effect"] == f"mode_{check['mode_change']}"), None)
         check["line_ratio"] = line
         check["named"] = line is None or (line - 1.0) * (spring.physical[key] - 1.0) > 0.0

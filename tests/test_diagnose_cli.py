@@ -136,7 +136,7 @@ def test_any_column_names(tmp_path, capsys):
     assert "coulomb_friction" in out and "inverse_dynamics" in out
     report = json.loads((tmp_path / "a.json").read_text())
     for key in ("form", "form_reason", "noise_floor", "gap_before_to_floor", "dead_time",
-                "linear_check", "force_balance"):
+                "linear_check", "held_by_later", "force_balance"):
         assert key in report
     # the shared --columns mapping gives the same answer
     rc = main(["diagnose", str(path), "--fit-linear", "--columns", "v_in=force,velocity=vel",

@@ -145,6 +145,26 @@ def test_rig_hidden_coulomb_friction_is_named_coulomb_friction(coulomb_n, excita
     assert result.gap_after <= 0.5 * result.gap_before
 
 
+def test_rig_heavy_coulomb_friction_under_a_small_excitation_holds_the_map_named_first():
+    # 3.4 N under the 0.4 V multisine: the mass sticks for most of the record, and the
+    # friction's loop alone ended where it pushes the motion. An input saturation was named
+    # first, the friction on top of it; refitted without the map, the friction does as
+    # well, so the map is not kept (`select._each_pays_on_top`) and the report says so
+    from fdi_daemon.diagnose.report import build_report, summary_lines
+
+    u, y = rig_recording(variant=(("seal_coulomb_n", 3.4), ("seal_static_n", 3.4)))
+    b, a = rig_model()
+    result = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+    assert result.named == ["coulomb_friction"]
+    assert result.gap_after <= 0.5 * result.gap_before
+    report = build_report(result)
+    for held in report["held_by_later"]:
+        assert held["held_by"] == ["coulomb_friction"]
+        assert held["sse_without"] <= 1.05 * held["sse_with"]
+        assert any(line.startswith(f"{held['effect']} was named first and is not kept")
+                   for line in summary_lines(report))
+
+
 def test_rig_without_fault_names_nothing_or_its_seal_friction():
     result = _diagnose(None, 0.0, **STRONG)
     assert set(result.named) <= SEAL

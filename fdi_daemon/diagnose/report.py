@@ -69,6 +69,7 @@ def build_report(result, source: str = "") -> dict[str, Any]:
                              if e.name == "dead_time"), None)},
         "linear_check": result.selection.linear,
         "spring_check": result.selection.spring,
+        "held_by_later": result.selection.held_by_later,
     }
     spring = [e.physical for e in result.selection.chosen if e.name == "loop_stiffness"]
     if spring:  # the force loop's spring in the base: what it does to the mode (§4.3)
@@ -127,6 +128,10 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
                 if isinstance(v, (int, float)) and not isinstance(v, bool))
             form = f"fitted as {e['form']}: " if e["form"] != e["effect"] else ""
             lines.append(f"missing effect: {e['effect']}  ({form}{params})")
+    for held in report["held_by_later"]:
+        lines.append(f"{held['effect']} was named first and is not kept: "
+                     f"{', '.join(held['held_by'])}, refitted without it, does as well "
+                     f"(held-out SSE {held['sse_without']:.4g} against {held['sse_with']:.4g})")
     spring = report.get("loop_spring", {})
     if "resonance_hz" in spring:
         lines.append(f"the force loop's linear part (its spring, in the base) moves the mode "

@@ -91,6 +91,20 @@ def _terminate(signum, frame):
     raise Terminated
 
 
+def _unraisable_terminated(hook):
+    """``hook`` (a `sys.unraisablehook`), except for a `Terminated` that could not
+    propagate: raised where Python drops exceptions (a ctypes callback, such as llvmlite's
+    object cache while numba compiles; a ``__del__``), it printed a traceback and the
+    signal was lost. It is not printed, and the signal is sent again a moment later."""
+    def handle(unraisable):
+        if isinstance(unraisable.exc_value, Terminated):
+            threading.Timer(TERMINATE_RETRY_S, os.kill,
+                            (os.getpid(), signal.SIGTERM)).start()
+            return
+        hook(unraisable)
+    return handle
+
+
 def _on_sigterm(handler):
     """Install ``handler`` for SIGTERM (main thread only); returns the one it replaces.
     Commands with their own handling (`fdi run`, `fdi sim serve`) install theirs over it."""
@@ -103,6 +117,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(attach_negative_values(sys.argv[1:] if argv is None else argv))
     previous = _on_sigterm(_terminate)
+    previous_hook = sys.unraisablehook
+    if previous is not None:
+        sys.unraisablehook = _unraisable_terminated(previous_hook)
     try:
         return int(args._run(args) or 0)
     except UserError as exc:
@@ -119,6 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if previous is not None:
             _on_sigterm(previous)
+            sys.unraisablehook = previous_hook
 
 
 if __name__ == "__main__":

@@ -60,3 +60,36 @@ def test_a_sigterm_during_an_import_ends_the_command_after_the_import(tmp_path):
                           text=True, timeout=30)
     assert done.stdout.split() == ["imported", "terminated"], (done.stdout, done.stderr)
     assert "Traceback" not in done.stderr
+
+
+def test_a_sigterm_in_a_callback_from_c_ends_the_command_without_a_traceback(tmp_path):
+    # a SIGTERM that arrived while numba compiled (llvmlite calls back into Python through
+    # ctypes) raised `Terminated` where ctypes drops exceptions: "Exception ignored on
+    # calling ctypes callback function" and a traceback reached the user. The signal is
+    # delivered again after it; here libc's qsort calls back into Python
+    import subprocess
+    import sys
+
+    script = ("import ctypes, ctypes.util, os, signal, sys, time\n"
+              "from fdi_daemon.cli import Terminated, _terminate, _unraisable_terminated\n"
+              "signal.signal(signal.SIGTERM, _terminate)\n"
+              "sys.unraisablehook = _unraisable_terminated(sys.unraisablehook)\n"
+              "libc = ctypes.CDLL(ctypes.util.find_library('c'))\n"
+              "CMP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_int),\n"
+              "                       ctypes.POINTER(ctypes.c_int))\n"
+              "def compare(a, b):\n"
+              "    os.kill(os.getpid(), signal.SIGTERM)\n"
+              "    time.sleep(0.01)\n"
+              "    return a[0] - b[0]\n"
+              "values = (ctypes.c_int * 2)(2, 1)\n"
+              "try:\n"
+              "    libc.qsort(values, 2, ctypes.sizeof(ctypes.c_int), CMP(compare))\n"
+              "    print('sorted', flush=True)\n"
+              "    time.sleep(5)\n"
+              "    print('not terminated', flush=True)\n"
+              "except Terminated:\n"
+              "    print('terminated', flush=True)\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=30)
+    assert done.stdout.split() == ["sorted", "terminated"], (done.stdout, done.stderr)
+    assert "Traceback" not in done.stderr, done.stderr

@@ -35,61 +35,55 @@ def test_a_command_leaves_the_sigterm_handler_as_it_found_it(tmp_path, capsys):
     assert signal.getsignal(signal.SIGTERM) is before
 
 
+def _words_printed(tmp_path, prelude: str, action: str) -> list[str]:
+    """Run, in a fresh interpreter with a command's SIGTERM handling (as `main` installs
+    it), ``prelude`` and then ``action`` (which sends SIGTERM to itself), then 5 s of sleep:
+    the words printed ("terminated" when the signal ended it). No traceback is printed."""
+    import subprocess
+    import sys
+
+    script = ("import signal, sys, time\n"
+              "from fdi_daemon.cli import Terminated, _terminate, _unraisable_terminated\n"
+              "signal.signal(signal.SIGTERM, _terminate)\n"
+              "sys.unraisablehook = _unraisable_terminated(sys.unraisablehook)\n"
+              + prelude + "try:\n"
+              + "".join(f"    {line}\n" for line in action.splitlines())
+              + "    time.sleep(5)\n"
+              "    print('not terminated', flush=True)\n"
+              "except Terminated:\n"
+              "    print('terminated', flush=True)\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=30)
+    assert "Traceback" not in done.stderr, done.stderr
+    return done.stdout.split()
+
+
 def test_a_sigterm_during_an_import_ends_the_command_after_the_import(tmp_path):
     # raised inside the import machinery, `Terminated` broke the module being imported: a
     # SIGTERM to `fdi sim serve` while it imported numpy printed numpy's traceback and
     # "numpy._core.multiarray failed to import". The signal is delivered again after it
-    import subprocess
-    import sys
-
     (tmp_path / "slow_module.py").write_text(
         "import os, signal, time\n"
         "os.kill(os.getpid(), signal.SIGTERM)\n"
         "time.sleep(0.3)\n"
         "print('imported', flush=True)\n")
-    script = ("import signal, sys, time\n"
-              "from fdi_daemon.cli import Terminated, _terminate\n"
-              "signal.signal(signal.SIGTERM, _terminate)\n"
-              "try:\n"
-              "    import slow_module\n"
-              "    time.sleep(5)\n"
-              "    print('not terminated', flush=True)\n"
-              "except Terminated:\n"
-              "    print('terminated', flush=True)\n")
-    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=30)
-    assert done.stdout.split() == ["imported", "terminated"], (done.stdout, done.stderr)
-    assert "Traceback" not in done.stderr
+    assert _words_printed(tmp_path, "", "import slow_module") == ["imported", "terminated"]
 
 
 def test_a_sigterm_in_a_callback_from_c_ends_the_command_without_a_traceback(tmp_path):
     # a SIGTERM that arrived while numba compiled (llvmlite calls back into Python through
     # ctypes) raised `Terminated` where ctypes drops exceptions: "Exception ignored on
-    # calling ctypes callback function" and a traceback reached the user. The signal is
-    # delivered again after it; here libc's qsort calls back into Python
-    import subprocess
-    import sys
-
-    script = ("import ctypes, ctypes.util, os, signal, sys, time\n"
-              "from fdi_daemon.cli import Terminated, _terminate, _unraisable_terminated\n"
-              "signal.signal(signal.SIGTERM, _terminate)\n"
-              "sys.unraisablehook = _unraisable_terminated(sys.unraisablehook)\n"
-              "libc = ctypes.CDLL(ctypes.util.find_library('c'))\n"
-              "CMP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_int),\n"
-              "                       ctypes.POINTER(ctypes.c_int))\n"
-              "def compare(a, b):\n"
-              "    os.kill(os.getpid(), signal.SIGTERM)\n"
-              "    time.sleep(0.01)\n"
-              "    return a[0] - b[0]\n"
-              "values = (ctypes.c_int * 2)(2, 1)\n"
-              "try:\n"
-              "    libc.qsort(values, 2, ctypes.sizeof(ctypes.c_int), CMP(compare))\n"
-              "    print('sorted', flush=True)\n"
-              "    time.sleep(5)\n"
-              "    print('not terminated', flush=True)\n"
-              "except Terminated:\n"
-              "    print('terminated', flush=True)\n")
-    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=30)
-    assert done.stdout.split() == ["sorted", "terminated"], (done.stdout, done.stderr)
-    assert "Traceback" not in done.stderr, done.stderr
+    # calling ctypes callback function", a traceback reached the user and the signal was
+    # lost. It is delivered again after it; here libc's qsort calls back into Python
+    prelude = ("import ctypes, ctypes.util, os\n"
+               "libc = ctypes.CDLL(ctypes.util.find_library('c'))\n"
+               "CMP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_int),\n"
+               "                       ctypes.POINTER(ctypes.c_int))\n"
+               "def compare(a, b):\n"
+               "    os.kill(os.getpid(), signal.SIGTERM)\n"
+               "    time.sleep(0.01)\n"
+               "    return a[0] - b[0]\n"
+               "values = (ctypes.c_int * 2)(2, 1)\n")
+    action = ("libc.qsort(values, 2, ctypes.sizeof(ctypes.c_int), CMP(compare))\n"
+              "print('sorted', flush=True)")
+    assert _words_printed(tmp_path, prelude, action) == ["sorted", "terminated"]

@@ -78,6 +78,11 @@ class Terminated(Exception):
 TERMINATE_RETRY_S = 0.05
 
 
+def _deliver_again(signum) -> None:
+    """Send ``signum`` to this process again in TERMINATE_RETRY_S."""
+    threading.Timer(TERMINATE_RETRY_S, os.kill, (os.getpid(), signum)).start()
+
+
 def _terminate(signum, frame):
     """Raise `Terminated`, except inside the import machinery: an exception raised there
     breaks the module being imported (numpy prints its own traceback and fails with
@@ -85,7 +90,7 @@ def _terminate(signum, frame):
     later, once the import is done."""
     while frame is not None:
         if frame.f_code.co_filename.startswith("<frozen importlib"):
-            threading.Timer(TERMINATE_RETRY_S, os.kill, (os.getpid(), signum)).start()
+            _deliver_again(signum)
             return
         frame = frame.f_back
     raise Terminated
@@ -98,8 +103,7 @@ def _unraisable_terminated(hook):
     signal was lost. It is not printed, and the signal is sent again a moment later."""
     def handle(unraisable):
         if isinstance(unraisable.exc_value, Terminated):
-            threading.Timer(TERMINATE_RETRY_S, os.kill,
-                            (os.getpid(), signal.SIGTERM)).start()
+            _deliver_again(signal.SIGTERM)
             return
         hook(unraisable)
     return handle

@@ -88,9 +88,8 @@ def noise_input(duration_s: float, corner_hz: float, rms: float, seed: int = 5,
                 fs_hz: float = FS, low_hz: float | None = None):
     """Gaussian noise at fs_hz low-passed at corner_hz (4th-order Butterworth; band-passed
     from low_hz when given: no content at DC to drift an integrating plant), scaled to rms."""
-    band = corner_hz if low_hz is None else [low_hz, corner_hz]
-    u = signal.lfilter(*signal.butter(4, band, btype="lowpass" if low_hz is None else "bandpass",
-                                      fs=fs_hz),
+    band, kind = (corner_hz, "lowpass") if low_hz is None else ([low_hz, corner_hz], "bandpass")
+    u = signal.lfilter(*signal.butter(4, band, btype=kind, fs=fs_hz),
                        np.random.default_rng(seed).standard_normal(int(duration_s * fs_hz)))
     return u * rms / np.std(u)
 
@@ -178,10 +177,9 @@ def rig_recording(fault: str | None = None, value: float = 0.0, rms_v: float = 0
     ``excitation`` (`RIG_EXCITATIONS`) of ``rms_v`` after 1 s at rest, with ``fault``
     switched on from the start: ``bearing_supply`` (a fraction of nominal: below ≈ 0.8 the
     block touches and Coulomb contact friction acts on the load) or one of
-    `hil_sim.rig.FAULTS`. variant:
-    `RigParams` overrides, as (name, value) pairs (a rig with other physics). input_effect:
-    one of `RIG_INPUT_EFFECTS`, acting on the command before the valve; the recorded v_in
-    is the command (as measured)."""
+    `hil_sim.rig.FAULTS`. variant: `RigParams` overrides, as (name, value) pairs (a rig
+    with other physics). input_effect: one of `RIG_INPUT_EFFECTS`, acting on the command
+    before the valve; the recorded v_in is the command (as measured)."""
     from hil_sim.msd import input_effects
     from hil_sim.rig import Rig, RigParams
 

@@ -51,6 +51,7 @@ from fdi_daemon.diagnose.effects import (BASE_TERMS, MODE_LINES, SHARE_RANGE, SP
                                          FittedEffect, NotApplicable, columns, fit_effect)
 from fdi_daemon.diagnose.force import (FORCE_EFFECTS, LOOPED, MECHANICS, SPRINGS, in_the_loop,
                                        mechanics_name, possible)
+from fdi_daemon.diagnose.mode_lines import LINES
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
 #: effect in pure noise near 2 %
@@ -466,7 +467,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
             # to be a gain, a shift or a mode line: is it still, on top of that effect?
             # (before the base's spring is checked: it can take a change of the mechanics
             # that a mode line reads, and then no room is left for the line)
-            if _stands_for(linear, linear["matching"]) in {e.named_as for e in by_mode}:
+            if _stands_for(linear["matching"]) in {e.named_as for e in by_mode}:
                 # the effect named is the change the check found, read by the loop's free
                 # path (the loop's spring reading a mass): one effect, one name, read on
                 # the line, which has no free numerator to bend the mode with
@@ -546,11 +547,11 @@ def _each_pays_on_top(ctx: Context, chosen: list[FittedEffect], prediction: np.n
     return chosen, prediction, []
 
 
-def _stands_for(linear: dict, explanation: str) -> str:
-    """The effect an explanation of the refit check (``linear``, `linear_round`) is named
-    as: a mode line the change of the mechanics it reads, a gain or a shift itself."""
-    params = next(x["params"] for x in linear["explanations"] if x["effect"] == explanation)
-    return params.get("named_as", explanation)
+def _stands_for(explanation: str) -> str:
+    """The effect an explanation of the refit check (`linear_round`) is named as: a mode
+    line the change of the mechanics it reads (`mode_lines.LINES`), a gain or a shift
+    itself."""
+    return LINES[MODE_LINES[explanation]] if explanation in MODE_LINES else explanation
 
 
 def _beyond_its_start(ctx: Context, cand: Candidate
@@ -722,7 +723,7 @@ def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
 
 
 def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray,
-                 floor_sse: float | None, linear: dict | None = None
+                 floor_sse: float | None, linear: dict
                  ) -> tuple[list[FittedEffect], np.ndarray, dict]:
     """The loop's spring never swallows a change of the mechanics silently.
 
@@ -773,7 +774,6 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     if damper is not None:
         check.update(named=True, damper=True)
         return damper[0], damper[1], check
-    linear = linear or {}
     matching = linear.get("matching")
     check["named"] = (check["mode_change"] in MECHANICS
                       and MECHANICS[check["mode_change"]] not in {e.named_as for e in rest}

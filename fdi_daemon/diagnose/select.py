@@ -494,9 +494,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         # nothing but the refit: name what it matches
         return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
                               explain=linear["matching"])
-    held: list[dict] = []
+    held_by_later: list[dict] = []
     if explain is None:
-        chosen, prediction, held = _each_pays_on_top(ctx, chosen, prediction)
+        chosen, prediction, held_by_later = _each_pays_on_top(ctx, chosen, prediction)
     others = [e.name for e in chosen if e.name not in BASE_TERMS and e.name != explain]
     if explain is not None and others:
         alone = _without_explanation(ctx, others, prediction, explain, floor_sse)
@@ -507,7 +507,7 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     if not any(e.name not in BASE_TERMS for e in chosen):
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
-    return Selection(chosen, rounds, prediction, linear, spring, held)
+    return Selection(chosen, rounds, prediction, linear, spring, held_by_later)
 
 
 def _each_pays_on_top(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray

@@ -1,6 +1,7 @@
 """Shared pytest configuration: plots never need a screen; the session fixtures of the
 conftest_<area> modules are registered here (their helpers are imported where used)."""
 
+import fdi_daemon  # noqa: F401  (first: it pins the BLAS kernel before NumPy loads)
 import matplotlib
 import pytest
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from fdi_daemon.diagnose.force import possible
 from fdi_daemon.diagnose.workflow import run_diagnose
 from tests.diagnose_cases import RIG_FS, RIG_INPUT_EFFECTS, rig_model, rig_recording
 
@@ -22,7 +23,15 @@ SEAL = {"coulomb_friction", "stribeck_friction"}
 def _diagnose(fault, value, **excitation):
     u, y = rig_recording(fault, value, **excitation)
     b, a = rig_model()
-    return run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+    return _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
+
+
+def _possible(result):
+    """``result``, after checking that every effect it holds is physically possible (a named
+    effect must be, docs/diagnose.md §5)."""
+    impossible = [e.name for e in result.selection.chosen if not possible([e])]
+    assert not impossible, f"physically impossible: {impossible} (named {result.named})"
+    return result
 
 
 #: the multisine that makes the friction and the sensor's range matter: 0.8 V RMS for 40 s
@@ -71,7 +80,8 @@ def test_rig_input_effect_is_named_first_with_its_size(effect):
     # the value reported is now the pure shift's (docs/diagnose.md §4.1)
     u, y = rig_recording(input_effect=effect, **STRONG)
     b, a = rig_model()
-    _assert_named_first_with_its_size(run_diagnose(u, y, RIG_FS, "acceleration", b, a), effect)
+    _assert_named_first_with_its_size(
+        _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a)), effect)
 
 
 def _assert_named_first_with_its_size(result, effect):
@@ -114,7 +124,7 @@ def test_rig_added_viscous_damping_is_named_viscous_friction(damping_n_s_per_m, 
     u, y = rig_recording(variant=(("viscous_damping_n_s_per_m", damping_n_s_per_m),),
                          **excitation)
     b, a = rig_model()
-    result = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
     assert "viscous_friction" in result.named
     assert set(result.named) <= {"viscous_friction"} | SEAL
     nominal = RigParams()
@@ -140,7 +150,7 @@ def test_rig_hidden_coulomb_friction_is_named_coulomb_friction(coulomb_n, excita
     u, y = rig_recording(variant=(("seal_coulomb_n", coulomb_n), ("seal_static_n", coulomb_n)),
                          **excitation)
     b, a = rig_model()
-    result = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
     assert result.named == ["coulomb_friction"]
     assert result.gap_after <= 0.5 * result.gap_before
 
@@ -154,7 +164,7 @@ def test_rig_heavy_coulomb_friction_under_a_small_excitation_holds_the_map_named
 
     u, y = rig_recording(variant=(("seal_coulomb_n", 3.4), ("seal_static_n", 3.4)))
     b, a = rig_model()
-    result = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
     assert result.named == ["coulomb_friction"]
     assert result.gap_after <= 0.5 * result.gap_before
     report = build_report(result)
@@ -207,7 +217,7 @@ def test_rig_payload_is_a_mass_change(bearing_mass_kg, excitation):
 
     u, y = rig_recording(variant=(("bearing_mass_kg", bearing_mass_kg),), **excitation)
     b, a = rig_model()
-    result = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
     assert "mass_change" in result.named
     assert set(result.named) <= {"mass_change"} | SEAL
     mass = next(e for e in result.selection.named if e.named_as == "mass_change")
@@ -228,7 +238,7 @@ def test_rig_payload_under_random_excitation_is_one_mass_change_with_its_size():
     u, y = rig_recording(variant=(("bearing_mass_kg", 1.5),), excitation="noise 1-15 Hz",
                          **STRONG)
     b, a = rig_model()
-    result = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
     assert result.named[:1] == ["mass_change"] and result.named.count("mass_change") == 1
     nominal = RigParams()
     true = (nominal.piston_rod_mass_kg + 1.5) / nominal.moving_mass_kg
@@ -255,7 +265,7 @@ def test_a_rig_variant_without_fault_names_no_friction_its_seal_lacks(tmp_path, 
     # had to add damping (docs/diagnose.md §4.3)
     rig, model = _variant_and_its_model(1, tmp_path, monkeypatch)
     u, y = rig_recording(variant=tuple(sorted(rig.items())), **STRONG)
-    result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
     assert set(result.named) <= SEAL, result.named
 
 
@@ -270,7 +280,7 @@ def test_a_rig_variant_damper_is_named_viscous_friction(tmp_path, monkeypatch):
     nominal = RigParams(**rig)
     damped = {**rig, "viscous_damping_n_s_per_m": 2.0 * nominal.viscous_damping_n_s_per_m}
     u, y = rig_recording(variant=tuple(sorted(damped.items())), **STRONG)
-    result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
     assert result.named[:1] == ["viscous_friction"]
     assert set(result.named) <= {"viscous_friction"} | SEAL
     added = nominal.viscous_damping_n_s_per_m / nominal.moving_mass_kg
@@ -288,7 +298,22 @@ def test_a_rig_variant_heavy_friction_is_named_coulomb_friction_alone(tmp_path, 
     rig, model = _variant_and_its_model(1, tmp_path, monkeypatch)
     seal = {**rig, "seal_coulomb_n": 1.0, "seal_static_n": 1.0}
     u, y = rig_recording(variant=tuple(sorted(seal.items())), rms_v=0.4, duration_s=30.0)
-    result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
+    assert result.named == ["coulomb_friction"]
+    assert result.gap_after <= 0.5 * result.gap_before
+
+
+def test_a_rig_variant_pure_coulomb_friction_is_named_by_a_possible_fit(tmp_path, monkeypatch):
+    # rig variant v0 with its own model, the seal's friction raised to a pure Coulomb
+    # friction of 0.5 N (static = Coulomb), 40 s at 0.8 V. The first round's friction left
+    # the noise floor; the base refitted for the next round ended where its Stribeck excess
+    # pushes the motion, and that refit was kept and named `stribeck_friction` until a
+    # refit of the base had to be physically possible (docs/diagnose.md §5)
+    rig, model = _variant_and_its_model(0, tmp_path, monkeypatch)
+    seal = {**rig, "seal_coulomb_n": 0.5, "seal_static_n": 0.5}
+    u, y = rig_recording(variant=tuple(sorted(seal.items())), **STRONG)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b,
+                                    model.plant_a))
     assert result.named == ["coulomb_friction"]
     assert result.gap_after <= 0.5 * result.gap_before
 
@@ -310,5 +335,5 @@ def test_a_rig_variant_input_effect_is_named_first_with_its_size(index, effect, 
     # (a dead time of two samples, a dead zone of ±0.15 V), 40 s at 0.8 V
     rig, model = _variant_and_its_model(index, tmp_path, monkeypatch)
     u, y = rig_recording(variant=tuple(sorted(rig.items())), input_effect=effect, **STRONG)
-    result = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
     _assert_named_first_with_its_size(result, effect)

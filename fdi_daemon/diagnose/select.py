@@ -421,8 +421,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         if refit_base:
             # the reference is the base given the fit each candidate gets on top of it
             # (its loop refitted from where it stands, `in_the_loop`): what the loop's
-            # fit reaches by itself is no candidate's
-            reference = in_the_loop(ctx, chosen, chosen)
+            # fit reaches by itself is no candidate's; a refit that is not physically
+            # possible is no base (the effects named stay as their round fitted them)
+            reference = _possible_or(in_the_loop(ctx, chosen, chosen), reference)
         e0 = ctx.target[test] - reference[1][test]
         sse0 = float(e0 @ e0)
         if rounds and floor_sse is not None and sse0 <= floor_sse:
@@ -454,7 +455,8 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 break
             # the base's loop from the candidate's start did it: that fit of the base is
             # kept when it fits the training part better, and the next candidate is tried
-            reference = min(reference, there, key=lambda fit: _sse(ctx, fit[1], ctx.split.fit))
+            reference = min(reference, _possible_or(there, reference),
+                            key=lambda fit: _sse(ctx, fit[1], ctx.split.fit))
             best.accepted = False
             best = _choose(results, n_eff)
         if best is None:
@@ -545,6 +547,15 @@ def _each_pays_on_top(ctx: Context, chosen: list[FittedEffect], prediction: np.n
                     "sse_with": sse_with, "sse_without": sse_without}
             return [mechanics_name(e) for e in effects], without, [held]
     return chosen, prediction, []
+
+
+def _possible_or(fit: tuple[list[FittedEffect], np.ndarray],
+                 fallback: tuple[list[FittedEffect], np.ndarray]
+                 ) -> tuple[list[FittedEffect], np.ndarray]:
+    """``fit`` (effects, contribution) where its effects are physically possible, else
+    ``fallback``: a refit of the base whose loop ends where a friction pushes the motion
+    is no model of the record, and what a round names must be physically possible."""
+    return fit if possible(fit[0]) else fallback
 
 
 def _stands_for(explanation: str) -> str:

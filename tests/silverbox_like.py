@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 
+import fdi_daemon  # noqa: F401  (first: it pins the BLAS kernel before NumPy loads)
 import numpy as np
 from scipy import signal
 

@@ -19,8 +19,9 @@ KERNEL = "Haswell"
 NEEDS = frozenset({"avx2", "fma"})
 
 
-def pin(environ=os.environ, machine: str | None = None, flags: set[str] | None = None
-        ) -> str | None:
+def pin(
+    environ=os.environ, machine: str | None = None, flags: set[str] | None = None
+) -> str | None:
     """Set ``OPENBLAS_CORETYPE`` to `KERNEL` in ``environ`` where the CPU (``machine``,
     ``flags``: this one's by default) runs it and no value is set; returns the value in
     force (None: OpenBLAS chooses)."""

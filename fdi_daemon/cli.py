@@ -60,8 +60,7 @@ def attach_negative_values(argv: list[str]) -> list[str]:
     ``--fault-window -5:10`` would be "expected one argument"."""
     out: list[str] = []
     for token in argv:
-        if (out and out[-1].startswith("--") and "=" not in out[-1]
-                and _NEGATIVE_VALUE.match(token)):
+        if out and out[-1].startswith("--") and "=" not in out[-1] and _NEGATIVE_VALUE.match(token):
             out[-1] = f"{out[-1]}={token}"
         else:
             out.append(token)
@@ -101,11 +100,13 @@ def _unraisable_terminated(hook):
     propagate: raised where Python drops exceptions (a ctypes callback, such as llvmlite's
     object cache while numba compiles; a ``__del__``), it printed a traceback and the
     signal was lost. It is not printed, and the signal is sent again a moment later."""
+
     def handle(unraisable):
         if isinstance(unraisable.exc_value, Terminated):
             _deliver_again(signal.SIGTERM)
             return
         hook(unraisable)
+
     return handle
 
 

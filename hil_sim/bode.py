@@ -34,14 +34,16 @@ def slope_db_per_decade(freq_hz: np.ndarray, G: np.ndarray, f_lo: float, f_hi: f
     return float(np.polyfit(np.log10(freq_hz[band]), 20.0 * np.log10(np.abs(G[band])), 1)[0])
 
 
-def plot_bode(path: str | Path, curves: list[tuple[str, object]],
-              min_coherence: float = 0.5) -> Path:
+def plot_bode(
+    path: str | Path, curves: list[tuple[str, object]], min_coherence: float = 0.5
+) -> Path:
     """Magnitude, phase and coherence of each (label, FrequencyResponse); points with
     coherence below ``min_coherence`` are drawn faint."""
     plt = pyplot()
 
-    fig, (ax_m, ax_p, ax_c) = plt.subplots(3, 1, figsize=(8, 9), sharex=True,
-                                           gridspec_kw={"height_ratios": [3, 2, 1]})
+    fig, (ax_m, ax_p, ax_c) = plt.subplots(
+        3, 1, figsize=(8, 9), sharex=True, gridspec_kw={"height_ratios": [3, 2, 1]}
+    )
     for (label, fr), color in zip(curves, ("C0", "C1", "C2", "C3")):
         f, G, coh = fr.freq_hz, fr.G, fr.coherence
         keep = f > 0
@@ -81,7 +83,9 @@ def _level_at(fr, freq_hz: float) -> float:
 def main(argv: list[str] | None = None) -> int:
     from hil_sim.scenarios import load_scenario, simulate
 
-    parser = argparse.ArgumentParser(prog="python -m hil_sim.bode", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m hil_sim.bode", description=__doc__.split("\n")[0]
+    )
     parser.add_argument("output", help="PNG to write")
     parser.add_argument("scenarios", nargs="+", help="chirp scenario YAML files")
     parser.add_argument("--seed", type=int, default=0)
@@ -93,12 +97,16 @@ def main(argv: list[str] | None = None) -> int:
         curves.append((f"{scenario.name}: {scenario.description}", fr))
         slope = slope_db_per_decade(fr.freq_hz, fr.G, 1.0, 6.0)
         peak = int(np.argmax(np.abs(fr.G) * (fr.freq_hz < 30)))
-        print(f"{scenario.name}: slope 1-6 Hz {slope:+.1f} dB/dec, peak "
-              f"{20 * np.log10(abs(fr.G[peak])):.1f} dB at {fr.freq_hz[peak]:.2f} Hz")
+        print(
+            f"{scenario.name}: slope 1-6 Hz {slope:+.1f} dB/dec, peak "
+            f"{20 * np.log10(abs(fr.G[peak])):.1f} dB at {fr.freq_hz[peak]:.2f} Hz"
+        )
         for f in (1.0, 10.0, 20.0, 30.0):
             i = int(np.argmin(np.abs(fr.freq_hz - f)))
-            print(f"  |G({f:g} Hz)| = {20 * np.log10(abs(fr.G[i])):.1f} dB, "
-                  f"phase {np.degrees(np.angle(fr.G[i])):.0f} deg, coherence {fr.coherence[i]:.2f}")
+            print(
+                f"  |G({f:g} Hz)| = {20 * np.log10(abs(fr.G[i])):.1f} dB, "
+                f"phase {np.degrees(np.angle(fr.G[i])):.0f} deg, coherence {fr.coherence[i]:.2f}"
+            )
     print(f"wrote {plot_bode(args.output, curves)}")
     return 0
 

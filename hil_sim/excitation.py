@@ -27,8 +27,10 @@ import numpy as np
 #: kind -> (required keys, optional keys); every kind also takes duration_s and offset_v
 SEGMENT_KEYS: dict[str, tuple[frozenset, frozenset]] = {
     "sine": (frozenset({"amplitude_v", "frequency_hz"}), frozenset({"phase_deg"})),
-    "chirp": (frozenset({"amplitude_v", "f0_hz", "f1_hz", "period_s"}),
-              frozenset({"alternate_sign"})),
+    "chirp": (
+        frozenset({"amplitude_v", "f0_hz", "f1_hz", "period_s"}),
+        frozenset({"alternate_sign"}),
+    ),
     "multisine": (frozenset({"amplitudes_v", "frequencies_hz"}), frozenset({"phases_deg"})),
     "steps": (frozenset({"levels_v", "hold_s"}), frozenset()),
     "zero": (frozenset(), frozenset()),
@@ -43,13 +45,19 @@ def sine(t_s: np.ndarray, amplitude_v: float, frequency_hz: float, phase_deg: fl
     return amplitude_v * np.sin(2.0 * np.pi * frequency_hz * t_s + math.radians(phase_deg))
 
 
-def chirp(t_s: np.ndarray, amplitude_v: float, f0_hz: float, f1_hz: float, period_s: float,
-          alternate_sign: bool = False) -> np.ndarray:
+def chirp(
+    t_s: np.ndarray,
+    amplitude_v: float,
+    f0_hz: float,
+    f1_hz: float,
+    period_s: float,
+    alternate_sign: bool = False,
+) -> np.ndarray:
     """Linear sweep f0 -> f1 over period_s, repeated (as the paper's §III.B chirp)."""
     cycle = np.floor(t_s / period_s)
     tau = t_s - cycle * period_s
     rate = (f1_hz - f0_hz) / period_s
-    u = amplitude_v * np.sin(2.0 * np.pi * (f0_hz * tau + 0.5 * rate * tau ** 2))
+    u = amplitude_v * np.sin(2.0 * np.pi * (f0_hz * tau + 0.5 * rate * tau**2))
     if alternate_sign:
         u = np.where(cycle % 2 == 1, -u, u)
     return u
@@ -76,8 +84,14 @@ def steps(t_s: np.ndarray, levels_v, hold_s: float) -> np.ndarray:
     return levels[(np.floor(t_s / hold_s).astype(np.int64)) % len(levels)]
 
 
-def random_operation(t_s: np.ndarray, rng: np.random.Generator, amplitude_v, frequency_hz,
-                     segment_s, kinds=RANDOM_KINDS) -> np.ndarray:
+def random_operation(
+    t_s: np.ndarray,
+    rng: np.random.Generator,
+    amplitude_v,
+    frequency_hz,
+    segment_s,
+    kinds=RANDOM_KINDS,
+) -> np.ndarray:
     """Changing operation: random sub-segments (kind, amplitude, frequency, length) drawn
     from ``rng``; multisines get 2-4 components whose amplitudes add up to the drawn peak."""
     u = np.zeros_like(t_s, dtype=np.float64)
@@ -98,9 +112,12 @@ def random_operation(t_s: np.ndarray, rng: np.random.Generator, amplitude_v, fre
         else:
             count = int(rng.integers(2, 5))
             weights = rng.uniform(0.3, 1.0, size=count)
-            u[start:stop] = multisine(tau, amp * weights / weights.sum(),
-                                      rng.uniform(*frequency_hz, size=count),
-                                      rng.uniform(0.0, 360.0, size=count))
+            u[start:stop] = multisine(
+                tau,
+                amp * weights / weights.sum(),
+                rng.uniform(*frequency_hz, size=count),
+                rng.uniform(0.0, 360.0, size=count),
+            )
         start = stop
     return u
 
@@ -109,28 +126,43 @@ def segment_signal(segment: dict, t_s: np.ndarray, rng: np.random.Generator) -> 
     """The voltage of one validated segment over its local time t_s (from 0)."""
     kind = segment["kind"]
     if kind == "sine":
-        u = sine(t_s, segment["amplitude_v"], segment["frequency_hz"],
-                 segment.get("phase_deg", 0.0))
+        u = sine(
+            t_s, segment["amplitude_v"], segment["frequency_hz"], segment.get("phase_deg", 0.0)
+        )
     elif kind == "chirp":
-        u = chirp(t_s, segment["amplitude_v"], segment["f0_hz"], segment["f1_hz"],
-                  segment["period_s"], bool(segment.get("alternate_sign", False)))
+        u = chirp(
+            t_s,
+            segment["amplitude_v"],
+            segment["f0_hz"],
+            segment["f1_hz"],
+            segment["period_s"],
+            bool(segment.get("alternate_sign", False)),
+        )
     elif kind == "multisine":
-        u = multisine(t_s, segment["amplitudes_v"], segment["frequencies_hz"],
-                      segment.get("phases_deg"))
+        u = multisine(
+            t_s, segment["amplitudes_v"], segment["frequencies_hz"], segment.get("phases_deg")
+        )
     elif kind == "steps":
         u = steps(t_s, segment["levels_v"], segment["hold_s"])
     elif kind == "zero":
         u = np.zeros_like(t_s)
     elif kind == "random":
-        u = random_operation(t_s, rng, segment["amplitude_v"], segment["frequency_hz"],
-                             segment["segment_s"], tuple(segment.get("kinds", RANDOM_KINDS)))
+        u = random_operation(
+            t_s,
+            rng,
+            segment["amplitude_v"],
+            segment["frequency_hz"],
+            segment["segment_s"],
+            tuple(segment.get("kinds", RANDOM_KINDS)),
+        )
     else:
         raise ValueError(f"unknown excitation kind {kind!r}")
     return u + segment.get("offset_v", 0.0)
 
 
-def build_program(segments: list[dict], fs_hz: float, n_samples: int,
-                  rng: np.random.Generator) -> np.ndarray:
+def build_program(
+    segments: list[dict], fs_hz: float, n_samples: int, rng: np.random.Generator
+) -> np.ndarray:
     """The excitation (V) of ``n_samples`` samples at ``fs_hz`` from validated segments."""
     u = np.zeros(n_samples)
     start = 0

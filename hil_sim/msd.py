@@ -30,14 +30,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+
 import numpy as np
 from scipy.linalg import expm
 
 from fdi_daemon.io.recordings import Recording
 
-EFFECT_NAMES = ("coulomb_friction", "viscous_friction", "stribeck_friction", "cubic_stiffness",
-                "dead_time", "input_saturation", "output_saturation", "dead_zone", "backlash",
-                "sensor_offset")
+EFFECT_NAMES = (
+    "coulomb_friction",
+    "viscous_friction",
+    "stribeck_friction",
+    "cubic_stiffness",
+    "dead_time",
+    "input_saturation",
+    "output_saturation",
+    "dead_zone",
+    "backlash",
+    "sensor_offset",
+)
 
 #: the parameter keys each effect takes
 EFFECT_KEYS: dict[str, tuple[str, ...]] = {
@@ -100,10 +110,14 @@ def state_space(p: MsdParams, extra_damping: float = 0.0) -> tuple[np.ndarray, .
         return a, bu, bf, a[1].copy(), bu[1]
     w = 2 * math.pi * p.input_filter_hz
     z = p.input_filter_damping
-    a = np.array([[0.0, 1.0, 0.0, 0.0],
-                  [-w * w, -2 * z * w, 0.0, 0.0],
-                  [0.0, 0.0, 0.0, 1.0],
-                  [p.gain_n_per_v / m, 0.0, -k / m, -c / m]])
+    a = np.array(
+        [
+            [0.0, 1.0, 0.0, 0.0],
+            [-w * w, -2 * z * w, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+            [p.gain_n_per_v / m, 0.0, -k / m, -c / m],
+        ]
+    )
     bu = np.array([0.0, w * w, 0.0, 0.0])
     bf = np.array([0.0, 0.0, 0.0, 1.0 / m])
     return a, bu, bf, a[3].copy(), 0.0
@@ -136,16 +150,18 @@ def friction_tf(p: MsdParams) -> tuple[np.ndarray, np.ndarray]:
 def _zoh_tf(a, b, c, d, fs_hz) -> tuple[np.ndarray, np.ndarray]:
     from scipy.signal import cont2discrete, ss2tf
 
-    ad, bd, cd, dd, _ = cont2discrete((a, b[:, None], c[None, :], np.array([[d]])),
-                                      1.0 / fs_hz, method="zoh")
+    ad, bd, cd, dd, _ = cont2discrete(
+        (a, b[:, None], c[None, :], np.array([[d]])), 1.0 / fs_hz, method="zoh"
+    )
     num, den = ss2tf(ad, bd, cd, dd)
     return np.asarray(num[0], dtype=float), np.asarray(den, dtype=float)
 
 
 def _input_chain(v_in: np.ndarray, p: MsdParams) -> np.ndarray:
     """The held input of every internal step after dead time, dead zone, backlash, saturation."""
-    return input_effects(np.repeat(np.asarray(v_in, dtype=float), p.substeps), p.effects,
-                         p.fs_hz * p.substeps)
+    return input_effects(
+        np.repeat(np.asarray(v_in, dtype=float), p.substeps), p.effects, p.fs_hz * p.substeps
+    )
 
 
 def input_effects(u: np.ndarray, effects: dict, rate_hz: float) -> np.ndarray:
@@ -203,8 +219,7 @@ class MsdSimulator:
         strib = eff.get("stribeck_friction")
         k3 = eff.get("cubic_stiffness", {}).get("k3_n_per_m3", 0.0)
         u_sub = _input_chain(v_in, p).tolist()
-        fault_step = (math.ceil(p.fault_time_s * p.fs_hz) if math.isfinite(p.fault_time_s)
-                      else n + 1)
+        fault_step = math.ceil(p.fault_time_s * p.fs_hz) if math.isfinite(p.fault_time_s) else n + 1
 
         s = [0.0] * ns
         accel = np.empty(n)
@@ -226,17 +241,19 @@ class MsdSimulator:
                 if strib is not None:
                     fc_s, fs_s = strib["coulomb_n"], strib["static_n"]
                     fmax += fc_s + (fs_s - fc_s) * math.exp(
-                        -(v / strib["stribeck_velocity_m_s"]) ** 2)
-                free = [sum(ad[r][q] * s[q] for q in range(ns)) + bdu[r] * u + bdf[r] * f_ext
-                        for r in range(ns)]
+                        -((v / strib["stribeck_velocity_m_s"]) ** 2)
+                    )
+                free = [
+                    sum(ad[r][q] * s[q] for q in range(ns)) + bdu[r] * u + bdf[r] * f_ext
+                    for r in range(ns)
+                ]
                 f = 0.0
                 if fmax > 0.0:
                     f_stop = -free[iv] / bdf[iv]
                     f = f_stop if abs(f_stop) <= fmax else -math.copysign(fmax, free[iv])
                 if sub == 0:
                     # the sample instant t_i: state, input and the friction of the step it starts
-                    accel[i] = (sum(ca[q] * s[q] for q in range(ns)) + da * u
-                                + (f + f_ext) / m)
+                    accel[i] = sum(ca[q] * s[q] for q in range(ns)) + da * u + (f + f_ext) / m
                     vel[i] = v
                     pos[i] = x
                     friction[i] = -f + c_friction * v  # F_f of eq. (5), Coulomb + viscous
@@ -269,9 +286,12 @@ class MsdSimulator:
         if not with_velocity:
             del cols["velocity"]
         cols["seq"] = np.arange(len(cols["t"]), dtype=np.int64)
-        meta = {"fs": repr(float(self.params.fs_hz)), "source": "hil_sim.msd",
-                "seed": str(self.seed),
-                "effects": ",".join(sorted(self.params.effects)) or "none"}
+        meta = {
+            "fs": repr(float(self.params.fs_hz)),
+            "source": "hil_sim.msd",
+            "seed": str(self.seed),
+            "effects": ",".join(sorted(self.params.effects)) or "none",
+        }
         return Recording(cols, meta)
 
 
@@ -282,8 +302,15 @@ def _uniform(rng: np.random.Generator, width: float, n: int) -> np.ndarray:
     return rng.uniform(-0.5 * width, 0.5 * width, n)
 
 
-def multisine(duration_s: float, fs_hz: float, f_lo_hz: float, f_hi_hz: float,
-              rms_v: float, seed: int = 0, n_tones: int = 40) -> np.ndarray:
+def multisine(
+    duration_s: float,
+    fs_hz: float,
+    f_lo_hz: float,
+    f_hi_hz: float,
+    rms_v: float,
+    seed: int = 0,
+    n_tones: int = 40,
+) -> np.ndarray:
     """Random-phase multisine (log-spaced tones in [f_lo, f_hi]) with the given RMS."""
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration_s * fs_hz))) / fs_hz
@@ -293,7 +320,8 @@ def multisine(duration_s: float, fs_hz: float, f_lo_hz: float, f_hi_hz: float,
     return u * (rms_v / np.sqrt(np.mean(u * u)))
 
 
-def simulate_recording(params: MsdParams, v_in: np.ndarray, seed: int = 0,
-                       with_velocity: bool = True) -> Recording:
+def simulate_recording(
+    params: MsdParams, v_in: np.ndarray, seed: int = 0, with_velocity: bool = True
+) -> Recording:
     """Convenience: ``MsdSimulator(params, seed).record(v_in)``."""
     return MsdSimulator(params, seed).record(v_in, with_velocity)

@@ -24,22 +24,37 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from fdi_daemon.errors import ConfigError
-from fdi_daemon.io.yaml_file import read_yaml
 from fdi_daemon.io.recordings import Recording
-from hil_sim.excitation import COMMON_KEYS, RANDOM_KINDS, SEGMENT_KEYS, build_program
-from hil_sim.excitation import piecewise_linear
+from fdi_daemon.io.yaml_file import read_yaml
+from hil_sim.excitation import (
+    COMMON_KEYS,
+    RANDOM_KINDS,
+    SEGMENT_KEYS,
+    build_program,
+    piecewise_linear,
+)
 from hil_sim.rig import FAULTS, Rig, RigParams
 from hil_sim.rig.params import validate_params
 
-TOP_KEYS = {"name", "description", "duration_s", "seed", "rig", "centring_gain_v_per_m",
-            "excitation", "events", "drift", "fault_window_s"}
+TOP_KEYS = {
+    "name",
+    "description",
+    "duration_s",
+    "seed",
+    "rig",
+    "centring_gain_v_per_m",
+    "excitation",
+    "events",
+    "drift",
+    "fault_window_s",
+}
 DRIFT_KEYS = {"supply_pressure", "temperature_k", "bearing_supply"}
 DRIFT_UPDATE_S = 1.0
 CHUNK_SAMPLES = 2560
@@ -90,8 +105,9 @@ def scenario_from_dict(data, path: Path | None = None) -> Scenario:
         duration_s=_positive(data["duration_s"], "duration_s", where),
         seed=_int(data.get("seed", 0), "seed", where),
         rig=_rig(data.get("rig", {}), where),
-        centring_gain_v_per_m=_number(data.get("centring_gain_v_per_m", 0.0),
-                                      "centring_gain_v_per_m", where, minimum=0.0),
+        centring_gain_v_per_m=_number(
+            data.get("centring_gain_v_per_m", 0.0), "centring_gain_v_per_m", where, minimum=0.0
+        ),
         excitation=_excitation(data["excitation"], where),
         events=_events(data.get("events", []), where),
         drift=_drift(data.get("drift", {}), where),
@@ -105,8 +121,9 @@ def scenario_from_dict(data, path: Path | None = None) -> Scenario:
 def _no_unknown(mapping: dict, allowed, prefix: str, where: str) -> None:
     for key in mapping:
         if key not in allowed:
-            raise ConfigError(f"{where}unknown key '{prefix}{key}' "
-                              f"(allowed: {', '.join(sorted(allowed))})")
+            raise ConfigError(
+                f"{where}unknown key '{prefix}{key}' (allowed: {', '.join(sorted(allowed))})"
+            )
 
 
 def _number(value, key: str, where: str, minimum: float | None = None) -> float:
@@ -172,16 +189,18 @@ def _excitation(value, where: str) -> list[dict]:
             raise ConfigError(f"{where}key 'excitation[{i}]' must be a mapping")
         kind = seg.get("kind")
         if kind not in SEGMENT_KEYS:
-            raise ConfigError(f"{where}key '{prefix}kind' must be one of "
-                              f"{', '.join(SEGMENT_KEYS)}, got {kind!r}")
+            raise ConfigError(
+                f"{where}key '{prefix}kind' must be one of {', '.join(SEGMENT_KEYS)}, got {kind!r}"
+            )
         required, optional = SEGMENT_KEYS[kind]
         _no_unknown(seg, required | optional | COMMON_KEYS, prefix, where)
         for key in sorted(required):
             if key not in seg:
                 raise ConfigError(f"{where}missing key '{prefix}{key}' for a {kind} segment")
         if "duration_s" not in seg and i != len(value) - 1:
-            raise ConfigError(f"{where}key '{prefix}duration_s' is needed on every segment "
-                              "but the last")
+            raise ConfigError(
+                f"{where}key '{prefix}duration_s' is needed on every segment but the last"
+            )
         segments.append(_segment(seg, prefix, where))
     return segments
 
@@ -199,10 +218,14 @@ def _segment(seg: dict, prefix: str, where: str) -> dict:
                 raise ConfigError(f"{where}key '{name}' must be true or false")
             out[key] = value
         elif key == "kinds":
-            if (not isinstance(value, list) or not value
-                    or any(k not in RANDOM_KINDS for k in value)):
-                raise ConfigError(f"{where}key '{name}' must list some of "
-                                  f"{', '.join(RANDOM_KINDS)}")
+            if (
+                not isinstance(value, list)
+                or not value
+                or any(k not in RANDOM_KINDS for k in value)
+            ):
+                raise ConfigError(
+                    f"{where}key '{name}' must list some of {', '.join(RANDOM_KINDS)}"
+                )
             out[key] = list(value)
         elif key in ranges:
             lo, hi = _numbers(value, name, where, length=2)
@@ -220,8 +243,10 @@ def _segment(seg: dict, prefix: str, where: str) -> dict:
     if seg["kind"] == "multisine":
         n = len(out["frequencies_hz"])
         if len(out["amplitudes_v"]) != n or len(out.get("phases_deg", [0] * n)) != n:
-            raise ConfigError(f"{where}keys '{prefix}amplitudes_v', '{prefix}frequencies_hz' "
-                              "(and phases_deg) must have the same length")
+            raise ConfigError(
+                f"{where}keys '{prefix}amplitudes_v', '{prefix}frequencies_hz' "
+                "(and phases_deg) must have the same length"
+            )
     if seg["kind"] == "random" and out["segment_s"][0] <= 0:
         raise ConfigError(f"{where}key '{prefix}segment_s' must be > 0")
     return out
@@ -240,18 +265,31 @@ def _events(value, where: str) -> list[dict]:
         t = _number(ev["t_s"], prefix + "t_s", where, minimum=0.0)
         if "bearing_supply" in ev:
             _no_unknown(ev, {"t_s", "bearing_supply"}, prefix, where)
-            events.append({"t_s": t, "bearing_supply": _number(
-                ev["bearing_supply"], prefix + "bearing_supply", where, minimum=0.0)})
+            events.append(
+                {
+                    "t_s": t,
+                    "bearing_supply": _number(
+                        ev["bearing_supply"], prefix + "bearing_supply", where, minimum=0.0
+                    ),
+                }
+            )
         elif "fault" in ev:
             _no_unknown(ev, {"t_s", "fault", "value"}, prefix, where)
             if ev["fault"] not in FAULTS:
-                raise ConfigError(f"{where}key '{prefix}fault' must be one of "
-                                  f"{', '.join(FAULTS)}, got {ev['fault']!r}")
+                raise ConfigError(
+                    f"{where}key '{prefix}fault' must be one of "
+                    f"{', '.join(FAULTS)}, got {ev['fault']!r}"
+                )
             if "value" not in ev:
                 raise ConfigError(f"{where}missing key '{prefix}value'")
             minimum = None if ev["fault"] == "accel_bias" else 0.0
-            events.append({"t_s": t, "fault": ev["fault"],
-                           "value": _number(ev["value"], prefix + "value", where, minimum)})
+            events.append(
+                {
+                    "t_s": t,
+                    "fault": ev["fault"],
+                    "value": _number(ev["value"], prefix + "value", where, minimum),
+                }
+            )
         else:
             raise ConfigError(f"{where}key 'events[{i}]' needs 'bearing_supply' or 'fault'")
     return sorted(events, key=lambda e: e["t_s"])
@@ -302,8 +340,12 @@ def _memory_bytes() -> int | None:
         return None
 
 
-def simulate(scenario: Scenario, seed: int | None = None, duration_s: float | None = None,
-             progress: Callable[[int, int], None] | None = None) -> Recording:
+def simulate(
+    scenario: Scenario,
+    seed: int | None = None,
+    duration_s: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Recording:
     """Run the scenario on a fresh `Rig`; returns the recording with ground truth.
 
     seed: rig noise and random excitation (default: the scenario's seed); duration_s
@@ -317,11 +359,12 @@ def simulate(scenario: Scenario, seed: int | None = None, duration_s: float | No
         raise ConfigError(f"duration {duration:g} s gives fewer than 2 samples")
     memory = _memory_bytes()
     if memory is not None and n * BYTES_PER_SAMPLE > memory:
-        raise ConfigError(f"duration {duration:g} s: the recording would need about "
-                          f"{n * BYTES_PER_SAMPLE / 1e9:.3g} GB of memory, more than this "
-                          f"machine has ({memory / 1e9:.3g} GB); simulate shorter pieces")
-    excitation = build_program(scenario.excitation, fs, n,
-                               np.random.default_rng([seed, 0x5EED]))
+        raise ConfigError(
+            f"duration {duration:g} s: the recording would need about "
+            f"{n * BYTES_PER_SAMPLE / 1e9:.3g} GB of memory, more than this "
+            f"machine has ({memory / 1e9:.3g} GB); simulate shorter pieces"
+        )
+    excitation = build_program(scenario.excitation, fs, n, np.random.default_rng([seed, 0x5EED]))
     rig = Rig(scenario.rig, seed=seed)
     rig.set_centring(scenario.centring_gain_v_per_m)
     event_index = [int(math.ceil(ev["t_s"] * fs - 1e-9)) for ev in scenario.events]
@@ -375,17 +418,19 @@ def _metadata(scenario: Scenario, seed: int, duration: float, fs: float) -> dict
         "centring_gain_v_per_m": f"{scenario.centring_gain_v_per_m:g}",
         "events": json.dumps(scenario.events, separators=(",", ":")),
         "ground_truth": "friction_force (N, air bearing), seal_friction_force (N), "
-                        "contact_force (N), fault_active (bearing in contact), "
-                        "other_fault_active, bearing_supply (fraction)",
+        "contact_force (N), fault_active (bearing in contact), "
+        "other_fault_active, bearing_supply (fraction)",
     }
     if scenario.path is not None:
         meta["scenario_file"] = str(scenario.path)
-    friction = [ev["t_s"] for ev in scenario.events
-                if "bearing_supply" in ev and ev["bearing_supply"] < 1.0]
+    friction = [
+        ev["t_s"] for ev in scenario.events if "bearing_supply" in ev and ev["bearing_supply"] < 1.0
+    ]
     if friction:
         meta["friction_fault_t"] = f"{friction[0]:g}"
-    other = [ev for ev in scenario.events
-             if "fault" in ev and ev["value"] != FAULTS[ev["fault"]][1]]
+    other = [
+        ev for ev in scenario.events if "fault" in ev and ev["value"] != FAULTS[ev["fault"]][1]
+    ]
     if other:
         meta["other_fault_t"] = f"{other[0]['t_s']:g}"
         meta["other_fault"] = other[0]["fault"]

@@ -50,14 +50,28 @@ class StageParams:
 
 
 #: a ball-screw positioning drive under a position loop (``loop="position"``)
-POSITIONER = StageParams(mass_kg=95.0, viscous_n_s_per_m=200.0, coulomb_n=20.0,
-                         offset_n=-3.0, kp_n_s_per_m=6000.0, ki_n_per_m=0.0,
-                         force_noise_n=1.0, fs_hz=1000.0)
+POSITIONER = StageParams(
+    mass_kg=95.0,
+    viscous_n_s_per_m=200.0,
+    coulomb_n=20.0,
+    offset_n=-3.0,
+    kp_n_s_per_m=6000.0,
+    ki_n_per_m=0.0,
+    force_noise_n=1.0,
+    fs_hz=1000.0,
+)
 
 
-def velocity_reference(duration_s: float, fs_hz: float, f_lo_hz: float = 0.2,
-                       f_hi_hz: float = 8.0, rms_m_s: float = 0.15, seed: int = 0,
-                       periods: int = 1, n_tones: int = 20) -> np.ndarray:
+def velocity_reference(
+    duration_s: float,
+    fs_hz: float,
+    f_lo_hz: float = 0.2,
+    f_hi_hz: float = 8.0,
+    rms_m_s: float = 0.15,
+    seed: int = 0,
+    periods: int = 1,
+    n_tones: int = 20,
+) -> np.ndarray:
     """Random-phase multisine velocity reference; ``periods`` > 1 repeats one period."""
     n_total = int(round(duration_s * fs_hz))
     n_period = n_total // periods
@@ -73,9 +87,15 @@ def velocity_reference(duration_s: float, fs_hz: float, f_lo_hz: float = 0.2,
     return np.tile(r, periods)
 
 
-def move_reference(duration_s: float, fs_hz: float, stroke_m: float = 0.2,
-                   v_max_m_s: float = 0.25, a_max_m_s2: float = 2.0,
-                   rest_s: tuple[float, float] = (0.2, 0.8), seed: int = 0) -> np.ndarray:
+def move_reference(
+    duration_s: float,
+    fs_hz: float,
+    stroke_m: float = 0.2,
+    v_max_m_s: float = 0.25,
+    a_max_m_s2: float = 2.0,
+    rest_s: tuple[float, float] = (0.2, 0.8),
+    seed: int = 0,
+) -> np.ndarray:
     """Position reference (m) of point-to-point moves: a rest of a random length in
     ``rest_s``, then a move to a random point of the stroke with a trapezoidal velocity
     (acceleration ``a_max``, a random top speed up to ``v_max``), and so on."""
@@ -85,7 +105,7 @@ def move_reference(duration_s: float, fs_hz: float, stroke_m: float = 0.2,
     i, here = 0, 0.0
     while i < n:
         rest = int(rng.uniform(*rest_s) * fs_hz)
-        q[i:i + rest] = here
+        q[i : i + rest] = here
         i += rest
         if i >= n:
             break
@@ -95,18 +115,25 @@ def move_reference(duration_s: float, fs_hz: float, stroke_m: float = 0.2,
         t_acc = speed / a_max_m_s2
         t_end = t_acc + length / speed if speed > 0 else 0.0
         t = np.arange(int(t_end * fs_hz) + 1) / fs_hz
-        covered = np.where(t < t_acc, 0.5 * a_max_m_s2 * t ** 2,
-                           np.where(t < t_end - t_acc, speed * (t - 0.5 * t_acc),
-                                    length - 0.5 * a_max_m_s2 * (t_end - t) ** 2))
+        covered = np.where(
+            t < t_acc,
+            0.5 * a_max_m_s2 * t**2,
+            np.where(
+                t < t_end - t_acc,
+                speed * (t - 0.5 * t_acc),
+                length - 0.5 * a_max_m_s2 * (t_end - t) ** 2,
+            ),
+        )
         m = min(t.size, n - i)
-        q[i:i + m] = here + math.copysign(1.0, there - here) * covered[:m]
+        q[i : i + m] = here + math.copysign(1.0, there - here) * covered[:m]
         i += t.size
         here = there
     return q
 
 
-def simulate_stage(p: StageParams, reference: np.ndarray, seed: int = 0,
-                   loop: str = "velocity") -> Recording:
+def simulate_stage(
+    p: StageParams, reference: np.ndarray, seed: int = 0, loop: str = "velocity"
+) -> Recording:
     """Closed-loop run; columns ``t``, ``force`` (N, controller output), ``vel`` (m/s,
     measured), with ``loop="position"`` also ``pos`` (m, the encoder), and the truth
     ``vel_true``, ``friction_true`` (N). ``reference``: velocity (m/s) or, with
@@ -155,9 +182,15 @@ def simulate_stage(p: StageParams, reference: np.ndarray, seed: int = 0,
             v = free - gain * f
             f_used += f
         fric[i] = f_used / p.substeps
-    cols = {"t": np.arange(n) / p.fs_hz, "force": force, "vel": vel_meas,
-            "vel_true": vel_true, "friction_true": fric}
+    cols = {
+        "t": np.arange(n) / p.fs_hz,
+        "force": force,
+        "vel": vel_meas,
+        "vel_true": vel_true,
+        "friction_true": fric,
+    }
     if loop == "position":
         cols["pos"] = pos_meas
-    return Recording(cols, {"fs": repr(float(p.fs_hz)), "source": "hil_sim.stage",
-                            "seed": str(seed)})
+    return Recording(
+        cols, {"fs": repr(float(p.fs_hz)), "source": "hil_sim.stage", "seed": str(seed)}
+    )

@@ -2,6 +2,8 @@
 conftest_<area> modules are registered here (their helpers are imported where used)."""
 
 import fdi_daemon  # noqa: F401  (first: it pins the BLAS kernel before NumPy loads)
+
+# isort: split
 import matplotlib
 import pytest
 

@@ -18,15 +18,29 @@ import numpy as np
 from rich.console import Console
 
 TMUX = shutil.which("tmux")
-STATES = ("starting", "calibrating", "monitoring", "fault_detected", "friction_isolated",
-          "other_fault")
+STATES = (
+    "starting",
+    "calibrating",
+    "monitoring",
+    "fault_detected",
+    "friction_isolated",
+    "other_fault",
+)
 
 
-def make_snapshot(state: str = "monitoring", *, theta: tuple[float, float] = (0.0123, -0.0456),
-                  history_s: float = 30.0, history_points: int = 300, t_now: float = 130.0,
-                  band: dict | None | str = "default", n_alarms: int = 2,
-                  gamma_f: float = 2.4, wall_time: float = 1_780_000_000.0,
-                  seed: int = 0) -> dict[str, Any]:
+def make_snapshot(
+    state: str = "monitoring",
+    *,
+    theta: tuple[float, float] = (0.0123, -0.0456),
+    history_s: float = 30.0,
+    history_points: int = 300,
+    t_now: float = 130.0,
+    band: dict | None | str = "default",
+    n_alarms: int = 2,
+    gamma_f: float = 2.4,
+    wall_time: float = 1_780_000_000.0,
+    seed: int = 0,
+) -> dict[str, Any]:
     """A full snapshot; history is noise around θ (or empty when history_points is 0)."""
     rng = np.random.default_rng(seed)
     t = np.linspace(t_now - history_s, t_now, history_points)
@@ -34,31 +48,64 @@ def make_snapshot(state: str = "monitoring", *, theta: tuple[float, float] = (0.
     th2 = theta[1] + 0.01 * rng.standard_normal(history_points)
     if band == "default":
         band = {"theta1": [-0.05, 0.05], "theta2": [-0.08, 0.08]}
-    alarms = [{"t": 100.0 + i * 0.5, "kind": ("fault_detected", "friction_isolated",
-                                             "cleared")[i % 3],
-               "theta1": 0.5 + i, "theta2": 1.25 + i} for i in range(n_alarms)]
+    alarms = [
+        {
+            "t": 100.0 + i * 0.5,
+            "kind": ("fault_detected", "friction_isolated", "cleared")[i % 3],
+            "theta1": 0.5 + i,
+            "theta2": 1.25 + i,
+        }
+        for i in range(n_alarms)
+    ]
     return {
-        "time": wall_time, "t": t_now, "state": state,
-        "link": {"kind": "sim", "connected": True, "rate_hz": 256.0, "samples": 33280,
-                 "gaps": 3, "crc_errors": 7, "bad_samples": 0,
-                 "tick_latency_us": {"p50": 42.0, "p99": 317.0}, "deadline_misses": 5},
+        "time": wall_time,
+        "t": t_now,
+        "state": state,
+        "link": {
+            "kind": "sim",
+            "connected": True,
+            "rate_hz": 256.0,
+            "samples": 33280,
+            "gaps": 3,
+            "crc_errors": 7,
+            "bad_samples": 0,
+            "tick_latency_us": {"p50": 42.0, "p99": 317.0},
+            "deadline_misses": 5,
+        },
         "monitor": {
-            "state": state, "theta1": theta[0], "theta2": theta[1], "friction_level": 0.25,
-            "band": band, "signature": [1.0, gamma_f], "residual_rms": 0.0321,
-            "statistic": 1.5, "threshold": 10.0,
+            "state": state,
+            "theta1": theta[0],
+            "theta2": theta[1],
+            "friction_level": 0.25,
+            "band": band,
+            "signature": [1.0, gamma_f],
+            "residual_rms": 0.0321,
+            "statistic": 1.5,
+            "threshold": 10.0,
             "history": {"t": t.tolist(), "theta1": th1.tolist(), "theta2": th2.tolist()},
         },
         "alarms": alarms,
-        "model": {"path": "configs/sim/model.yaml",
-                  "provenance": {"tool": "fdi signature", "source": "friction_run.csv",
-                                 "gamma_f": gamma_f}},
+        "model": {
+            "path": "configs/sim/model.yaml",
+            "provenance": {
+                "tool": "fdi signature",
+                "source": "friction_run.csv",
+                "gamma_f": gamma_f,
+            },
+        },
     }
 
 
 def screen_text(renderable, width: int = 80, height: int = 24) -> str:
     """What a `width` x `height` terminal shows for `renderable`, as plain text."""
-    console = Console(record=True, width=width, height=height, color_system=None,
-                      force_terminal=False, legacy_windows=False)
+    console = Console(
+        record=True,
+        width=width,
+        height=height,
+        color_system=None,
+        force_terminal=False,
+        legacy_windows=False,
+    )
     console.print(renderable)
     return console.export_text()
 
@@ -69,8 +116,12 @@ class ScriptedStatusServer:
     ``time`` set to now so that the client never sees them stale; `raw` replaces every
     answer with those bytes."""
 
-    def __init__(self, path: str | Path, snapshots: list[dict[str, Any]] | None = None,
-                 raw: bytes | None = None):
+    def __init__(
+        self,
+        path: str | Path,
+        snapshots: list[dict[str, Any]] | None = None,
+        raw: bytes | None = None,
+    ):
         self.path = str(path)
         self.snapshots = snapshots or [{"state": "starting"}]
         self.raw = raw
@@ -82,7 +133,7 @@ class ScriptedStatusServer:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._serve, daemon=True)
 
-    def __enter__(self) -> "ScriptedStatusServer":
+    def __enter__(self) -> ScriptedStatusServer:
         self._thread.start()
         return self
 
@@ -108,7 +159,7 @@ class ScriptedStatusServer:
         while not self._stop.is_set():
             try:
                 conn, _ = self._sock.accept()
-            except (socket.timeout, OSError):
+            except (TimeoutError, OSError):
                 continue
             with conn:
                 conn.settimeout(0.05)
@@ -117,7 +168,7 @@ class ScriptedStatusServer:
                     while not self._stop.is_set():
                         try:
                             chunk = conn.recv(4096)
-                        except socket.timeout:
+                        except TimeoutError:
                             continue
                         if not chunk:
                             break
@@ -131,19 +182,42 @@ class TmuxScreen:
     """A detached tmux session of `width` x `height` running `command` (in `cwd`); the
     pane stays after the command ends (`pane_dead`)."""
 
-    def __init__(self, command: list[str], width: int = 100, height: int = 30,
-                 cwd: str | Path | None = None):
+    def __init__(
+        self, command: list[str], width: int = 100, height: int = 30, cwd: str | Path | None = None
+    ):
         self.server = f"fdi-test-{uuid.uuid4().hex[:8]}"
-        self._tmux("-f", "/dev/null", "new-session", "-d", "-s", "dash", "-x", str(width),
-                   "-y", str(height), *(["-c", str(cwd)] if cwd else []),
-                   " ".join(shlex.quote(part) for part in command),
-                   ";", "set-option", "-t", "dash", "remain-on-exit", "on")
+        self._tmux(
+            "-f",
+            "/dev/null",
+            "new-session",
+            "-d",
+            "-s",
+            "dash",
+            "-x",
+            str(width),
+            "-y",
+            str(height),
+            *(["-c", str(cwd)] if cwd else []),
+            " ".join(shlex.quote(part) for part in command),
+            ";",
+            "set-option",
+            "-t",
+            "dash",
+            "remain-on-exit",
+            "on",
+        )
 
     def _tmux(self, *args: str, check: bool = True) -> str:
         # COLUMNS/LINES (set under pytest) would override the pane's real size
         env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES", "TMUX")}
-        return subprocess.run([TMUX, "-L", self.server, *args], capture_output=True, text=True,
-                              check=check, timeout=10, env=env).stdout
+        return subprocess.run(
+            [TMUX, "-L", self.server, *args],
+            capture_output=True,
+            text=True,
+            check=check,
+            timeout=10,
+            env=env,
+        ).stdout
 
     def text(self, history_lines: int = 0) -> str:
         """The screen (and that many lines scrolled off above it)."""

@@ -17,7 +17,7 @@ MODEL = REPO / "configs" / "model_sim_rig.yaml"
 FS_HZ = 256.0
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def scenario_recording(name: str, seed: int = 0, duration_s: float | None = None):
     """A scenario of configs/scenarios simulated once per session."""
     from hil_sim.scenarios import load_scenario, simulate
@@ -25,7 +25,7 @@ def scenario_recording(name: str, seed: int = 0, duration_s: float | None = None
     return simulate(load_scenario(SCENARIOS / f"{name}.yaml"), seed=seed, duration_s=duration_s)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def sim_rig_model():
     """FdiModel of the simulated rig (configs/model_sim_rig.yaml)."""
     from fdi_daemon.io.model_file import load_model
@@ -43,21 +43,33 @@ def model_copy(**changes):
     return model
 
 
-def msd_system(fault_time_s: float = float("inf"), duration_s: float = 8.0, seed: int = 0,
-               coulomb_n: float = 0.5, viscous: float = 2.0):
+def msd_system(
+    fault_time_s: float = float("inf"),
+    duration_s: float = 8.0,
+    seed: int = 0,
+    coulomb_n: float = 0.5,
+    viscous: float = 2.0,
+):
     """The paper's §V system with exact Ĝ and G_e: (model, recording)."""
     from fdi_daemon.io.model_file import FaultFilter, FdiModel
     from fdi_daemon.io.recordings import Recording
     from hil_sim.msd import MsdParams, MsdSimulator, friction_tf, nominal_tf
 
-    params = MsdParams(fault_time_s=fault_time_s, coulomb_n=coulomb_n,
-                       viscous_n_s_per_m=viscous, accel_noise_width=0.02)
+    params = MsdParams(
+        fault_time_s=fault_time_s,
+        coulomb_n=coulomb_n,
+        viscous_n_s_per_m=viscous,
+        accel_noise_width=0.02,
+    )
     num, den = friction_tf(params)
     plant_b, plant_a = nominal_tf(params)
-    model = FdiModel(fs=FS_HZ, plant_b=plant_b, plant_a=plant_a,
-                     fault_filter=FaultFilter(b=-coulomb_n * num, f=den, nk=0,
-                                              gamma_f=viscous / coulomb_n),
-                     velocity={"lead_compensation_hz": 8.0})
+    model = FdiModel(
+        fs=FS_HZ,
+        plant_b=plant_b,
+        plant_a=plant_a,
+        fault_filter=FaultFilter(b=-coulomb_n * num, f=den, nk=0, gamma_f=viscous / coulomb_n),
+        velocity={"lead_compensation_hz": 8.0},
+    )
     t = np.arange(int(duration_s * FS_HZ)) / FS_HZ
     out = MsdSimulator(params, seed).run(1.4 * np.sin(2 * np.pi * 8.0 * t))
     cols = {k: out[k] for k in ("t", "v_in", "accel", "fault_active")}

@@ -15,8 +15,9 @@ from fdi_daemon.io.recordings import Recording, write_recording
 FS = 256.0
 
 #: the known plant: a differentiator-like 4th-order system with a 8 Hz resonance (b0 = 0)
-PLANT_POLES = np.array([0.85 * np.exp(2j * np.pi * 8 / FS), 0.85 * np.exp(-2j * np.pi * 8 / FS),
-                        0.9, 0.6])
+PLANT_POLES = np.array(
+    [0.85 * np.exp(2j * np.pi * 8 / FS), 0.85 * np.exp(-2j * np.pi * 8 / FS), 0.9, 0.6]
+)
 PLANT_ZEROS = np.array([1.0, -0.5, 0.3])
 PLANT_GAIN = 0.05
 
@@ -47,14 +48,17 @@ def plant_output(u: np.ndarray, noise_fraction: float, seed: int) -> np.ndarray:
 def plant_recording(path, n_samples: int, seed: int, noise_fraction: float = 0.02):
     """A chirp recording of the known plant (columns t, v_in, accel; fs in the metadata)."""
     u = chirp(n_samples, phase=37.0 * seed)
-    rec = Recording({"t": np.arange(n_samples) / FS, "v_in": u,
-                     "accel": plant_output(u, noise_fraction, seed)}, {"fs": "256"})
+    rec = Recording(
+        {"t": np.arange(n_samples) / FS, "v_in": u, "accel": plant_output(u, noise_fraction, seed)},
+        {"fs": "256"},
+    )
     write_recording(path, rec)
     return path
 
 
-def signature_data(gamma: float, kind: str, noise_fraction: float, seed: int = 2,
-                   n_samples: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+def signature_data(
+    gamma: float, kind: str, noise_fraction: float, seed: int = 2, n_samples: int = 1024
+) -> tuple[np.ndarray, np.ndarray]:
     """(residual, velocity) with residual = G_e(sign v + γ v) + noise, G_e = OE_B/OE_F.
 
     kind "sweep": a chirp 2..8 Hz whose amplitude grows 0.03..0.1 m/s (identifying);
@@ -62,7 +66,7 @@ def signature_data(gamma: float, kind: str, noise_fraction: float, seed: int = 2
     """
     t = np.arange(n_samples) / FS
     if kind == "sweep":
-        v = 0.1 * (0.3 + 0.7 * t / t[-1]) * np.sin(2 * np.pi * (2.0 * t + 0.75 * t ** 2))
+        v = 0.1 * (0.3 + 0.7 * t / t[-1]) * np.sin(2 * np.pi * (2.0 * t + 0.75 * t**2))
     elif kind == "sine":
         v = 0.08 * np.sin(2 * np.pi * 8.0 * t)
     else:
@@ -80,8 +84,13 @@ def match_roots(estimated: np.ndarray, true: np.ndarray) -> float:
 
 # ---------------------------------------------------------------- session recordings
 
-SIM_SCENARIOS = ("ident_chirp", "ident_chirp_long", "signature_calibration_paired",
-                 "test_case_1", "test_case_2")
+SIM_SCENARIOS = (
+    "ident_chirp",
+    "ident_chirp_long",
+    "signature_calibration_paired",
+    "test_case_1",
+    "test_case_2",
+)
 
 
 @pytest.fixture(scope="session")
@@ -95,8 +104,9 @@ def sim_recordings(tmp_path_factory):
         scenario = load_scenario(f"configs/scenarios/{name}.yaml")
         paths[name] = write_recording(out / f"{name}.csv", simulate(scenario))
     scenario = load_scenario("configs/scenarios/ident_chirp.yaml")
-    paths["ident_chirp_seed1"] = write_recording(out / "ident_chirp_seed1.csv",
-                                                 simulate(scenario, seed=1))
+    paths["ident_chirp_seed1"] = write_recording(
+        out / "ident_chirp_seed1.csv", simulate(scenario, seed=1)
+    )
     return paths
 
 
@@ -120,8 +130,9 @@ def true_gamma(rec, t0: float, t1: float, min_speed_m_s: float = 0.01) -> float:
     sliding = np.abs(v) > min_speed_m_s
     if "stuck" in rec.columns:
         sliding &= rec["stuck"][sel] == 0
-    coef = np.linalg.lstsq(np.column_stack([np.sign(v[sliding]), v[sliding]]),
-                           force[sliding], rcond=None)[0]
+    coef = np.linalg.lstsq(
+        np.column_stack([np.sign(v[sliding]), v[sliding]]), force[sliding], rcond=None
+    )[0]
     return float(coef[1] / coef[0])
 
 
@@ -136,19 +147,23 @@ def msd_recordings(tmp_path_factory):
     fs = FS
     clean = msd.MsdParams(accel_noise_width=0.02)
     t = np.arange(1024) / fs
-    chirp_u = 0.7 * np.sin(np.pi * 20.0 / t[-1] * t ** 2)
+    chirp_u = 0.7 * np.sin(np.pi * 20.0 / t[-1] * t**2)
     t2 = np.arange(2048) / fs
-    chirp_val = 0.5 * np.sin(np.pi * 20.0 / t2[-1] * t2 ** 2 + 1.0)
-    fault = msd.MsdParams(accel_noise_width=0.02, fault_time_s=1.0, coulomb_n=0.5,
-                          viscous_n_s_per_m=1.0)
+    chirp_val = 0.5 * np.sin(np.pi * 20.0 / t2[-1] * t2**2 + 1.0)
+    fault = msd.MsdParams(
+        accel_noise_width=0.02, fault_time_s=1.0, coulomb_n=0.5, viscous_n_s_per_m=1.0
+    )
     t3 = np.arange(int(6 * fs)) / fs
     amplitude = 0.3 + 1.2 * (np.floor(t3) % 6) / 5
     paths = {
         "chirp": write_recording(out / "chirp.csv", msd.simulate_recording(clean, chirp_u, 1)),
-        "chirp_val": write_recording(out / "chirp_val.csv",
-                                     msd.simulate_recording(clean, chirp_val, 2)),
-        "amp_steps": write_recording(out / "amp_steps.csv", msd.simulate_recording(
-            fault, amplitude * np.sin(2 * np.pi * 8.0 * t3), 5)),
+        "chirp_val": write_recording(
+            out / "chirp_val.csv", msd.simulate_recording(clean, chirp_val, 2)
+        ),
+        "amp_steps": write_recording(
+            out / "amp_steps.csv",
+            msd.simulate_recording(fault, amplitude * np.sin(2 * np.pi * 8.0 * t3), 5),
+        ),
     }
     paths["gamma_true"] = fault.viscous_n_s_per_m / fault.coulomb_n
     return paths

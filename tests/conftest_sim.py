@@ -39,12 +39,19 @@ def sweep_recording():
 
 @pytest.fixture(scope="session")
 def test_case_recordings():
-    return {name: simulate(load_scenario(scenario_path(name)), seed=1)
-            for name in ("test_case_1", "test_case_2")}
+    return {
+        name: simulate(load_scenario(scenario_path(name)), seed=1)
+        for name in ("test_case_1", "test_case_2")
+    }
 
 
-def run_sine_with_supply(amplitude_v: float, supply: float, seed: int = 0,
-                         frequency_hz: float = 8.0, seconds: float = 4.0):
+def run_sine_with_supply(
+    amplitude_v: float,
+    supply: float,
+    seed: int = 0,
+    frequency_hz: float = 8.0,
+    seconds: float = 4.0,
+):
     """Sine run; the bearing supply changes to `supply` at half time. Returns (pre, post)."""
     rig = Rig(seed=seed)
     u = sine(amplitude_v, frequency_hz, seconds)

@@ -27,33 +27,61 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "configs" / "scenarios"
-OPERATION = [{"kind": "random", "amplitude_v": [0.8, 1.6], "frequency_hz": [1.0, 9.0],
-              "segment_s": [5.0, 40.0]}]
+OPERATION = [
+    {
+        "kind": "random",
+        "amplitude_v": [0.8, 1.6],
+        "frequency_hz": [1.0, 9.0],
+        "segment_s": [5.0, 40.0],
+    }
+]
 
 
 def _creep(ramp_s: float, record_s: float, supply: float = 0.62):
     start = record_s / 3.0
-    return {"name": f"creep_{ramp_s:.0f}s", "duration_s": record_s, "seed": 3,
-            "centring_gain_v_per_m": 30.0, "excitation": OPERATION,
-            "drift": {"bearing_supply": {"times_s": [0.0, start, start + ramp_s, record_s],
-                                         "values": [1.0, 1.0, supply, supply]}}}, start
+    return {
+        "name": f"creep_{ramp_s:.0f}s",
+        "duration_s": record_s,
+        "seed": 3,
+        "centring_gain_v_per_m": 30.0,
+        "excitation": OPERATION,
+        "drift": {
+            "bearing_supply": {
+                "times_s": [0.0, start, start + ramp_s, record_s],
+                "values": [1.0, 1.0, supply, supply],
+            }
+        },
+    }, start
 
 
 def _from_start(supply: float):
-    return {"name": f"from_start_{supply}", "duration_s": 20.0, "seed": 0,
-            "centring_gain_v_per_m": 30.0,
-            "excitation": [{"kind": "multisine", "amplitudes_v": [0.6, 0.5, 0.4],
-                            "frequencies_hz": [3.3, 5.0, 8.0]}],
-            "events": [{"t_s": 0.0, "bearing_supply": supply}]}, 0.0
+    return {
+        "name": f"from_start_{supply}",
+        "duration_s": 20.0,
+        "seed": 0,
+        "centring_gain_v_per_m": 30.0,
+        "excitation": [
+            {
+                "kind": "multisine",
+                "amplitudes_v": [0.6, 0.5, 0.4],
+                "frequencies_hz": [3.3, 5.0, 8.0],
+            }
+        ],
+        "events": [{"t_s": 0.0, "bearing_supply": supply}],
+    }, 0.0
 
 
 def cases():
     import yaml
 
     ff = yaml.safe_load((SCENARIOS / "fault_free_hour.yaml").read_text())
-    return {"creep 10 min": _creep(600.0, 1800.0), "creep 1 h": _creep(3600.0, 7200.0),
-            "from start 45 %": _from_start(0.45), "from start 62 %": _from_start(0.62),
-            "fault-free hour": (ff, None)}
+    return {
+        "creep 10 min": _creep(600.0, 1800.0),
+        "creep 1 h": _creep(3600.0, 7200.0),
+        "from start 45 %": _from_start(0.45),
+        "from start 62 %": _from_start(0.62),
+        "fault-free hour": (ff, None),
+    }
 
 
 def _fdi(*argv):
@@ -73,14 +101,31 @@ def models(root: Path, names) -> dict:
     shipped = default_config_path().with_name("model_sim_rig.yaml")
     paths = {"highpass": shipped}
     if "observer" in names:
-        paired = write_recording(root / "paired.npz", simulate(
-            load_scenario(SCENARIOS / "signature_calibration_paired.yaml")))
+        paired = write_recording(
+            root / "paired.npz",
+            simulate(load_scenario(SCENARIOS / "signature_calibration_paired.yaml")),
+        )
         paths["observer"] = root / "observer.yaml"
-        _fdi("signature", paired, "--model", shipped, "--fault-window", "22:42",
-             "--reference-window", "1:21", "--lowpass-hz", "10", "--velocity-method",
-             "model_observer", "-o", paths["observer"])
-    ff = write_recording(root / "ff10.npz", simulate(
-        load_scenario(SCENARIOS / "fault_free_hour.yaml"), seed=7, duration_s=600.0))
+        _fdi(
+            "signature",
+            paired,
+            "--model",
+            shipped,
+            "--fault-window",
+            "22:42",
+            "--reference-window",
+            "1:21",
+            "--lowpass-hz",
+            "10",
+            "--velocity-method",
+            "model_observer",
+            "-o",
+            paths["observer"],
+        )
+    ff = write_recording(
+        root / "ff10.npz",
+        simulate(load_scenario(SCENARIOS / "fault_free_hour.yaml"), seed=7, duration_s=600.0),
+    )
     out = {}
     for name in names:
         out[name] = load_model(paths[name])
@@ -107,10 +152,12 @@ def measure(label: str, model, case: str, rec, fault_t) -> str:
         return f"{e['kind']} {'+' if fault_t is not None else 't='}{rel:.2f} s"
 
     raised = [e for e in alarms if e["kind"] == "alarm_raised"]
-    return (f"{case:16s} {label:20s} episodes {kinds.count('fault_detected'):3d} "
-            f"cleared {kinds.count('cleared'):3d}  detected {first('fault_detected'):28s} "
-            f"isolated {first('friction_isolated', 'other_fault'):32s} "
-            f"lifecycle alarms {len(raised)}")
+    return (
+        f"{case:16s} {label:20s} episodes {kinds.count('fault_detected'):3d} "
+        f"cleared {kinds.count('cleared'):3d}  detected {first('fault_detected'):28s} "
+        f"isolated {first('friction_isolated', 'other_fault'):32s} "
+        f"lifecycle alarms {len(raised)}"
+    )
 
 
 if __name__ == "__main__":

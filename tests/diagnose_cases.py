@@ -3,7 +3,7 @@ machines like the real ones, and the simulated pneumatic rig with one fault each
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +31,7 @@ HIDDEN = {
 NOISE = dict(accel_noise_width=0.2, velocity_noise_width=0.01, position_noise_width=5e-4)
 
 
-@lru_cache(maxsize=None)
+@cache
 def recording(effect: str | None, seed: int = 2, duration_s: float = DURATION_S):
     """A recording of the §V model (multisine 0.3–12 Hz, 0.5 V RMS) with ``effect`` hidden."""
     effects = {} if effect is None else {effect: HIDDEN[effect]}
@@ -50,7 +50,7 @@ def nominal_model() -> tuple[np.ndarray, np.ndarray]:
 STAGE_DURATION_S = 60.0
 
 
-@lru_cache(maxsize=None)
+@cache
 def stage_recording(coulomb_n: float = 20.0, offset_n: float = 1.0, seed: int = 2):
     """A PI velocity loop around a mass with Coulomb friction and a constant force; the
     recording's columns are ``force`` and ``vel`` (not the recording contract's names)."""
@@ -65,7 +65,7 @@ def stage_recording(coulomb_n: float = 20.0, offset_n: float = 1.0, seed: int = 
 POSITIONER_DURATION_S = 24.8
 
 
-@lru_cache(maxsize=None)
+@cache
 def positioner_recording(coulomb_n: float = 20.0, offset_n: float = -3.0, seed: int = 2):
     """A ball-screw drive under a position loop (P position, P velocity on the encoder's
     differences), moving from point to point with rests between the moves (the load held
@@ -80,34 +80,50 @@ def positioner_recording(coulomb_n: float = 20.0, offset_n: float = -3.0, seed: 
 
 
 #: the ratio each named linear change reports
-NAMED_RATIOS = {"mass_change": "mass_ratio", "stiffness_change": "stiffness_ratio",
-                "gain_fault": "gain_ratio", "viscous_friction": "damping_change_per_s"}
+NAMED_RATIOS = {
+    "mass_change": "mass_ratio",
+    "stiffness_change": "stiffness_ratio",
+    "gain_fault": "gain_ratio",
+    "viscous_friction": "damping_change_per_s",
+}
 
 
-def noise_input(duration_s: float, corner_hz: float, rms: float, seed: int = 5,
-                fs_hz: float = FS, low_hz: float | None = None):
+def noise_input(
+    duration_s: float,
+    corner_hz: float,
+    rms: float,
+    seed: int = 5,
+    fs_hz: float = FS,
+    low_hz: float | None = None,
+):
     """Gaussian noise at fs_hz low-passed at corner_hz (4th-order Butterworth; band-passed
     from low_hz when given: no content at DC to drift an integrating plant), scaled to rms."""
     band, kind = (corner_hz, "lowpass") if low_hz is None else ([low_hz, corner_hz], "bandpass")
-    u = signal.lfilter(*signal.butter(4, band, btype=kind, fs=fs_hz),
-                       np.random.default_rng(seed).standard_normal(int(duration_s * fs_hz)))
+    u = signal.lfilter(
+        *signal.butter(4, band, btype=kind, fs=fs_hz),
+        np.random.default_rng(seed).standard_normal(int(duration_s * fs_hz)),
+    )
     return u * rms / np.std(u)
 
 
-@lru_cache(maxsize=None)
+@cache
 def duffing_recording(k3_n_per_m3: float = 3e5, seed: int = 2, noise_hz: float | None = None):
     """A Duffing oscillator: the §V mass-spring-damper driven directly by the input (no
     input filter) with a cubic spring (≈ 60 % of the linear force at the peaks); 40 s of a
     0.3–12 Hz multisine at 1 V RMS, or with ``noise_hz`` of Gaussian noise low-passed there
     (4th-order Butterworth, seed 5, 1 V RMS); position out (0.5 mm uniform noise)."""
     effects = {"cubic_stiffness": {"k3_n_per_m3": k3_n_per_m3}} if k3_n_per_m3 else {}
-    u = (multisine(40.0, FS, 0.3, 12.0, 1.0, seed=1) if noise_hz is None
-         else noise_input(40.0, noise_hz, 1.0))
-    return simulate_recording(MsdParams(input_filter_hz=None, effects=effects, **NOISE), u,
-                              seed=seed)
+    u = (
+        multisine(40.0, FS, 0.3, 12.0, 1.0, seed=1)
+        if noise_hz is None
+        else noise_input(40.0, noise_hz, 1.0)
+    )
+    return simulate_recording(
+        MsdParams(input_filter_hz=None, effects=effects, **NOISE), u, seed=seed
+    )
 
 
-@lru_cache(maxsize=None)
+@cache
 def arrow_recording(k3_n_per_m3: float = 1.5e5, seed: int = 2):
     """A Duffing oscillator recorded as nonlinear benchmarks are (the Silverbox): 20 s of
     an "arrow" (Gaussian noise low-passed at 12 Hz whose amplitude rises linearly to
@@ -115,16 +131,20 @@ def arrow_recording(k3_n_per_m3: float = 1.5e5, seed: int = 2):
     §V model without input filter, position out. The arrow's tip drives the spring harder
     than anything after it."""
     rising = noise_input(20.0, 12.0, 1.0) * np.linspace(0.0, 1.0, int(20.0 * FS))
-    rising *= 1.7 / np.std(rising[-int(2.0 * FS):])
-    u = np.concatenate([rising] + [multisine(8.0, FS, 0.3, 12.0, 1.0, seed=s)
-                                   for s in (11, 12, 13)])
-    return simulate_recording(MsdParams(input_filter_hz=None,
-                                        effects={"cubic_stiffness":
-                                                 {"k3_n_per_m3": k3_n_per_m3}}, **NOISE),
-                              u, seed=seed)
+    rising *= 1.7 / np.std(rising[-int(2.0 * FS) :])
+    u = np.concatenate(
+        [rising] + [multisine(8.0, FS, 0.3, 12.0, 1.0, seed=s) for s in (11, 12, 13)]
+    )
+    return simulate_recording(
+        MsdParams(
+            input_filter_hz=None, effects={"cubic_stiffness": {"k3_n_per_m3": k3_n_per_m3}}, **NOISE
+        ),
+        u,
+        seed=seed,
+    )
 
 
-@lru_cache(maxsize=None)
+@cache
 def changed_recording(parameter: str, ratio: float, seed: int = 2):
     """The §V model whose ``parameter`` (an `MsdParams` field: the actuator's
     ``gain_n_per_v``, the spring's ``stiffness_n_per_m``, the load's ``mass_kg``) is
@@ -169,10 +189,16 @@ RIG_EXCITATIONS = {
 }
 
 
-@lru_cache(maxsize=None)
-def rig_recording(fault: str | None = None, value: float = 0.0, rms_v: float = 0.4,
-                  duration_s: float = 30.0, variant: tuple[tuple[str, float], ...] = (),
-                  input_effect: str | None = None, excitation: str = "multisine 1-12 Hz"):
+@cache
+def rig_recording(
+    fault: str | None = None,
+    value: float = 0.0,
+    rms_v: float = 0.4,
+    duration_s: float = 30.0,
+    variant: tuple[tuple[str, float], ...] = (),
+    input_effect: str | None = None,
+    excitation: str = "multisine 1-12 Hz",
+):
     """(v_in, accel) of the simulated pneumatic rig (`hil_sim.rig.Rig`, seed 4) driven by
     ``excitation`` (`RIG_EXCITATIONS`) of ``rms_v`` after 1 s at rest, with ``fault``
     switched on from the start: ``bearing_supply`` (a fraction of nominal: below ≈ 0.8 the
@@ -196,4 +222,3 @@ def rig_recording(fault: str | None = None, value: float = 0.0, rms_v: float = 0
     # the rig measures the voltage its valve gets (with the converter's error): recorded is
     # the command with that error, the effect hidden between them
     return command + (out["v_in"] - applied), out["accel"]
-

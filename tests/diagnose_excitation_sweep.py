@@ -31,22 +31,34 @@ def mechanics() -> None:
     from tests.diagnose_cases import FS, NAMED_RATIOS, NOISE, noise_input, nominal_model
 
     b, a = nominal_model()
-    inputs = {"noise 15 Hz": noise_input(24.0, 15.0, 0.5),
-              "multisine 0.3-4 Hz": multisine(24.0, FS, 0.3, 4.0, 0.5, seed=1),
-              "multisine 3-8 Hz": multisine(24.0, FS, 3.0, 8.0, 0.5, seed=1)}
-    changes = [("mass_kg", 0.8), ("mass_kg", 1.25), ("stiffness_n_per_m", 0.8),
-               ("damping_n_s_per_m", 1.5)]
+    inputs = {
+        "noise 15 Hz": noise_input(24.0, 15.0, 0.5),
+        "multisine 0.3-4 Hz": multisine(24.0, FS, 0.3, 4.0, 0.5, seed=1),
+        "multisine 3-8 Hz": multisine(24.0, FS, 3.0, 8.0, 0.5, seed=1),
+    }
+    changes = [
+        ("mass_kg", 0.8),
+        ("mass_kg", 1.25),
+        ("stiffness_n_per_m", 0.8),
+        ("damping_n_s_per_m", 1.5),
+    ]
     for label, u in inputs.items():
         for parameter, ratio in changes:
             value = ratio * getattr(MsdParams(), parameter)
             rec = simulate_recording(MsdParams(**{parameter: value}, **NOISE), u, seed=2)
             for kind, column in (("acceleration", "accel"), ("position", "position")):
                 r = run_diagnose(rec.v_in, rec[column], FS, kind, b, a)
-                read = {e.named_as: round(float(e.physical[NAMED_RATIOS[e.named_as]]), 3)
-                        for e in r.selection.named if e.named_as in NAMED_RATIOS}
-                print(f"{label}, {parameter} x {ratio:g}, {kind}: {r.named} "
-                      f"{r.gap_before:.4f} -> {r.gap_after:.4f} "
-                      f"(floor {r.info['noise_floor']['floor']:.4f}) {read}", flush=True)
+                read = {
+                    e.named_as: round(float(e.physical[NAMED_RATIOS[e.named_as]]), 3)
+                    for e in r.selection.named
+                    if e.named_as in NAMED_RATIOS
+                }
+                print(
+                    f"{label}, {parameter} x {ratio:g}, {kind}: {r.named} "
+                    f"{r.gap_before:.4f} -> {r.gap_after:.4f} "
+                    f"(floor {r.info['noise_floor']['floor']:.4f}) {read}",
+                    flush=True,
+                )
 
 
 def duffing() -> None:
@@ -54,53 +66,79 @@ def duffing() -> None:
     from hil_sim.msd import MsdParams, multisine, simulate_recording
     from tests.diagnose_cases import FS, NOISE, noise_input
 
-    inputs = {"multisine 0.3-12 Hz": multisine(40.0, FS, 0.3, 12.0, 1.0, seed=1),
-              "noise 15 Hz": noise_input(40.0, 15.0, 1.0),
-              "multisine 0.3-4 Hz": multisine(40.0, FS, 0.3, 4.0, 1.0, seed=1)}
+    inputs = {
+        "multisine 0.3-12 Hz": multisine(40.0, FS, 0.3, 12.0, 1.0, seed=1),
+        "noise 15 Hz": noise_input(40.0, 15.0, 1.0),
+        "multisine 0.3-4 Hz": multisine(40.0, FS, 0.3, 4.0, 1.0, seed=1),
+    }
     for k3 in (3e4, 1e5, 3e5):
         for label, u in inputs.items():
-            params = MsdParams(input_filter_hz=None,
-                               effects={"cubic_stiffness": {"k3_n_per_m3": k3}}, **NOISE)
+            params = MsdParams(
+                input_filter_hz=None, effects={"cubic_stiffness": {"k3_n_per_m3": k3}}, **NOISE
+            )
             rec = simulate_recording(params, u, seed=2)
             r = run_diagnose(rec.v_in, rec["position"], FS, "position")
-            cubic = next((e.physical for e in r.selection.named
-                          if e.name == "cubic_stiffness"), {})
+            cubic = next((e.physical for e in r.selection.named if e.name == "cubic_stiffness"), {})
             # both forms size k₃ in input units (V per m³): times the input's gain, N/m³
             read = params.gain_n_per_v * cubic.get(
-                "cubic_coefficient_input_equivalent", cubic.get("cubic_coefficient", math.nan))
-            print(f"k3 {k3:.0e}, {label}: {r.named} {r.gap_before:.4f} -> {r.gap_after:.4f} "
-                  f"(floor {r.info['noise_floor']['floor']:.4f}), form {r.info['form']}, "
-                  f"k3 read {read:.3g} N/m^3", flush=True)
+                "cubic_coefficient_input_equivalent", cubic.get("cubic_coefficient", math.nan)
+            )
+            print(
+                f"k3 {k3:.0e}, {label}: {r.named} {r.gap_before:.4f} -> {r.gap_after:.4f} "
+                f"(floor {r.info['noise_floor']['floor']:.4f}), form {r.info['form']}, "
+                f"k3 read {read:.3g} N/m^3",
+                flush=True,
+            )
 
 
 def rig() -> None:
     from fdi_daemon.diagnose.workflow import run_diagnose
-    from tests.diagnose_cases import (NAMED_RATIOS, RIG_EXCITATIONS, RIG_FS, RIG_INPUT_EFFECTS,
-                                      rig_model, rig_recording)
+    from tests.diagnose_cases import (
+        NAMED_RATIOS,
+        RIG_EXCITATIONS,
+        RIG_FS,
+        RIG_INPUT_EFFECTS,
+        rig_model,
+        rig_recording,
+    )
 
     def pure(coulomb_n: float) -> dict:  # the rod seal's friction, static = Coulomb
         return {"variant": (("seal_coulomb_n", coulomb_n), ("seal_static_n", coulomb_n))}
 
     b, a = rig_model()
-    cases = {"fault-free": {}, "Coulomb 1 N": pure(1.0), "Coulomb 3.4 N": pure(3.4),
-             "accel bias 0.5": {"fault": "accel_bias", "value": 0.5},
-             "valve gain 0.8": {"fault": "valve_gain", "value": 0.8},
-             "payload +0.5 kg": {"variant": (("bearing_mass_kg", 1.5),)},
-             "supply 0.8": {"fault": "supply_pressure", "value": 0.8},
-             "bearing supply 0.75": {"fault": "bearing_supply", "value": 0.75},
-             **{effect: {"input_effect": effect} for effect in RIG_INPUT_EFFECTS}}
+    cases = {
+        "fault-free": {},
+        "Coulomb 1 N": pure(1.0),
+        "Coulomb 3.4 N": pure(3.4),
+        "accel bias 0.5": {"fault": "accel_bias", "value": 0.5},
+        "valve gain 0.8": {"fault": "valve_gain", "value": 0.8},
+        "payload +0.5 kg": {"variant": (("bearing_mass_kg", 1.5),)},
+        "supply 0.8": {"fault": "supply_pressure", "value": 0.8},
+        "bearing supply 0.75": {"fault": "bearing_supply", "value": 0.75},
+        **{effect: {"input_effect": effect} for effect in RIG_INPUT_EFFECTS},
+    }
     for excitation in list(RIG_EXCITATIONS)[1:]:
         for label, case in cases.items():
             u, y = rig_recording(rms_v=0.8, duration_s=40.0, excitation=excitation, **case)
             r = run_diagnose(u, y, RIG_FS, "acceleration", b, a)
-            read = {f"{e.named_as}:{key}": round(float(e.physical[key]), 4)
-                    for e in r.selection.named
-                    for key in (NAMED_RATIOS.get(e.named_as), "dead_time_s", "half_width",
-                                "level", "gap", "offset")
-                    if key in e.physical and isinstance(e.physical[key], float)}
-            print(f"{excitation}, {label}: {r.named} {r.gap_before:.4f} -> "
-                  f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {read}",
-                  flush=True)
+            read = {
+                f"{e.named_as}:{key}": round(float(e.physical[key]), 4)
+                for e in r.selection.named
+                for key in (
+                    NAMED_RATIOS.get(e.named_as),
+                    "dead_time_s",
+                    "half_width",
+                    "level",
+                    "gap",
+                    "offset",
+                )
+                if key in e.physical and isinstance(e.physical[key], float)
+            }
+            print(
+                f"{excitation}, {label}: {r.named} {r.gap_before:.4f} -> "
+                f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {read}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

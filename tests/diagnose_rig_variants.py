@@ -24,9 +24,16 @@ import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-FAULTS = ((None, 0.0), ("bearing_supply", 0.65), ("supply_pressure", 0.8),
-          ("valve_gain", 0.8), ("accel_bias", 0.3), ("payload_kg", 0.5), ("damping_x", 2.0),
-          ("seal_coulomb_n", 0.5))
+FAULTS = (
+    (None, 0.0),
+    ("bearing_supply", 0.65),
+    ("supply_pressure", 0.8),
+    ("valve_gain", 0.8),
+    ("accel_bias", 0.3),
+    ("payload_kg", 0.5),
+    ("damping_x", 2.0),
+    ("seal_coulomb_n", 0.5),
+)
 #: faults made by changing the variant's `RigParams` (in `main`; the others are
 #: `rig_recording` faults)
 CHANGES = ("payload_kg", "damping_x", "seal_coulomb_n")
@@ -34,10 +41,11 @@ CHANGES = ("payload_kg", "damping_x", "seal_coulomb_n")
 
 def identified_model(rig: dict, folder: Path):
     """`fdi identify` on the variant's identification chirp."""
+    from test_detect_other_rig import record
+
     from fdi_daemon.cli import main
     from fdi_daemon.io.model_file import load_model
     from fdi_daemon.io.recordings import write_recording
-    from test_detect_other_rig import record
 
     write_recording(folder / "ident.npz", record(rig, "ident_chirp"))
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
@@ -48,9 +56,10 @@ def identified_model(rig: dict, folder: Path):
 def main(indices: list[int]) -> None:
     sys.path.insert(0, str(REPO / "tests"))
     sys.path.insert(0, str(REPO))
+    from test_detect_other_rig import rig_variant
+
     from fdi_daemon.diagnose.workflow import run_diagnose
     from hil_sim.rig import RigParams
-    from test_detect_other_rig import rig_variant
     from tests.diagnose_cases import NAMED_RATIOS, RIG_FS, rig_recording
 
     for index in indices:
@@ -71,14 +80,24 @@ def main(indices: list[int]) -> None:
                 truth = f" (damping per unit mass + {added:.1f} /s)"
             elif fault == "seal_coulomb_n":
                 params.update(seal_coulomb_n=value, seal_static_n=value)
-            u, y = rig_recording(None if fault in CHANGES else fault, value, rms_v=0.8,
-                                 duration_s=40.0, variant=tuple(sorted(params.items())))
+            u, y = rig_recording(
+                None if fault in CHANGES else fault,
+                value,
+                rms_v=0.8,
+                duration_s=40.0,
+                variant=tuple(sorted(params.items())),
+            )
             r = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
-            ratios = {e.named_as: round(float(e.physical[NAMED_RATIOS[e.named_as]]), 3)
-                      for e in r.selection.named if e.named_as in NAMED_RATIOS}
-            print(f"v{index} {fault or 'none'} {value:g}: {r.named} {r.gap_before:.4f} -> "
-                  f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {ratios}"
-                  + truth, flush=True)
+            ratios = {
+                e.named_as: round(float(e.physical[NAMED_RATIOS[e.named_as]]), 3)
+                for e in r.selection.named
+                if e.named_as in NAMED_RATIOS
+            }
+            print(
+                f"v{index} {fault or 'none'} {value:g}: {r.named} {r.gap_before:.4f} -> "
+                f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {ratios}" + truth,
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -22,17 +22,27 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "configs" / "scenarios"
-CASES = (("test_case_1", 3.05, 1.5), ("test_case_2", 2.9, 1.5),
-         ("steady_friction_changing_operation", 20.0, 10.0))
+CASES = (
+    ("test_case_1", 3.05, 1.5),
+    ("test_case_2", 2.9, 1.5),
+    ("steady_friction_changing_operation", 20.0, 10.0),
+)
 
 
 def variants() -> dict[str, dict]:
     sys.path.insert(0, str(REPO / "tests"))
     from test_detect_other_rig import rig_variant
 
-    return {"default": {}, "v0": rig_variant(0), "v1": rig_variant(1),
-            "velsrc": {"bearing_mass_kg": 0.6, "piston_rod_mass_kg": 0.2,
-                       "viscous_damping_n_s_per_m": 150.0}}
+    return {
+        "default": {},
+        "v0": rig_variant(0),
+        "v1": rig_variant(1),
+        "velsrc": {
+            "bearing_mass_kg": 0.6,
+            "piston_rod_mass_kg": 0.2,
+            "viscous_damping_n_s_per_m": 150.0,
+        },
+    }
 
 
 def _record(rig, name, out):
@@ -62,30 +72,74 @@ def _fdi(*argv):
 def measure(name: str, rig: dict, root: Path) -> list[str]:
     from fdi_daemon.io.model_file import load_model
 
-    names = ("ident_chirp", "ident_chirp_long", "signature_calibration",
-             "signature_calibration_paired") + tuple(c[0] for c in CASES)
+    names = (
+        "ident_chirp",
+        "ident_chirp_long",
+        "signature_calibration",
+        "signature_calibration_paired",
+    ) + tuple(c[0] for c in CASES)
     recs = {n: _record(rig, n, root / f"{n}.npz") for n in names}
-    _fdi("identify", root / "ident_chirp.npz", "-o", root / "plant.yaml",
-         "--validate", root / "ident_chirp_long.npz")
-    _fdi("signature", root / "signature_calibration.npz", "--model", root / "plant.yaml",
-         "--fault-window", "11:40", "-o", root / "highpass.yaml")
-    _fdi("signature", root / "signature_calibration_paired.npz", "--model",
-         root / "plant.yaml", "--fault-window", "22:42", "--reference-window", "1:21",
-         "--lowpass-hz", "10", "--velocity-method", "model_observer",
-         "-o", root / "observer.yaml")
-    _fdi("signature", root / "signature_calibration_paired.npz", "--model",
-         root / "plant.yaml", "--fault-window", "22:42", "--reference-window", "1:21",
-         "--lowpass-hz", "10", "--velocity-method", "position_observer",
-         "-o", root / "position.yaml")
+    _fdi(
+        "identify",
+        root / "ident_chirp.npz",
+        "-o",
+        root / "plant.yaml",
+        "--validate",
+        root / "ident_chirp_long.npz",
+    )
+    _fdi(
+        "signature",
+        root / "signature_calibration.npz",
+        "--model",
+        root / "plant.yaml",
+        "--fault-window",
+        "11:40",
+        "-o",
+        root / "highpass.yaml",
+    )
+    _fdi(
+        "signature",
+        root / "signature_calibration_paired.npz",
+        "--model",
+        root / "plant.yaml",
+        "--fault-window",
+        "22:42",
+        "--reference-window",
+        "1:21",
+        "--lowpass-hz",
+        "10",
+        "--velocity-method",
+        "model_observer",
+        "-o",
+        root / "observer.yaml",
+    )
+    _fdi(
+        "signature",
+        root / "signature_calibration_paired.npz",
+        "--model",
+        root / "plant.yaml",
+        "--fault-window",
+        "22:42",
+        "--reference-window",
+        "1:21",
+        "--lowpass-hz",
+        "10",
+        "--velocity-method",
+        "position_observer",
+        "-o",
+        root / "position.yaml",
+    )
     cal = recs["signature_calibration_paired"]
     calibrated = np.mean(cal.columns["contact_force"][cal.t >= 22.0])
     lines = []
     for velocity in ("highpass", "observer", "position"):
         model = load_model(root / f"{velocity}.yaml")
         sig = model.provenance["signature"]
-        lines.append(f"{name} {velocity}: gamma_f {model.fault_filter.gamma_f} "
-                     f"interval {sig['cost_profile']['interval_99']} "
-                     f"VAF {sig['fault_filter_vaf_percent_full_band']:.1f} %")
+        lines.append(
+            f"{name} {velocity}: gamma_f {model.fault_filter.gamma_f} "
+            f"interval {sig['cost_profile']['interval_99']} "
+            f"VAF {sig['fault_filter_vaf_percent_full_band']:.1f} %"
+        )
         lines.extend(case_lines(model, recs, calibrated))
     return lines
 
@@ -102,24 +156,28 @@ def case_lines(model, recs: dict, calibrated: float) -> list[str]:
         events, trace = Monitor(model).run(rec)
         truth = np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5]) / calibrated
         det = next((e for e in events if e["kind"] == "fault_detected"), None)
-        iso = next((e for e in events if e["kind"] in ("friction_isolated", "other_fault")),
-                   None)
-        level = trace.friction_level[(trace.t >= fault_t + after)
-                                     & np.isfinite(trace.friction_level)]
-        head = (f"  {case}: detected "
-                f"{None if det is None else round(1000 * (det['t'] - fault_t))} ms, "
-                f"{None if iso is None else iso['kind']} "
-                f"{None if iso is None else round(iso['t'] - fault_t, 2)} s, episodes "
-                f"{sum(e['kind'] == 'fault_detected' for e in events)}, cleared "
-                f"{sum(e['kind'] == 'cleared' for e in events)}")
+        iso = next((e for e in events if e["kind"] in ("friction_isolated", "other_fault")), None)
+        level = trace.friction_level[
+            (trace.t >= fault_t + after) & np.isfinite(trace.friction_level)
+        ]
+        head = (
+            f"  {case}: detected "
+            f"{None if det is None else round(1000 * (det['t'] - fault_t))} ms, "
+            f"{None if iso is None else iso['kind']} "
+            f"{None if iso is None else round(iso['t'] - fault_t, 2)} s, episodes "
+            f"{sum(e['kind'] == 'fault_detected' for e in events)}, cleared "
+            f"{sum(e['kind'] == 'cleared' for e in events)}"
+        )
         if level.size == 0:
             lines.append(f"{head}, no level")
             continue
         med = np.median(level)
         lo, hi = np.percentile(level, [5, 95])
-        lines.append(f"{head}, level {med:.3f} (truth {truth:.3f}, "
-                     f"{100 * (med / truth - 1):+.0f} %), 5th/95th {100 * (lo / med - 1):+.0f}/"
-                     f"{100 * (hi / med - 1):+.0f} %")
+        lines.append(
+            f"{head}, level {med:.3f} (truth {truth:.3f}, "
+            f"{100 * (med / truth - 1):+.0f} %), 5th/95th {100 * (lo / med - 1):+.0f}/"
+            f"{100 * (hi / med - 1):+.0f} %"
+        )
     return lines
 
 

@@ -40,12 +40,15 @@ SHOWN = (0.0, 2.0, 3.33, 5.0)
 def _profile_line(label: str, grid: np.ndarray, sse: np.ndarray, spread: float) -> str:
     rel = sse / sse.min()
     at = "  ".join(f"{g:g}: {np.interp(g, grid, rel):.3f}" for g in SHOWN)
-    return (f"{label:<44} least cost at γ {grid[np.argmin(sse)]:5.2f}; relative cost {at}; "
-            f"explained {100 * (1 - sse.min() / spread):.1f} %")
+    return (
+        f"{label:<44} least cost at γ {grid[np.argmin(sse)]:5.2f}; relative cost {at}; "
+        f"explained {100 * (1 - sse.min() / spread):.1f} %"
+    )
 
 
-def _free_stick_profile(accel: np.ndarray, velocity: np.ndarray, stuck: np.ndarray,
-                        grid: np.ndarray) -> np.ndarray:
+def _free_stick_profile(
+    accel: np.ndarray, velocity: np.ndarray, stuck: np.ndarray, grid: np.ndarray
+) -> np.ndarray:
     """Σe² per γ of r = G_e (x_f + s), x_f = sign v + γ v while sliding, s free while stuck
     (the force that holds the load): G_e [4 3 0] by output error given s, s by least squares
     given G_e, alternated eight times from s = 0, each γ warm-started from its neighbour."""
@@ -64,8 +67,9 @@ def _free_stick_profile(accel: np.ndarray, velocity: np.ndarray, stuck: np.ndarr
             start = (fit.b, fit.f)
             response = signal.lfilter(fit.b, fit.f, pulse)
             on_held = toeplitz(response, np.zeros(len(accel)))[:, held]
-            hold[held] = np.linalg.lstsq(on_held, accel - fit.y_sim + on_held @ hold[held],
-                                         rcond=None)[0]
+            hold[held] = np.linalg.lstsq(
+                on_held, accel - fit.y_sim + on_held @ hold[held], rcond=None
+            )[0]
         fit = fit_output_error(sliding + hold, accel, 4, 3, 0, start=start)
         sse.append(fit.sse)
     return np.array(sse)
@@ -76,20 +80,28 @@ def _measured(fault: dict, window: slice, model):
     window (``model``: the shipped model, made on this rig), and (label, velocity, stuck rows) with the
     true velocity and stuck flag, and with the model observer's v̂ and the rows where the
     accelerometer is quiet (`stick_window_oracle.quiet_rows`)."""
+    from stick_window_oracle import quiet_rows
+
     from fdi_daemon.core.velocity_observer import velocity_from_settings
     from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.ident.signature import plant_residual
-    from stick_window_oracle import quiet_rows
 
     accel = np.asarray(fault["accel"], float)
     residual = plant_residual(nominal_plant(model), fault["v_in"], accel)
     observer = velocity_from_settings({"method": "model_observer"}, fs_hz=FS)
     found = quiet_rows(accel)
     return residual[window], (
-        ("measured r, true v and stuck, hold free", fault["velocity_true"],
-         fault["stuck"][window] > 0.5),
-        ("measured r, observer v̂, quiet ẍ, hold free", observer.run(accel, accel - residual),
-         found[window]))
+        (
+            "measured r, true v and stuck, hold free",
+            fault["velocity_true"],
+            fault["stuck"][window] > 0.5,
+        ),
+        (
+            "measured r, observer v̂, quiet ẍ, hold free",
+            observer.run(accel, accel - residual),
+            found[window],
+        ),
+    )
 
 
 def main() -> None:
@@ -129,11 +141,11 @@ def main() -> None:
     stuck = fault["stuck"] > 0.5
     contact = fault["contact_force"]
     for label, force in (
-            ("control: sign v + 3.33 v through G_e", -(np.sign(v) + 3.33 * v)),
-            ("the friction force through G_e", fault["friction_force"]),
-            ("... set to 0 while the load is stuck", fault["friction_force"] * ~stuck),
-            ("μ_k N sign v + c_v N v through G_e", 0.30 * contact * np.sign(v)
-             + 1.0 * contact * v)):
+        ("control: sign v + 3.33 v through G_e", -(np.sign(v) + 3.33 * v)),
+        ("the friction force through G_e", fault["friction_force"]),
+        ("... set to 0 while the load is stuck", fault["friction_force"] * ~stuck),
+        ("μ_k N sign v + c_v N v through G_e", 0.30 * contact * np.sign(v) + 1.0 * contact * v),
+    ):
         seen = signal.lfilter(g_e.b, g_e.f, -force)
         seen += 0.05 * np.std(seen[window]) * noise
         sig = estimate_signature(seen[:end], v[:end], grid=GRID, fit_from=first)

@@ -39,8 +39,14 @@ def main() -> None:
     for _ in range(rounds):
         for tree in trees:
             env = dict(os.environ, PYTHONPATH=os.path.abspath(tree))
-            out = subprocess.run([sys.executable, "-c", _ONE], env=env, cwd=tree,
-                                 capture_output=True, text=True, check=True).stdout
+            out = subprocess.run(
+                [sys.executable, "-c", _ONE],
+                env=env,
+                cwd=tree,
+                capture_output=True,
+                text=True,
+                check=True,
+            ).stdout
             print(f"{tree}: {out.strip()}", flush=True)
 
 

@@ -14,17 +14,19 @@ from pathlib import Path
 
 import pytest
 
-MOSQUITTO = shutil.which("mosquitto", path=os.pathsep.join(
-    [os.environ.get("PATH", ""), "/usr/sbin", "/usr/local/sbin"]))
+MOSQUITTO = shutil.which(
+    "mosquitto", path=os.pathsep.join([os.environ.get("PATH", ""), "/usr/sbin", "/usr/local/sbin"])
+)
 
 needs_mosquitto = pytest.mark.skipif(
-    MOSQUITTO is None, reason="mosquitto is not installed (apt-get install mosquitto; "
-                              ".ci/run installs it)")
+    MOSQUITTO is None,
+    reason="mosquitto is not installed (apt-get install mosquitto; .ci/run installs it)",
+)
 
 
 #: brokers started and not stopped yet: `stop_brokers` ends them after every test, also a
 #: failed one (a broker left running outlives the test run)
-RUNNING: set["Broker"] = set()
+RUNNING: set[Broker] = set()
 
 
 @pytest.fixture(autouse=True)
@@ -53,19 +55,23 @@ class Broker:
             f"user {getpass.getuser()}\n"  # as root, mosquitto would switch to "mosquitto"
             f"listener {self.port} 127.0.0.1\n"
             f"persistence true\npersistence_location {folder}/\n"
-            f"log_dest file {self.log}\nlog_type all\n" + extra
-            + ("" if "allow_anonymous" in extra else "allow_anonymous true\n"))
+            f"log_dest file {self.log}\nlog_type all\n"
+            + extra
+            + ("" if "allow_anonymous" in extra else "allow_anonymous true\n")
+        )
         self.proc: subprocess.Popen | None = None
 
-    def start(self, timeout_s: float = 20.0) -> "Broker":
-        self.proc = subprocess.Popen([MOSQUITTO, "-c", str(self.config)],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    def start(self, timeout_s: float = 20.0) -> Broker:
+        self.proc = subprocess.Popen(
+            [MOSQUITTO, "-c", str(self.config)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        )
         RUNNING.add(self)
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
-                raise RuntimeError(f"mosquitto exited: {self.proc.stderr.read().decode()}"
-                                   f"{self.tail()}")
+                raise RuntimeError(
+                    f"mosquitto exited: {self.proc.stderr.read().decode()}{self.tail()}"
+                )
             try:
                 socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
                 return self
@@ -96,15 +102,17 @@ SUBSCRIBE_TIMEOUT_S = 30.0
 class Subscriber:
     """A paho client that records every message of ``topic`` (persistent session, QoS 1)."""
 
-    def __init__(self, port: int, topic: str, client_id: str = "fdi-test-subscriber",
-                 **connect) -> None:
+    def __init__(
+        self, port: int, topic: str, client_id: str = "fdi-test-subscriber", **connect
+    ) -> None:
         import paho.mqtt.client as mqtt
 
         self.messages: list[dict] = []  # {"topic", "payload", "retain", "dup", "qos"}
         self._lock = threading.Lock()
         self.topic = topic
-        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
-                                  clean_session=False)
+        self.client = mqtt.Client(
+            mqtt.CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=False
+        )
         if "username" in connect:
             self.client.username_pw_set(connect["username"], connect.get("password"))
         if "ca_file" in connect:
@@ -120,14 +128,21 @@ class Subscriber:
         # reach this session (it had no subscription yet)
         if not subscribed.wait(SUBSCRIBE_TIMEOUT_S):
             self.close()
-            raise AssertionError(f"the subscriber to {topic} got no SUBACK within "
-                                 f"{SUBSCRIBE_TIMEOUT_S:g} s")
+            raise AssertionError(
+                f"the subscriber to {topic} got no SUBACK within {SUBSCRIBE_TIMEOUT_S:g} s"
+            )
 
     def _on_message(self, client, userdata, msg) -> None:
         with self._lock:
-            self.messages.append({"topic": msg.topic, "payload": json.loads(msg.payload),
-                                  "retain": bool(msg.retain), "dup": bool(msg.dup),
-                                  "qos": msg.qos})
+            self.messages.append(
+                {
+                    "topic": msg.topic,
+                    "payload": json.loads(msg.payload),
+                    "retain": bool(msg.retain),
+                    "dup": bool(msg.dup),
+                    "qos": msg.qos,
+                }
+            )
 
     def on(self, suffix: str) -> list[dict]:
         with self._lock:
@@ -140,8 +155,10 @@ class Subscriber:
             if value:
                 return value
             time.sleep(0.1)
-        raise AssertionError(f"timed out waiting for {what}; got "
-                             f"{[m['topic'] for m in self.messages][-20:]}{explain()}")
+        raise AssertionError(
+            f"timed out waiting for {what}; got "
+            f"{[m['topic'] for m in self.messages][-20:]}{explain()}"
+        )
 
     def close(self) -> None:
         self.client.disconnect()

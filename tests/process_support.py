@@ -16,14 +16,20 @@ REPO = Path(__file__).resolve().parents[1]
 def start_fdi(*args: str, cwd: Path | None = None) -> subprocess.Popen:
     """``python -m fdi_daemon ARGS`` of this checkout in a session of its own (a signal
     reaches what it is sent to, not the test), stdout and stderr piped as text."""
-    return subprocess.Popen([sys.executable, "-m", "fdi_daemon", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=cwd, start_new_session=True,
-                            env={**os.environ, "PYTHONPATH": str(REPO)})
+    return subprocess.Popen(
+        [sys.executable, "-m", "fdi_daemon", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=cwd,
+        start_new_session=True,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
 
 
-def wait_for_children(proc: subprocess.Popen, count: int, timeout_s: float = 120.0,
-                      command: str = "") -> set[psutil.Process]:
+def wait_for_children(
+    proc: subprocess.Popen, count: int, timeout_s: float = 120.0, command: str = ""
+) -> set[psutil.Process]:
     """The processes started under ``proc`` (at any depth) once ``count`` have been seen;
     with ``command``, only those whose command line contains it (a short-lived helper such
     as the ``uname -p`` behind `platform.processor` is then not counted)."""

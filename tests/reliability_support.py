@@ -29,7 +29,7 @@ FS_HZ = 256.0
 ALARMS = ("fault_detected", "friction_isolated", "other_fault")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _session_dir() -> Path:
     return Path(tempfile.mkdtemp(prefix="fdi-reliability-"))
 
@@ -45,12 +45,13 @@ def _complete(path: Path) -> bool:
         return False
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def model_path() -> Path:
     """Model file of the simulated rig (see the module docstring)."""
     if SHIPPED_MODEL.exists() and _complete(SHIPPED_MODEL):
         return SHIPPED_MODEL
     from conftest_detect import sim_rig_model
+
     from fdi_daemon.io.model_file import save_model
 
     path = _session_dir() / "model_sim_rig.yaml"
@@ -68,7 +69,7 @@ def load_test_model(**changes):
     return model
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def fault_free(seconds: float, seed: int = 3):
     """Fault-free recording of the device's default scenario (1.4 V, 8 Hz sine)."""
     from hil_sim.devices.realtime import DEFAULT_SCENARIO
@@ -84,9 +85,17 @@ def frames_of(rec, first: int = 0, count: int | None = None, seq_offset: int = 0
 
     stop = len(rec) if count is None else first + count
     seq = rec.columns["seq"]
-    return [encode_frame(Frame(int(seq[i]) + seq_offset, float(rec.v_in[i]),
-                               float(rec.accel[i]), float(rec["position"][i])))
-            for i in range(first, stop)]
+    return [
+        encode_frame(
+            Frame(
+                int(seq[i]) + seq_offset,
+                float(rec.v_in[i]),
+                float(rec.accel[i]),
+                float(rec["position"][i]),
+            )
+        )
+        for i in range(first, stop)
+    ]
 
 
 class PtyDevice:
@@ -170,26 +179,50 @@ def service_loop(link, model=None, deadline_s: float = 10.0):
     out = Collector()
     monitor = Monitor(model)
     monitor.warm_up()
-    loop = ServiceLoop(link, monitor, out, fs_hz=model.fs, deadline_s=deadline_s,
-                       read_timeout_s=0.02, status_period_s=3600.0)
+    loop = ServiceLoop(
+        link,
+        monitor,
+        out,
+        fs_hz=model.fs,
+        deadline_s=deadline_s,
+        read_timeout_s=0.02,
+        status_period_s=3600.0,
+    )
     return loop, out
 
 
-def write_config(path: Path, link: dict, state_dir: Path, *, recorder: bool = True,
-                 stall_timeout_s: float | None = 1.0, status_socket: bool = True) -> Path:
+def write_config(
+    path: Path,
+    link: dict,
+    state_dir: Path,
+    *,
+    recorder: bool = True,
+    stall_timeout_s: float | None = 1.0,
+    status_socket: bool = True,
+) -> Path:
     """A rig config for ``fdi run --config`` with outputs under ``state_dir``."""
     link = dict(link)
     if link.get("kind") not in ("replay", "sim"):
-        link["reconnect"] = {"backoff_initial_s": 0.1, "backoff_max_s": 1.0,
-                             "stall_timeout_s": stall_timeout_s}
+        link["reconnect"] = {
+            "backoff_initial_s": 0.1,
+            "backoff_max_s": 1.0,
+            "stall_timeout_s": stall_timeout_s,
+        }
     config = {
         "link": link,
         "model": {"path": str(model_path())},
-        "sinks": {"event_log": "events.jsonl", "stdout": True,
-                  "status_socket": "status.sock" if status_socket else None,
-                  "modbus_status": {"enabled": False}},
-        "recorder": {"enabled": recorder, "dir": "recordings", "rotate_seconds": 600,
-                     "fsync_period_s": 1.0},
+        "sinks": {
+            "event_log": "events.jsonl",
+            "stdout": True,
+            "status_socket": "status.sock" if status_socket else None,
+            "modbus_status": {"enabled": False},
+        },
+        "recorder": {
+            "enabled": recorder,
+            "dir": "recordings",
+            "rotate_seconds": 600,
+            "fsync_period_s": 1.0,
+        },
         "service": {"state_dir": str(state_dir)},
     }
     path.write_text(yaml.safe_dump(config))
@@ -242,16 +275,20 @@ def continuous_fault_free_hours(hours: int, seed: int):
     step = int(round(fs))
     rig = Rig(scenario.rig, seed=seed)
     rig.set_centring(scenario.centring_gain_v_per_m)
-    setters = {"supply_pressure": rig.set_supply_drift, "temperature_k": rig.set_temperature,
-               "bearing_supply": rig.set_bearing_supply}
+    setters = {
+        "supply_pressure": rig.set_supply_drift,
+        "temperature_k": rig.set_temperature,
+        "bearing_supply": rig.set_bearing_supply,
+    }
     for hour in range(hours):
-        program = build_program(scenario.excitation, fs, per_hour,
-                                np.random.default_rng([seed, hour, 0x5EED]))
+        program = build_program(
+            scenario.excitation, fs, per_hour, np.random.default_rng([seed, hour, 0x5EED])
+        )
         parts = []
         for start in range(0, per_hour, step):
             for name, prof in scenario.drift.items():
                 setters[name](float(np.interp(start / fs, prof["times_s"], prof["values"])))
-            parts.append(rig.run(program[start:start + step]))
+            parts.append(rig.run(program[start : start + step]))
         cols = {k: np.concatenate([p[k] for p in parts]) for k in ("t", "v_in", "accel", "seq")}
         cols["seq"] = cols["seq"].astype(np.int64)
         yield Recording(cols, {"fs": f"{fs:g}", "hour": str(hour), "seed": str(seed)})

@@ -10,18 +10,27 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).parent))
 
 from conftest_detect import scenario_recording, sim_rig_model  # noqa: E402
+
 from fdi_daemon.detect.monitor import Monitor  # noqa: E402
 
-SCENARIOS = ("test_case_1", "test_case_2", "fault_accel_bias", "fault_valve_gain",
-             "fault_supply_pressure", "fault_accel_saturation", "fault_accel_dropout",
-             "steady_friction_changing_operation")
+SCENARIOS = (
+    "test_case_1",
+    "test_case_2",
+    "fault_accel_bias",
+    "fault_valve_gain",
+    "fault_supply_pressure",
+    "fault_accel_saturation",
+    "fault_accel_dropout",
+    "steady_friction_changing_operation",
+)
 
 
 def main() -> None:
     for name in SCENARIOS:
         for seed in (0, 1):
-            events, _ = Monitor(sim_rig_model()).run(scenario_recording(name, seed=seed),
-                                                     trace_every=64)
+            events, _ = Monitor(sim_rig_model()).run(
+                scenario_recording(name, seed=seed), trace_every=64
+            )
             kinds = [(e["kind"], round(e["t"], 4)) for e in events if e["kind"] != "calibrated"]
             print(name, seed, kinds)
 

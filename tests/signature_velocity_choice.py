@@ -34,34 +34,57 @@ def measure(name: str, rig: dict, root: Path) -> list[str]:
     from fdi_daemon.io.recordings import write_recording
     from hil_sim.scenarios import scenario_from_dict, simulate
 
-    recs = {n: _record(rig, n, root / f"{n}.npz") for n in
-            ("ident_chirp", "ident_chirp_long", "signature_calibration")
-            + tuple(c[0] for c in CASES)}
+    recs = {
+        n: _record(rig, n, root / f"{n}.npz")
+        for n in ("ident_chirp", "ident_chirp_long", "signature_calibration")
+        + tuple(c[0] for c in CASES)
+    }
     non_friction = {fault: record(rig, fault, duration_s=64.0) for fault in NON_FRICTION}
     low = simulate(scenario_from_dict({**LOW_FREQUENCY_CALIBRATION, "rig": rig}))
     write_recording(root / "low_frequency.npz", low)
-    _fdi("identify", root / "ident_chirp.npz", "-o", root / "plant.yaml",
-         "--validate", root / "ident_chirp_long.npz")
-    runs = (("shipped", recs["signature_calibration"], "11:40", 11.0),
-            ("four tones", low, "5:20", 5.0))
+    _fdi(
+        "identify",
+        root / "ident_chirp.npz",
+        "-o",
+        root / "plant.yaml",
+        "--validate",
+        root / "ident_chirp_long.npz",
+    )
+    runs = (
+        ("shipped", recs["signature_calibration"], "11:40", 11.0),
+        ("four tones", low, "5:20", 5.0),
+    )
     lines = []
     for run, cal, window, fault_from in runs:
-        source = root / ("signature_calibration.npz" if run == "shipped" else
-                         "low_frequency.npz")
+        source = root / ("signature_calibration.npz" if run == "shipped" else "low_frequency.npz")
         calibrated = np.mean(cal.columns["contact_force"][cal.t >= fault_from])
         for choice in ("auto", "highpass"):
             out = root / f"{run}-{choice}.yaml".replace(" ", "_")
-            _fdi("signature", source, "--model", root / "plant.yaml", "--fault-window", window,
-                 "--velocity-method", choice, "-o", out)
+            _fdi(
+                "signature",
+                source,
+                "--model",
+                root / "plant.yaml",
+                "--fault-window",
+                window,
+                "--velocity-method",
+                choice,
+                "-o",
+                out,
+            )
             model = load_model(out)
             sig = model.provenance["signature"]
-            lines.append(f"{name} {run} {choice}: keeps {model.velocity.get('method', 'highpass')}"
-                         f", VAF by velocity {sig['vaf_percent_by_velocity']}, gamma_f "
-                         f"{model.fault_filter.gamma_f}")
+            lines.append(
+                f"{name} {run} {choice}: keeps {model.velocity.get('method', 'highpass')}"
+                f", VAF by velocity {sig['vaf_percent_by_velocity']}, gamma_f "
+                f"{model.fault_filter.gamma_f}"
+            )
             lines.extend(case_lines(model, recs, calibrated))
             if run == "four tones":
-                lines.extend(f"  {fault}: {[kind for kind, _ in _kinds(model, faulty)]}"
-                             for fault, faulty in non_friction.items())
+                lines.extend(
+                    f"  {fault}: {[kind for kind, _ in _kinds(model, faulty)]}"
+                    for fault, faulty in non_friction.items()
+                )
     return lines
 
 

@@ -19,6 +19,8 @@ from __future__ import annotations
 import argparse
 
 import fdi_daemon  # noqa: F401  (first: it pins the BLAS kernel before NumPy loads)
+
+# isort: split
 import numpy as np
 from scipy import signal
 
@@ -44,8 +46,9 @@ def odd_multisine(seed: int, band_hz: float = 200.0) -> np.ndarray:
     return u / np.std(u)
 
 
-def excitation(seed: int = 1, band_hz: float = 200.0, realisations: int = REALISATIONS
-               ) -> np.ndarray:
+def excitation(
+    seed: int = 1, band_hz: float = 200.0, realisations: int = REALISATIONS
+) -> np.ndarray:
     """V1: the arrow, the realisations (each preceded by its period's last 475 samples),
     with all ten, zeros to the benchmark's 131 072 samples."""
     rng = np.random.default_rng(seed)
@@ -66,21 +69,29 @@ def excitation(seed: int = 1, band_hz: float = 200.0, realisations: int = REALIS
 
 def params(k3: float) -> MsdParams:
     effects = {"cubic_stiffness": {"k3_n_per_m3": k3}} if k3 else {}
-    return MsdParams(mass_kg=1.0, stiffness_n_per_m=W0 ** 2, damping_n_s_per_m=2 * ZETA * W0,
-                     gain_n_per_v=W0 ** 2, input_filter_hz=None, fs_hz=FS, substeps=8,
-                     position_noise_width=0.1e-3 * np.sqrt(12.0), effects=effects)
+    return MsdParams(
+        mass_kg=1.0,
+        stiffness_n_per_m=W0**2,
+        damping_n_s_per_m=2 * ZETA * W0,
+        gain_n_per_v=W0**2,
+        input_filter_hz=None,
+        fs_hz=FS,
+        substeps=8,
+        position_noise_width=0.1e-3 * np.sqrt(12.0),
+        effects=effects,
+    )
 
 
-def record(beta: float, seed: int = 1, band_hz: float = 200.0,
-           realisations: int = REALISATIONS):
+def record(beta: float, seed: int = 1, band_hz: float = 200.0, realisations: int = REALISATIONS):
     """(V1, V2 = position, the true cubic coefficient in V per V³); k₃ gives the strength
     β on the linear oscillator's multisine part."""
     u = excitation(seed, band_hz, realisations)
     y = simulate_recording(params(0.0), u, seed=seed)["position"][
-        ARROW:ARROW + realisations * PERIOD]
-    k3 = beta * W0 ** 2 / float(np.mean(y ** 2))
+        ARROW : ARROW + realisations * PERIOD
+    ]
+    k3 = beta * W0**2 / float(np.mean(y**2))
     rec = simulate_recording(params(k3), u, seed=seed)
-    return rec.v_in, rec["position"], k3 / W0 ** 2
+    return rec.v_in, rec["position"], k3 / W0**2
 
 
 def main(betas: list[float], band_hz: float) -> None:
@@ -89,13 +100,19 @@ def main(betas: list[float], band_hz: float) -> None:
     for beta in betas:
         u, y, truth = record(beta, band_hz=band_hz)
         result = run_diagnose(u, y, FS, "position")
-        sizes = {e.name: {k: round(v, 4) for k, v in e.physical.items()
-                          if k.endswith("input_equivalent")}
-                 for e in result.selection.named}
-        print(f"beta {beta}, band {band_hz:g} Hz: named {result.named}, gap "
-              f"{result.gap_before:.4f} -> {result.gap_after:.4f} "
-              f"(floor {result.info['noise_floor']['floor']}), "
-              f"sizes {sizes}, k3 truth {truth:.4f} V/V^3", flush=True)
+        sizes = {
+            e.name: {
+                k: round(v, 4) for k, v in e.physical.items() if k.endswith("input_equivalent")
+            }
+            for e in result.selection.named
+        }
+        print(
+            f"beta {beta}, band {band_hz:g} Hz: named {result.named}, gap "
+            f"{result.gap_before:.4f} -> {result.gap_after:.4f} "
+            f"(floor {result.info['noise_floor']['floor']}), "
+            f"sizes {sizes}, k3 truth {truth:.4f} V/V^3",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -45,8 +45,9 @@ def _pole_signature(model, cal, residual, velocity, first, keep):
     best = None
     for gamma in np.arange(0.0, 10.01, 0.2):
         filtered = lfilter([1.0], a_plant, np.sign(velocity) + gamma * velocity)
-        lags = np.column_stack([np.concatenate([np.zeros(j), filtered[:filtered.size - j]])
-                                for j in range(width)])[first:][keep[first:]]
+        lags = np.column_stack(
+            [np.concatenate([np.zeros(j), filtered[: filtered.size - j]]) for j in range(width)]
+        )[first:][keep[first:]]
         target = residual[first:][keep[first:]]
         b, *_ = np.linalg.lstsq(lags, target, rcond=None)
         sse = float(np.sum((target - lags @ b) ** 2))
@@ -64,12 +65,12 @@ def main() -> None:
     from test_detect_friction_level import LOW_FREQUENCY_CALIBRATION
 
     from fdi_daemon.cli import main as fdi
+    from fdi_daemon.core.velocity_observer import velocity_from_settings
     from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.ident.signature import plant_residual
     from fdi_daemon.io.model_file import load_model, save_model
     from fdi_daemon.io.recordings import write_recording
-    from fdi_daemon.core.velocity_observer import velocity_from_settings
-    from fdi_daemon.diagnose.augment import nominal_plant
     from hil_sim.scenarios import scenario_from_dict, simulate
 
     cal = simulate(scenario_from_dict(LOW_FREQUENCY_CALIBRATION))
@@ -83,21 +84,37 @@ def main() -> None:
         save_model(root / "plant.yaml", plant)
         write_recording(root / "cal.npz", cal)
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            assert fdi(["signature", str(root / "cal.npz"), "--model", str(root / "plant.yaml"),
-                        "--fault-window", "5:20", "-o", str(root / "auto.yaml")]) == 0
+            assert (
+                fdi(
+                    [
+                        "signature",
+                        str(root / "cal.npz"),
+                        "--model",
+                        str(root / "plant.yaml"),
+                        "--fault-window",
+                        "5:20",
+                        "-o",
+                        str(root / "auto.yaml"),
+                    ]
+                )
+                == 0
+            )
         auto = load_model(root / "auto.yaml")
     residual = plant_residual(nominal_plant(auto), cal.v_in, cal.accel)
     velocity = velocity_from_settings(auto.velocity, cal.fs).run(cal.accel, cal.accel - residual)
     sliding = np.convolve(stuck.astype(float), np.ones(9), "same") == 0
     every = np.ones(stuck.size, dtype=bool)
     models = {"fdi signature (auto)": (auto, auto.fault_filter.gamma_f, None)}
-    for name, keep in (("G_e = B/Â, every sample", every),
-                       ("G_e = B/Â, sliding samples only", sliding),
-                       ("G_e = B/Â, quiet-accelerometer rows left out", ~quiet_rows(cal.accel))):
+    for name, keep in (
+        ("G_e = B/Â, every sample", every),
+        ("G_e = B/Â, sliding samples only", sliding),
+        ("G_e = B/Â, quiet-accelerometer rows left out", ~quiet_rows(cal.accel)),
+    ):
         models[name] = _pole_signature(auto, cal, residual, velocity, first, keep)
 
-    spec = yaml.safe_load((REPO / "configs" / "scenarios"
-                           / "steady_friction_changing_operation.yaml").read_text())
+    spec = yaml.safe_load(
+        (REPO / "configs" / "scenarios" / "steady_friction_changing_operation.yaml").read_text()
+    )
     rec = simulate(scenario_from_dict(spec))
     truth = rec.columns["velocity_true"]
     rec_stuck = rec.columns["stuck"] > 0.5
@@ -116,11 +133,14 @@ def main() -> None:
         cells = []
         for trace in levels.values():
             inside = (trace.t >= a) & (trace.t < b) & np.isfinite(trace.friction_level)
-            cells.append(f"{np.median(trace.friction_level[inside]):.2f}" if inside.any()
-                         else "  - ")
-        print(f"{a:3.0f}-{b:3.0f} s  {rec_stuck[seg].mean():5.1%}  "
-              f"{1e3 * np.std(truth[seg]):3.0f} mm/s  "
-              f"{np.sum(freq * power) / np.sum(power):4.1f} Hz | " + " | ".join(cells))
+            cells.append(
+                f"{np.median(trace.friction_level[inside]):.2f}" if inside.any() else "  - "
+            )
+        print(
+            f"{a:3.0f}-{b:3.0f} s  {rec_stuck[seg].mean():5.1%}  "
+            f"{1e3 * np.std(truth[seg]):3.0f} mm/s  "
+            f"{np.sum(freq * power) / np.sum(power):4.1f} Hz | " + " | ".join(cells)
+        )
 
 
 if __name__ == "__main__":

@@ -36,14 +36,17 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 WINDOW = 256
-CASES = (("test_case_1", 3.05, 1.5), ("test_case_2", 2.9, 1.5),
-         ("steady_friction_changing_operation", 20.0, 10.0))
+CASES = (
+    ("test_case_1", 3.05, 1.5),
+    ("test_case_2", 2.9, 1.5),
+    ("steady_friction_changing_operation", 20.0, 10.0),
+)
 SHARES = (0.1, 0.2, 0.3)
 QUIET_MPS2 = 0.1
 
 
 def _sliding_sum(x: np.ndarray) -> np.ndarray:
-    return np.convolve(x, np.ones(WINDOW))[:x.size]
+    return np.convolve(x, np.ones(WINDOW))[: x.size]
 
 
 def masked_theta1(g1, g2, r, keep):
@@ -52,7 +55,7 @@ def masked_theta1(g1, g2, r, keep):
     a11, a12, a22 = (_sliding_sum(k * x) for x in (g1 * g1, g1 * g2, g2 * g2))
     b1, b2 = _sliding_sum(k * g1 * r), _sliding_sum(k * g2 * r)
     with np.errstate(invalid="ignore", divide="ignore"):
-        theta1 = (a22 * b1 - a12 * b2) / (a11 * a22 - a12 ** 2)
+        theta1 = (a22 * b1 - a12 * b2) / (a11 * a22 - a12**2)
     return np.where(_sliding_sum(k) >= WINDOW / 4, theta1, np.nan)
 
 
@@ -95,8 +98,11 @@ def variants() -> None:
     print("rig      case          truth  stuck | none    oracle  quiet ẍ")
     for index in (None, *range(8)):
         rig = {} if index is None else rig_variant(index)
-        with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()), \
-                contextlib.redirect_stderr(io.StringIO()):
+        with (
+            tempfile.TemporaryDirectory() as tmp,
+            contextlib.redirect_stdout(io.StringIO()),
+            contextlib.redirect_stderr(io.StringIO()),
+        ):
             model = model_of(rig, Path(tmp))
         cal = record(rig, "signature_calibration")
         calibrated = np.mean(cal.columns["contact_force"][cal.t >= 11.0])
@@ -106,10 +112,14 @@ def variants() -> None:
             stuck = rec.columns["stuck"] > 0.5
             after = rec.t >= fault_t + settle_s
             batch = Pipeline(model, WINDOW).run(rec.v_in, rec.accel)
-            cells = [_median_error(batch, keep, after, truth) for keep in
-                     (np.ones(stuck.size, dtype=bool), ~stuck, ~quiet_rows(rec.accel))]
-            print(f"{'default' if index is None else f'variant {index}':8s} {name[:12]:12s} "
-                  f"{truth:6.2f} {stuck[after].mean():6.1%} | " + "  ".join(cells))
+            cells = [
+                _median_error(batch, keep, after, truth)
+                for keep in (np.ones(stuck.size, dtype=bool), ~stuck, ~quiet_rows(rec.accel))
+            ]
+            print(
+                f"{'default' if index is None else f'variant {index}':8s} {name[:12]:12s} "
+                f"{truth:6.2f} {stuck[after].mean():6.1%} | " + "  ".join(cells)
+            )
 
 
 def _window_rms(x: np.ndarray) -> np.ndarray:
@@ -137,14 +147,18 @@ def main() -> None:
         masks = {"none": np.ones(rec.t.size, dtype=bool), "not stuck (oracle)": ~stuck}
         for share in SHARES:
             masks[f"|v| > {share} RMS (oracle)"] = np.abs(v_true) > share * _window_rms(v_true)
-            masks[f"|v̂| > {share} RMS"] = (np.abs(batch.velocity)
-                                           > share * _window_rms(batch.velocity))
+            masks[f"|v̂| > {share} RMS"] = np.abs(batch.velocity) > share * _window_rms(
+                batch.velocity
+            )
         masks[f"quiet ẍ < {QUIET_MPS2} m/s²"] = ~quiet_rows(rec.accel)
-        accel_rms3 = np.sqrt(np.convolve(rec.accel ** 2, np.ones(3) / 3)[:rec.t.size])
-        print(f"{name}: truth {truth:.3f}; load stuck {stuck[after].mean():.1%}; accelerometer "
-              f"3-sample RMS stuck p50 {np.median(accel_rms3[stuck & after]):.3f}, sliding "
-              f"p1 {np.percentile(accel_rms3[~stuck & after], 1):.3f} m/s²"
-              if (stuck & after).any() else f"{name}: truth {truth:.3f}; load never stuck")
+        accel_rms3 = np.sqrt(np.convolve(rec.accel**2, np.ones(3) / 3)[: rec.t.size])
+        print(
+            f"{name}: truth {truth:.3f}; load stuck {stuck[after].mean():.1%}; accelerometer "
+            f"3-sample RMS stuck p50 {np.median(accel_rms3[stuck & after]):.3f}, sliding "
+            f"p1 {np.percentile(accel_rms3[~stuck & after], 1):.3f} m/s²"
+            if (stuck & after).any()
+            else f"{name}: truth {truth:.3f}; load never stuck"
+        )
         before = batch.moving & (rec.t < fault_t) & (rec.t >= WINDOW / rec.fs)
         theta1_before = pipeline.thetas(batch)[0][before]
         print(f"  θ1 before the fault (the seal, no mask): {np.nanmedian(theta1_before):.3f}")
@@ -154,8 +168,10 @@ def main() -> None:
                 print(f"  {label:26s} no window keeps a quarter of its rows")
                 continue
             p5, p50, p95 = np.percentile(ok, [5, 50, 95])
-            print(f"  {label:26s} θ1 {p50:6.3f} ({p5:.2f}–{p95:.2f}), "
-                  f"{100 * (p50 / truth - 1):+5.0f} %")
+            print(
+                f"  {label:26s} θ1 {p50:6.3f} ({p5:.2f}–{p95:.2f}), "
+                f"{100 * (p50 / truth - 1):+5.0f} %"
+            )
 
 
 if __name__ == "__main__":

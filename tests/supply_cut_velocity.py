@@ -34,19 +34,24 @@ def main() -> None:
     after = (rec.t >= 3.5) & (rec.t < 6.0)
     stuck = after & (np.abs(truth) < 1e-4)
     moving = after & ~stuck
-    print(f"stuck {stuck.sum() / after.sum():.0%} of 3.5-6 s; true velocity RMS "
-          f"{1e3 * np.std(truth[after]):.1f} mm/s")
+    print(
+        f"stuck {stuck.sum() / after.sum():.0%} of 3.5-6 s; true velocity RMS "
+        f"{1e3 * np.std(truth[after]):.1f} mm/s"
+    )
     estimates = {"high-pass 1 Hz": velocity_from_settings({"method": "highpass"}, fs).run(accel)}
     for hz in (0.5, 0.2, 0.1, 0.05):
-        block = velocity_from_settings({"method": "model_observer", "highpass_hz": hz,
-                                        "leak_hz": min(0.02, hz / 5)}, fs)
+        block = velocity_from_settings(
+            {"method": "model_observer", "highpass_hz": hz, "leak_hz": min(0.02, hz / 5)}, fs
+        )
         estimates[f"observer {hz:g} Hz"] = block.run(accel, accel - residual)
     for name, v in estimates.items():
         sign = np.mean(np.sign(v[moving]) == np.sign(truth[moving]))
         error = 1e3 * np.sqrt(np.mean((v[moving] - truth[moving]) ** 2))
         held = 1e3 * np.sqrt(np.mean(v[stuck] ** 2))
-        print(f"{name:16s} sign right while moving {sign:.1%}, error while moving "
-              f"{error:.2f} mm/s, |v̂| while stuck {held:.2f} mm/s")
+        print(
+            f"{name:16s} sign right while moving {sign:.1%}, error while moving "
+            f"{error:.2f} mm/s, |v̂| while stuck {held:.2f} mm/s"
+        )
 
 
 if __name__ == "__main__":

@@ -83,12 +83,11 @@ def test_a_level_that_dithers_around_a_step_does_not_chatter():
 
 def test_smoothing_keeps_noisy_readings_from_chattering_and_follows_a_step():
     rng = np.random.default_rng(2)
-    times = np.arange(1.0, 4 * 3600.0, 0.1)   # 10 Hz readings, as the daemon's
+    times = np.arange(1.0, 4 * 3600.0, 0.1)  # 10 Hz readings, as the daemon's
     levels = 0.47 + 0.08 * rng.standard_normal(times.size)
     counts = {}
     for smoothing in (0.0, 30.0):
-        lc = AlarmLifecycle(settings(smoothing_s=smoothing, raise_delay_s=0.0,
-                                     lower_delay_s=0.0))
+        lc = AlarmLifecycle(settings(smoothing_s=smoothing, raise_delay_s=0.0, lower_delay_s=0.0))
         lc.step(0.0, 0.3, FAULT)
         counts[smoothing] = len(feed(lc, times, levels))
     assert counts[30.0] == 0 and counts[0.0] > 20
@@ -104,16 +103,16 @@ def test_priority_falls_only_below_the_deadband_for_the_off_delay_and_never_belo
     lc = AlarmLifecycle(settings(raise_delay_s=0.0, lower_delay_s=60.0, deadband=0.05))
     lc.step(0.0, 1.2, FAULT)
     assert lc.priority == 3
-    assert lc.step(10.0, 0.97) == []          # below 1.0 but within the deadband
-    assert lc.step(20.0, 0.9) == []           # off-delay starts
+    assert lc.step(10.0, 0.97) == []  # below 1.0 but within the deadband
+    assert lc.step(20.0, 0.9) == []  # off-delay starts
     assert lc.step(79.0, 0.9) == []
-    out = lc.step(80.0, 0.0)                  # below 0.95 for 60 s; below 0.45 just now
+    out = lc.step(80.0, 0.0)  # below 0.95 for 60 s; below 0.45 just now
     assert [(e["previous"], e["priority"]) for e in out] == [(3, 2)]
     assert lc.step(110.0, 0.0) == [] and lc.step(139.0, 0.0) == []
-    out = lc.step(140.0, 0.0)                 # each step keeps its own off-delay
+    out = lc.step(140.0, 0.0)  # each step keeps its own off-delay
     assert [(e["previous"], e["priority"]) for e in out] == [(2, 1)]
     assert lc.active and lc.priority == 1
-    assert lc.step(300.0, 0.0) == []          # never below 1 while active
+    assert lc.step(300.0, 0.0) == []  # never below 1 while active
 
 
 def test_cleared_then_a_new_fault_within_the_return_delay_is_the_same_alarm():
@@ -126,18 +125,17 @@ def test_cleared_then_a_new_fault_within_the_return_delay_is_the_same_alarm():
 
 def every_10_s(lc, start, stop, level):
     """Readings of ``level`` every 10 s in [start, stop); the events they raised."""
-    return feed(lc, np.arange(start, stop, 10.0), np.full(int(np.ceil((stop - start) / 10)),
-                                                             level))
+    return feed(lc, np.arange(start, stop, 10.0), np.full(int(np.ceil((stop - start) / 10)), level))
 
 
 def test_return_needs_the_detector_cleared_and_the_level_back_for_the_delay_of_motion():
     lc = AlarmLifecycle(settings(return_delay_s=600.0, return_level=0.1))
     lc.step(0.0, 0.4, FAULT)
     assert lc.step(100.0, 0.4, CLEARED) == []
-    assert every_10_s(lc, 110.0, 900.0, 0.15) == []   # below the lowest step, not back
+    assert every_10_s(lc, 110.0, 900.0, 0.15) == []  # below the lowest step, not back
     assert every_10_s(lc, 900.0, 1200.0, 0.05) == []  # back: 290 s of motion so far
     assert every_10_s(lc, 5000.0, 5300.0, 0.05) == []  # a rest (no readings), then 580 s
-    assert lc.step(5300.0, 0.05) == []                # 590 s
+    assert lc.step(5300.0, 0.05) == []  # 590 s
     out = lc.step(5310.0, 0.05)
     assert kinds(out) == ["alarm_returned"]
     assert out[0]["state"] == "returned_unacknowledged" and out[0]["priority"] == 0
@@ -151,7 +149,7 @@ def test_return_needs_the_detector_cleared_and_the_level_back_for_the_delay_of_m
 def test_the_level_back_before_the_detector_clears_still_waits_for_the_delay():
     lc = AlarmLifecycle(settings(return_delay_s=600.0))
     lc.step(0.0, 0.0, {"kind": "other_fault"})
-    assert every_10_s(lc, 10.0, 2000.0, 0.0) == []    # low all along, detector still faulty
+    assert every_10_s(lc, 10.0, 2000.0, 0.0) == []  # low all along, detector still faulty
     assert lc.step(2000.0, 0.0, CLEARED) == []
     assert every_10_s(lc, 2010.0, 2600.0, 0.0) == []
     assert kinds(lc.step(2600.0, 0.0)) == ["alarm_returned"]
@@ -192,8 +190,9 @@ def scripted_inputs(seed=3, n=4000):
     """Seconds of levels with faults, clears and a dither, as (time, level, event)."""
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.uniform(0.5, 30.0, n))
-    level = np.clip(np.linspace(0.0, 1.4, n) * (t < t[n // 2]) + 0.05 * rng.standard_normal(n),
-                    0, None)
+    level = np.clip(
+        np.linspace(0.0, 1.4, n) * (t < t[n // 2]) + 0.05 * rng.standard_normal(n), 0, None
+    )
     level[rng.random(n) < 0.1] = np.nan
     choices = [None] * 300 + [FAULT, FRICTION, CLEARED, {"kind": "calibrated"}]
     events = [choices[k] for k in rng.integers(0, len(choices), n)]
@@ -207,8 +206,9 @@ def smoothing(request):
 
 def test_batch_equals_step_and_chunks_with_the_same_final_state(smoothing):
     inputs = scripted_inputs()
-    cfg = settings(raise_delay_s=30.0, lower_delay_s=300.0, return_delay_s=300.0,
-                   smoothing_s=smoothing)
+    cfg = settings(
+        raise_delay_s=30.0, lower_delay_s=300.0, return_delay_s=300.0, smoothing_s=smoothing
+    )
     one = AlarmLifecycle(cfg)
     stepped = [e for args in inputs for e in one.step(*args)]
     whole = AlarmLifecycle(cfg)
@@ -242,25 +242,42 @@ def test_a_restored_alarm_absorbs_the_detectors_renewed_fault():
     lc.step(10.0, 0.6, FRICTION)
     restored = AlarmLifecycle.from_dict(json.loads(json.dumps(lc.to_dict())), now=50.0)
     assert restored.active and restored.summary(50.0)["alarm_id"] == 1
-    assert restored.step(60.0, 0.6, FAULT) == []   # the new detector run raises again: joined
+    assert restored.step(60.0, 0.6, FAULT) == []  # the new detector run raises again: joined
     # without a new fault the level decides: low for the return delay after the restore
     quiet = AlarmLifecycle.from_dict(lc.to_dict(), now=50.0)
     assert quiet.step(100.0, 0.6) == [] and every_10_s(quiet, 700.0, 1300.0, 0.0) == []
     assert kinds(quiet.step(1300.0, 0.0))[-1] == "alarm_returned"
 
 
-@pytest.mark.parametrize("data", [None, {}, {"version": 99}, {"version": 1},
-                                  {"version": 1, "settings": {}, "state": {"state": "x"}},
-                                  {"version": 1, "settings": {}, "state": {"bogus": 1}}])
+@pytest.mark.parametrize(
+    "data",
+    [
+        None,
+        {},
+        {"version": 99},
+        {"version": 1},
+        {"version": 1, "settings": {}, "state": {"state": "x"}},
+        {"version": 1, "settings": {}, "state": {"bogus": 1}},
+    ],
+)
 def test_a_malformed_state_is_refused(data):
     with pytest.raises(ValueError):
         AlarmLifecycle.from_dict(data)
 
 
-@pytest.mark.parametrize("kwargs", [{"steps": ()}, {"steps": (0.5, 0.25)}, {"steps": (-1.0,)},
-                                    {"deadband": 0.3}, {"return_delay_s": -1.0},
-                                    {"return_level": 0.0}, {"return_level": 0.22},
-                                    {"raise_delay_s": float("nan")}])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"steps": ()},
+        {"steps": (0.5, 0.25)},
+        {"steps": (-1.0,)},
+        {"deadband": 0.3},
+        {"return_delay_s": -1.0},
+        {"return_level": 0.0},
+        {"return_level": 0.22},
+        {"raise_delay_s": float("nan")},
+    ],
+)
 def test_bad_settings_are_refused(kwargs):
     with pytest.raises(ValueError):
         AlarmSettings(**kwargs)

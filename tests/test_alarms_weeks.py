@@ -29,8 +29,8 @@ from fdi_daemon.service.trend import TrendStore, read_trend
 
 DAYS = 28
 WEAR_START_DAY = 7
-WEAR = 1.3           # signature units reached at the end
-BASELINE = 0.08      # fault-free level of this rig (the model's baseline)
+WEAR = 1.3  # signature units reached at the end
+BASELINE = 0.08  # fault-free level of this rig (the model's baseline)
 READING_S = 10.0
 START = 1_790_000_000.0 - 1_790_000_000.0 % 86400  # a UTC midnight
 
@@ -66,13 +66,18 @@ def simulate(tmp_path, restart_every_days: float = 3.0, seed: int = 7):
         hour = (k * READING_S % 86400) / 3600
         moving = 6.0 <= hour < 22.0
         condition = 0.98 * condition + 0.004 * rng.standard_normal()
-        level = (BASELINE + true_excess(day) + condition + 0.03 * rng.standard_normal()
-                 if moving else None)
+        level = (
+            BASELINE + true_excess(day) + condition + 0.03 * rng.standard_normal()
+            if moving
+            else None
+        )
         # the chattering stand-in detector
         detector = []
         if moving and detector_on_until is None and level - BASELINE > 0.3:
-            detector = [{"t": day * 86400, "kind": "fault_detected"},
-                        {"t": day * 86400, "kind": "friction_isolated"}]
+            detector = [
+                {"t": day * 86400, "kind": "fault_detected"},
+                {"t": day * 86400, "kind": "friction_isolated"},
+            ]
             detector_on_until = clock.now + 1200.0
         elif detector_on_until is not None and clock.now >= detector_on_until:
             detector = [{"t": day * 86400, "kind": "cleared"}]
@@ -80,8 +85,10 @@ def simulate(tmp_path, restart_every_days: float = 3.0, seed: int = 7):
         for event in detector:
             counts[event["kind"]] = counts.get(event["kind"], 0) + 1
             events.extend(keeper.detector_event(event))
-        snapshot = {"t": day * 86400, "monitor": {"friction_level": level,
-                                                  "baseline_level": BASELINE}}
+        snapshot = {
+            "t": day * 86400,
+            "monitor": {"friction_level": level, "baseline_level": BASELINE},
+        }
         new, row = keeper.status(snapshot)
         events.extend(new)
         if moving:
@@ -90,8 +97,9 @@ def simulate(tmp_path, restart_every_days: float = 3.0, seed: int = 7):
             store.append(row)
         if clock.now >= next_restart:  # the daemon restarts: state file round trip
             write_state(state_path, keeper.state(counts))
-            keeper = AlarmKeeper(settings, "model", stored=read_state(state_path, "model"),
-                                 clock=clock)
+            keeper = AlarmKeeper(
+                settings, "model", stored=read_state(state_path, "model"), clock=clock
+            )
             detector_on_until = None  # the new detector run starts afresh
             next_restart += restart_every_days * 86400
             restarts += 1
@@ -117,7 +125,7 @@ def test_wear_through_restarts_is_one_alarm_rising_through_its_steps(weeks):
     assert restarts >= 8
     assert counts["fault_detected"] > 20  # the stand-in detector chatters ...
     raised = [e for e in events if e["kind"] == "alarm_raised"]
-    assert len(raised) == 1             # ... the alarm does not
+    assert len(raised) == 1  # ... the alarm does not
     steps = [(e["previous"], e["priority"]) for e in events if e["kind"] == "alarm_priority"]
     assert steps == [(1, 2), (2, 3)]
     assert not [e for e in events if e["kind"] == "alarm_returned"]
@@ -146,9 +154,22 @@ def test_the_trend_shows_the_wear_the_steps_and_the_rests(weeks, tmp_path, capsy
     # the alarm priority column rises once through 1, 2, 3 and stays
     changes = data["priority"][np.flatnonzero(np.diff(data["priority"])) + 1]
     assert list(changes) == [1, 2, 3]
-    assert main(["trend", "--db", str(tmp / "trend.sqlite"), "--since",
-                 "2026-09-01", "--csv", str(tmp_path / "trend.csv"),
-                 "--plot", str(tmp_path / "trend.png")]) == 0
+    assert (
+        main(
+            [
+                "trend",
+                "--db",
+                str(tmp / "trend.sqlite"),
+                "--since",
+                "2026-09-01",
+                "--csv",
+                str(tmp_path / "trend.csv"),
+                "--plot",
+                str(tmp_path / "trend.png"),
+            ]
+        )
+        == 0
+    )
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == 1 + DAYS
     assert lines[-1].split()[5] == "3"  # the last day's highest priority

@@ -7,8 +7,9 @@ from fdi_daemon.cli import main
 
 
 def test_bench_monitor_reports_both_implementations():
-    out = bench_monitor(step_samples=1_000, batch_samples=20_000, baseline_samples=700,
-                        incident_s=60.0)
+    out = bench_monitor(
+        step_samples=1_000, batch_samples=20_000, baseline_samples=700, incident_s=60.0
+    )
     for section in ("step_us", "baseline_step_us"):
         assert set(out[section]) == {"p50", "p99", "max", "samples"}
         assert 0 < out[section]["p50"] <= out[section]["p99"] <= out[section]["max"]
@@ -16,8 +17,9 @@ def test_bench_monitor_reports_both_implementations():
     assert out["batch_samples_per_s"] > 0 and out["baseline_samples_per_s"] > 0
     assert out["batch_alarm_episodes"] == 0  # the fault-free data take the quiet path
     assert out["step_speedup_p50"] == out["baseline_step_us"]["p50"] / out["step_us"]["p50"]
-    assert out["step_cpu_over_reference"] == (out["step_cpu_us_p50"]
-                                              / out["reference_step_cpu_us_p50"])
+    assert out["step_cpu_over_reference"] == (
+        out["step_cpu_us_p50"] / out["reference_step_cpu_us_p50"]
+    )
     shares = out["batch_cpu_share_by_pair"]
     assert len(shares) == 5 and all(x > 0 for x in shares)
     assert abs(out["batch_cpu_share_of_reference"] - sorted(shares)[2]) <= 1e-4
@@ -39,16 +41,31 @@ def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
     import fdi_daemon.bench.monitor as bm
     import fdi_daemon.bench.sim as bs
 
-    small = bench_monitor(step_samples=600, batch_samples=5_000, baseline_samples=600,
-                          incident_s=0.0)
+    small = bench_monitor(
+        step_samples=600, batch_samples=5_000, baseline_samples=600, incident_s=0.0
+    )
     monkeypatch.setattr(bm, "bench_monitor", lambda **kw: small)
-    monkeypatch.setattr(bs, "bench_sim", lambda **kw: {"sim_s_per_wall_s": 100.0,
-                                                       "hour_wall_s": 36.0,
-                                                       "kernel_sim_s_per_wall_s": 120.0,
-                                                       "jit": True})
-    monkeypatch.setattr(bi, "bench_ident", lambda **kw: {
-        "identify_1024_samples_s": 0.5, "identify_target_s": 2.0, "signature_grid_points": 51,
-        "signature_grid_1024_samples_s": 9.0, "signature_target_s": 30.0})
+    monkeypatch.setattr(
+        bs,
+        "bench_sim",
+        lambda **kw: {
+            "sim_s_per_wall_s": 100.0,
+            "hour_wall_s": 36.0,
+            "kernel_sim_s_per_wall_s": 120.0,
+            "jit": True,
+        },
+    )
+    monkeypatch.setattr(
+        bi,
+        "bench_ident",
+        lambda **kw: {
+            "identify_1024_samples_s": 0.5,
+            "identify_target_s": 2.0,
+            "signature_grid_points": 51,
+            "signature_grid_1024_samples_s": 9.0,
+            "signature_target_s": 30.0,
+        },
+    )
     assert main(["bench", "--quick", "--json", str(tmp_path / "b.json")]) == 0
     data = json.loads((tmp_path / "b.json").read_text())
     assert data["monitor"] == small and {"sim", "ident", "machine"} <= set(data)
@@ -56,8 +73,9 @@ def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
     assert "per-tick step p50" in out and "compiled chain without detector" in out
 
 
-def test_a_json_path_that_cannot_be_written_is_refused_before_measuring(tmp_path,
-                                                                        monkeypatch, capsys):
+def test_a_json_path_that_cannot_be_written_is_refused_before_measuring(
+    tmp_path, monkeypatch, capsys
+):
     """--json in a missing directory failed after the minutes of measuring."""
     import fdi_daemon.bench.monitor as bm
 

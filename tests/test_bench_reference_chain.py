@@ -31,13 +31,16 @@ def signals():
 def test_theta_equals_a_direct_least_squares_solve_of_each_window(model, signals):
     v_in, accel = signals
     pl = Pipeline(model, WINDOW)
-    (pb, pa), (vb, va), (gb, ga) = ((pl.plant.b, pl.plant.a), (pl.velocity.b, pl.velocity.a),
-                                    (pl.ge_sign.b, pl.ge_sign.a))
+    (pb, pa), (vb, va), (gb, ga) = (
+        (pl.plant.b, pl.plant.a),
+        (pl.velocity.b, pl.velocity.a),
+        (pl.ge_sign.b, pl.ge_sign.a),
+    )
     r = accel - lfilter(pb, pa, v_in)
     v = lfilter(vb, va, accel)
     g1, g2 = lfilter(gb, ga, np.sign(v)), lfilter(gb, ga, v)
     theta1, theta2 = ReferenceChain.from_model(model, WINDOW).run(v_in, accel)
-    assert np.all(np.isnan(theta1[:WINDOW - 1]))
+    assert np.all(np.isnan(theta1[: WINDOW - 1]))
     for k in range(WINDOW - 1, len(r), 37):
         sl = slice(k - WINDOW + 1, k + 1)
         expect = np.linalg.lstsq(np.column_stack([g1[sl], g2[sl]]), r[sl], rcond=None)[0]

@@ -29,9 +29,12 @@ def test_a_kernel_the_user_chose_is_kept():
 def test_importing_fdi_daemon_pins_the_kernel_before_numpy_loads():
     # a fresh interpreter: the package sets the variable before its first NumPy import
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
-    code = ("import sys, os, fdi_daemon; print('numpy' in sys.modules, "
-            "os.environ.get('OPENBLAS_CORETYPE'))")
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                         text=True, check=True).stdout.split()
+    code = (
+        "import sys, os, fdi_daemon; print('numpy' in sys.modules, "
+        "os.environ.get('OPENBLAS_CORETYPE'))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.split()
     expected = blas_kernel.pin({}) or "None"
     assert out == ["False", expected]

@@ -36,8 +36,7 @@ def scaled(x):
     return {factor} * x
 """
 
-RUN = ("from kpkg.caller import kernel; "
-       "print(kernel(1.0), sum(kernel.stats.cache_hits.values()))")
+RUN = "from kpkg.caller import kernel; print(kernel(1.0), sum(kernel.stats.cache_hits.values()))"
 
 
 def _package(tmp_path: Path, factor: float, offset: float) -> Path:
@@ -52,10 +51,15 @@ def _package(tmp_path: Path, factor: float, offset: float) -> Path:
 def _run(tmp_path: Path, **env: str) -> tuple[float, int]:
     """kernel(1.0) in a new process, and how many of its signatures came from the cache."""
     environ = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
-    environ.update(PYTHONPATH=f"{tmp_path}{os.pathsep}{REPO}", PYTHONDONTWRITEBYTECODE="1",
-                   **env)
-    out = subprocess.run([sys.executable, "-c", RUN], env=environ, capture_output=True,
-                         text=True, timeout=120, check=True).stdout.split()
+    environ.update(PYTHONPATH=f"{tmp_path}{os.pathsep}{REPO}", PYTHONDONTWRITEBYTECODE="1", **env)
+    out = subprocess.run(
+        [sys.executable, "-c", RUN],
+        env=environ,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    ).stdout.split()
     return float(out[0]), int(out[1])
 
 

@@ -17,23 +17,34 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _python(code: str, tmp_path: Path, boundscheck: bool) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{REPO}",
-           "NUMBA_BOUNDSCHECK": "1" if boundscheck else "0",
-           "NUMBA_CACHE_DIR": str(tmp_path / ("cache-checked" if boundscheck else "cache"))}
-    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=env, cwd=tmp_path,
-                          capture_output=True, text=True, timeout=900)
+    env = {
+        **os.environ,
+        "PYTHONPATH": f"{tmp_path}{os.pathsep}{REPO}",
+        "NUMBA_BOUNDSCHECK": "1" if boundscheck else "0",
+        "NUMBA_CACHE_DIR": str(tmp_path / ("cache-checked" if boundscheck else "cache")),
+    }
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
 
 
 def test_an_index_is_taken_as_given_and_bounds_checks_catch_a_negative_one(tmp_path):
     package = tmp_path / "indexpkg"
     package.mkdir()
-    (package / "__init__.py").write_text(textwrap.dedent("""
+    (package / "__init__.py").write_text(
+        textwrap.dedent("""
         from fdi_daemon.core.compiled import jit
 
         @jit
         def at(a, k):
             return a[k]
-    """))
+    """)
+    )
     # a view into a larger array: index -1 reads the element before the view (4.0, inside
     # the base array's memory) where a wrap-around would read the view's last one (9.0)
     code = """

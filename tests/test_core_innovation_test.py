@@ -46,8 +46,9 @@ def _data(n=3000, seed=1):
 
 def test_statistic_reacts_to_a_change_and_not_before():
     phi, y = _data()
-    test = InnovationTest(3, window_samples=200, lag_samples=10, test_samples=8, every=2,
-                          min_sigma=1e-3)
+    test = InnovationTest(
+        3, window_samples=200, lag_samples=10, test_samples=8, every=2, min_sigma=1e-3
+    )
     stat, ok, theta = test.run(phi, y)
     assert len(theta) == 3 and theta[0].shape == y.shape
     assert not ok[:209].any() and ok[300:].all()
@@ -58,8 +59,7 @@ def test_statistic_reacts_to_a_change_and_not_before():
 @pytest.mark.parametrize("every", [1, 3])
 def test_step_run_and_chunks_are_bit_equal(every):
     phi, y = _data(n=1500)
-    args = dict(p=3, window_samples=100, lag_samples=7, test_samples=5, every=every,
-                min_sigma=1e-3)
+    args = dict(p=3, window_samples=100, lag_samples=7, test_samples=5, every=every, min_sigma=1e-3)
     one = InnovationTest(**args)
     ref = np.array([one.step(tuple(row), float(v)) for row, v in zip(phi.tolist(), y)])
     whole = InnovationTest(**args)
@@ -90,8 +90,9 @@ def test_reference_fit_is_the_least_squares_fit_of_its_lagged_window(p, every):
     n_rows, lag, window = 1200, 7, 100
     phi = np.column_stack([rng.normal(size=(n_rows, p - 1)), np.ones(n_rows)])
     y = phi @ np.arange(1.0, p + 1.0) + 0.1 * rng.normal(size=n_rows)
-    test = InnovationTest(p, window_samples=window, lag_samples=lag, test_samples=5,
-                          every=every, min_sigma=1e-3)
+    test = InnovationTest(
+        p, window_samples=window, lag_samples=lag, test_samples=5, every=every, min_sigma=1e-3
+    )
     _, ok, theta = test.run(phi, y)
     theta = np.column_stack(theta)
     n = itest_groups(window, every) * every

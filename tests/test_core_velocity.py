@@ -29,8 +29,8 @@ def test_sine_velocity_amplitude_and_phase(integrator):
     t = np.arange(int(20 * FS)) / FS
     w = 2 * math.pi * f
     est = VelocityEstimator(FS, integrator=integrator)
-    v = est.run(np.sin(w * t))[-int(4 * FS):]
-    tt = t[-int(4 * FS):]
+    v = est.run(np.sin(w * t))[-int(4 * FS) :]
+    tt = t[-int(4 * FS) :]
     # least-squares fit of the steady state: v ≈ c cos(ωt) + s sin(ωt)
     basis = np.column_stack([np.cos(w * tt), np.sin(w * tt)])
     c, s = np.linalg.lstsq(basis, v, rcond=None)[0]
@@ -57,8 +57,10 @@ def test_offset_does_not_drift():
     assert np.all(np.isfinite(v))
 
 
-@pytest.mark.parametrize("settings", [{}, {"lead_compensation_hz": 8.0},
-                                      {"integrator": "forward_euler", "highpass_order": 2}])
+@pytest.mark.parametrize(
+    "settings",
+    [{}, {"lead_compensation_hz": 8.0}, {"integrator": "forward_euler", "highpass_order": 2}],
+)
 def test_streaming_contract(settings):
     rng = np.random.default_rng(1)
     x = rng.normal(size=1500)
@@ -79,8 +81,7 @@ def test_streaming_contract(settings):
 
 
 def test_settings_round_trip_and_validation():
-    est = VelocityEstimator.from_settings({"highpass_hz": 0.5, "integrator": "backward_euler"},
-                                          FS)
+    est = VelocityEstimator.from_settings({"highpass_hz": 0.5, "integrator": "backward_euler"}, FS)
     s = est.settings()
     assert s["highpass_hz"] == 0.5 and s["highpass_order"] == 3
     again = VelocityEstimator.from_settings(s)

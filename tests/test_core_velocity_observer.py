@@ -7,8 +7,12 @@ import pytest
 from scipy.signal import butter, lfilter
 
 from fdi_daemon.core.velocity import VelocityEstimator
-from fdi_daemon.core.velocity_observer import (ModelVelocityObserver, trusted_from_hz,
-                                               velocity_from_settings, velocity_setting_names)
+from fdi_daemon.core.velocity_observer import (
+    ModelVelocityObserver,
+    trusted_from_hz,
+    velocity_from_settings,
+    velocity_setting_names,
+)
 
 FS = 256.0
 
@@ -90,10 +94,12 @@ def test_response_with_an_exact_and_a_missing_model():
         expected = half_wt / math.tan(half_wt) / math.hypot(1.0, 0.02 / f)
         assert abs(h) == pytest.approx(expected, rel=1e-3)
         assert math.degrees(np.angle(h)) == pytest.approx(
-            math.degrees(math.atan(0.02 / f)), abs=0.05)
+            math.degrees(math.atan(0.02 / f)), abs=0.05
+        )
     residual_only = VelocityEstimator(FS, highpass_hz=0.5, highpass_order=2)
     assert math.degrees(np.angle(obs.response(2.0, model_error=1.0))) == pytest.approx(
-        residual_only.phase_lead_deg(2.0), abs=1e-6)
+        residual_only.phase_lead_deg(2.0), abs=1e-6
+    )
 
 
 def test_settings_round_trip_and_method_selection():
@@ -102,8 +108,13 @@ def test_settings_round_trip_and_method_selection():
     again = velocity_from_settings(obs.settings(), FS)
     assert again.settings() == obs.settings()
     # no method: today's estimator, with today's settings exactly
-    old = {"fs_hz": FS, "highpass_hz": 1.0, "highpass_order": 3, "integrator": "trapezoid",
-           "lead_compensation_hz": None}
+    old = {
+        "fs_hz": FS,
+        "highpass_hz": 1.0,
+        "highpass_order": 3,
+        "integrator": "trapezoid",
+        "lead_compensation_hz": None,
+    }
     est = velocity_from_settings(old, FS)
     assert isinstance(est, VelocityEstimator) and not est.needs_model
     assert est.settings() == old
@@ -112,16 +123,19 @@ def test_settings_round_trip_and_method_selection():
     assert set(velocity_setting_names()) >= {"method", "leak_hz", "highpass_hz", "fs_hz"}
 
 
-@pytest.mark.parametrize("settings, message", [
-    ({"method": "kalman"}, "method must be one of"),
-    ({"method": "model_observer", "leak_hz": 0.6}, "leak_hz must lie in"),
-    ({"method": "model_observer", "leak_hz": -1}, "leak_hz must lie in"),
-    ({"leak_hz": 0.02}, "leak_hz does not belong to method highpass"),
-    ({"crossover_hz": 5.0}, "crossover_hz does not belong to method highpass"),
-    ({"method": "position_observer", "crossover_hz": 100.0}, "crossover_hz must lie in"),
-    ({"method": "position_observer", "leak_hz": 0.1}, "unknown velocity setting"),
-    ({"method": "model_observer", "fs_hz": 100.0}, "disagrees"),
-])
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        ({"method": "kalman"}, "method must be one of"),
+        ({"method": "model_observer", "leak_hz": 0.6}, "leak_hz must lie in"),
+        ({"method": "model_observer", "leak_hz": -1}, "leak_hz must lie in"),
+        ({"leak_hz": 0.02}, "leak_hz does not belong to method highpass"),
+        ({"crossover_hz": 5.0}, "crossover_hz does not belong to method highpass"),
+        ({"method": "position_observer", "crossover_hz": 100.0}, "crossover_hz must lie in"),
+        ({"method": "position_observer", "leak_hz": 0.1}, "unknown velocity setting"),
+        ({"method": "model_observer", "fs_hz": 100.0}, "disagrees"),
+    ],
+)
 def test_bad_settings_are_refused(settings, message):
     with pytest.raises(ValueError, match=message):
         velocity_from_settings(settings, FS)
@@ -144,10 +158,9 @@ def test_trusted_from_hz_is_where_the_phase_error_falls_below_its_bound():
     assert 3.5 < f30 < 4.3
     assert _butterworth_highpass_lead_deg(f30, 1.0) == pytest.approx(30.0, abs=0.5)
     assert _butterworth_highpass_lead_deg(0.97 * f30, 1.0) > 30.0
-    assert _butterworth_highpass_lead_deg(f30, 1.0) == pytest.approx(hp.phase_lead_deg(f30),
-                                                                    abs=1e-6)
+    assert _butterworth_highpass_lead_deg(f30, 1.0) == pytest.approx(
+        hp.phase_lead_deg(f30), abs=1e-6
+    )
     obs = velocity_from_settings({"method": "model_observer", "leak_hz": 0.02}, FS)
-    assert trusted_from_hz(obs, 30.0) == pytest.approx(0.02 / math.tan(math.radians(30)),
-                                                       rel=0.02)
-    assert trusted_from_hz(velocity_from_settings({"method": "position_observer"}, FS),
-                           30.0) == 0.0
+    assert trusted_from_hz(obs, 30.0) == pytest.approx(0.02 / math.tan(math.radians(30)), rel=0.02)
+    assert trusted_from_hz(velocity_from_settings({"method": "position_observer"}, FS), 30.0) == 0.0

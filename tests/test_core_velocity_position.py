@@ -54,7 +54,7 @@ def test_a_held_load_reads_zero_velocity_whatever_the_accelerometer_says():
     n = int(20 * FS)
     accel = 0.05 + 0.02 * rng.standard_normal(n)
     v = PositionVelocityObserver(FS, crossover_hz=5.0).run(accel, np.full(n, 0.01))
-    assert np.max(np.abs(v[int(5 * FS):])) < 1e-3
+    assert np.max(np.abs(v[int(5 * FS) :])) < 1e-3
 
 
 def test_streaming_contract_with_missing_positions():
@@ -79,8 +79,9 @@ def test_streaming_contract_with_missing_positions():
     held[[500, 501, 502]] = x[499]
     held[2999] = x[2998]
     held[[0, 1]] = 0.0
-    np.testing.assert_allclose(PositionVelocityObserver(FS).run(a, held), ref, rtol=1e-12,
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        PositionVelocityObserver(FS).run(a, held), ref, rtol=1e-12, atol=1e-15
+    )
 
 
 def test_settings_round_trip():

@@ -10,11 +10,17 @@ import threading
 import time
 
 import pytest
+from conftest_dashboard import make_snapshot
 from rich.console import Console
 
-from conftest_dashboard import make_snapshot
-from fdi_daemon.dashboard.app import DashboardConsole, Frame, KeyReader, LatestSnapshot, \
-    run_alongside, run_dashboard
+from fdi_daemon.dashboard.app import (
+    DashboardConsole,
+    Frame,
+    KeyReader,
+    LatestSnapshot,
+    run_alongside,
+    run_dashboard,
+)
 
 
 def quiet_console() -> Console:
@@ -58,8 +64,12 @@ def test_q_from_a_terminal_quits_and_restores_the_terminal():
                 assert keys.interactive
                 assert not termios.tcgetattr(slave)[3] & termios.ICANON
                 os.write(master, b"q")
-                assert run_dashboard(lambda: Frame(None), refresh_hz=20,
-                                     console=quiet_console(), keys=keys) == "quit"
+                assert (
+                    run_dashboard(
+                        lambda: Frame(None), refresh_hz=20, console=quiet_console(), keys=keys
+                    )
+                    == "quit"
+                )
             assert termios.tcgetattr(slave) == before
     finally:
         os.close(master)
@@ -113,8 +123,14 @@ def test_output_of_work_waits_until_the_dashboard_has_left_the_screen(tmp_path):
     script.write_text(WORK_IN_A_TERMINAL.format(tests=str(Path(__file__).parent)))
     master, slave = pty.openpty()
     env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
-    process = subprocess.Popen([sys.executable, str(script)], stdin=slave, stdout=slave,
-                               stderr=slave, env={**env, "TERM": "xterm"}, close_fds=True)
+    process = subprocess.Popen(
+        [sys.executable, str(script)],
+        stdin=slave,
+        stdout=slave,
+        stderr=slave,
+        env={**env, "TERM": "xterm"},
+        close_fds=True,
+    )
     os.close(slave)
     output = b""
     try:
@@ -161,8 +177,10 @@ def test_a_write_to_a_dead_terminal_ends_the_loop_instead_of_spinning(err):
 
     dead = DeadTerminal(err)
     console = DashboardConsole(file=dead, width=80, height=24, force_terminal=True)
-    assert run_dashboard(provider, refresh_hz=50, console=console,
-                         keys=KeyReader(io.StringIO())) == "hangup"
+    assert (
+        run_dashboard(provider, refresh_hz=50, console=console, keys=KeyReader(io.StringIO()))
+        == "hangup"
+    )
     assert len(calls) <= 1 and dead.writes <= 3  # at most one frame tried, no retry loop
 
 
@@ -172,8 +190,12 @@ def test_a_hung_up_terminal_ends_the_loop_and_restores_nothing_that_fails():
         with KeyReader(stream) as keys:
             os.close(master)  # the terminal emulator goes away: end of input on the slave
             started = time.monotonic()
-            assert run_dashboard(lambda: Frame(None), refresh_hz=20,
-                                 console=quiet_console(), keys=keys) == "hangup"
+            assert (
+                run_dashboard(
+                    lambda: Frame(None), refresh_hz=20, console=quiet_console(), keys=keys
+                )
+                == "hangup"
+            )
             assert time.monotonic() - started < 30  # ended by itself (before: spun forever)
     os.close(slave)
 
@@ -188,8 +210,12 @@ def test_hangup_of_the_dashboards_terminal_stops_the_work():
 
     dead = DeadTerminal(errno.EPIPE)
     console = DashboardConsole(file=dead, width=80, height=24, force_terminal=True)
-    assert run_alongside(work, lambda: Frame(make_snapshot()), request_stop=stopped.set,
-                         console=console) == 0
+    assert (
+        run_alongside(
+            work, lambda: Frame(make_snapshot()), request_stop=stopped.set, console=console
+        )
+        == 0
+    )
 
 
 def test_an_unwritable_place_for_the_held_output_is_one_clear_error(tmp_path, monkeypatch):

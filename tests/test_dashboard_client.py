@@ -6,10 +6,14 @@ import math
 import time
 
 import pytest
-
 from conftest_dashboard import ScriptedStatusServer, make_snapshot
-from fdi_daemon.dashboard.client import (DaemonUnreachable, SocketProvider, StatusConnection,
-                                         fetch_snapshot)
+
+from fdi_daemon.dashboard.client import (
+    DaemonUnreachable,
+    SocketProvider,
+    StatusConnection,
+    fetch_snapshot,
+)
 
 
 class FakeClock:

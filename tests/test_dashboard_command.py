@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
 from conftest_dashboard import ScriptedStatusServer, make_snapshot
+
 from fdi_daemon.cli import main
-from fdi_daemon.service import config as config_module
 from fdi_daemon.commands.dashboard import default_socket_path
+from fdi_daemon.service import config as config_module
 
 
 def test_default_socket_is_the_one_fdi_run_uses(tmp_path, monkeypatch):
@@ -28,8 +28,10 @@ def test_default_socket_is_the_one_fdi_run_uses(tmp_path, monkeypatch):
 
 def test_socket_from_a_config_and_a_disabled_socket(tmp_path, capsys, monkeypatch):
     rig = tmp_path / "rig.yaml"
-    rig.write_text("link: {kind: sim}\nmodel: {path: m.yaml}\n"
-                   f"service: {{state_dir: {tmp_path}}}\nsinks: {{status_socket: s.sock}}\n")
+    rig.write_text(
+        "link: {kind: sim}\nmodel: {path: m.yaml}\n"
+        f"service: {{state_dir: {tmp_path}}}\nsinks: {{status_socket: s.sock}}\n"
+    )
     assert Path(default_socket_path(str(rig))) == tmp_path / "s.sock"
     config = config_module.load_config(rig)
     config.sinks["status_socket"] = None  # what `status_socket: null` means
@@ -42,8 +44,10 @@ def test_socket_from_a_config_and_a_disabled_socket(tmp_path, capsys, monkeypatc
 def test_once_prints_a_frame_of_the_requested_size(tmp_path, capsys):
     sock = tmp_path / "status.sock"
     with ScriptedStatusServer(sock, [make_snapshot("other_fault")]):
-        assert main(["dashboard", "--connect", str(sock), "--once", "--width", "90",
-                     "--height", "26"]) == 0
+        assert (
+            main(["dashboard", "--connect", str(sock), "--once", "--width", "90", "--height", "26"])
+            == 0
+        )
     lines = capsys.readouterr().out.rstrip("\n").split("\n")
     assert len(lines) == 26 and max(len(line) for line in lines) <= 90
     assert "OTHER FAULT" in lines[0]
@@ -66,7 +70,17 @@ def test_bad_refresh_rate_is_a_usage_error(rate, capsys):
 
 
 def test_replay_dashboard_needs_realtime(tmp_path, capsys):
-    assert main(["replay", str(tmp_path / "rec.csv"), "--model", str(tmp_path / "m.yaml"),
-                 "--dashboard"]) == 2
+    assert (
+        main(
+            [
+                "replay",
+                str(tmp_path / "rec.csv"),
+                "--model",
+                str(tmp_path / "m.yaml"),
+                "--dashboard",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--dashboard needs --realtime" in err

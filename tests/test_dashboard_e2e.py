@@ -9,8 +9,8 @@ import re
 import sys
 
 import pytest
-
 from conftest_dashboard import TMUX, TmuxScreen
+
 from fdi_daemon.service.config import load_config
 
 DEFAULT = load_config()
@@ -18,16 +18,19 @@ DEFAULT = load_config()
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(TMUX is None, reason="tmux is not installed"),
-    pytest.mark.skipif(not DEFAULT.model_path.exists(),
-                       reason=f"{DEFAULT.model_path.name} is not in fdi_daemon/data"),
+    pytest.mark.skipif(
+        not DEFAULT.model_path.exists(),
+        reason=f"{DEFAULT.model_path.name} is not in fdi_daemon/data",
+    ),
 ]
 
 
 def test_both_dashboards_follow_the_daemon_to_the_friction_fault(tmp_path):
     (fault,) = DEFAULT.simulated_device["faults"]
     fdi = [sys.executable, "-m", "fdi_daemon"]
-    daemon = TmuxScreen(fdi + ["run", "--dashboard", "--duration", str(fault["at_s"] + 60.0)],
-                        100, 30, cwd=tmp_path)
+    daemon = TmuxScreen(
+        fdi + ["run", "--dashboard", "--duration", str(fault["at_s"] + 60.0)], 100, 30, cwd=tmp_path
+    )
     # no --connect: the dashboard finds the socket `fdi run` uses (same $XDG_STATE_HOME)
     attached = TmuxScreen(fdi + ["dashboard"], 100, 32, cwd=tmp_path)
     try:

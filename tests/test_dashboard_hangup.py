@@ -15,16 +15,18 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest_dashboard import TMUX, TmuxScreen
+
 from fdi_daemon.service.config import load_config
 
 DEFAULT = load_config()
 
 pytestmark = [
     pytest.mark.skipif(TMUX is None, reason="tmux is not installed"),
-    pytest.mark.skipif(not DEFAULT.model_path.exists(),
-                       reason=f"{DEFAULT.model_path.name} is not in fdi_daemon/data"),
+    pytest.mark.skipif(
+        not DEFAULT.model_path.exists(),
+        reason=f"{DEFAULT.model_path.name} is not in fdi_daemon/data",
+    ),
 ]
 
 
@@ -56,8 +58,12 @@ def test_run_dashboard_ends_cleanly_when_its_terminal_hangs_up(tmp_path, hangup)
     """kill-session: the whole terminal goes (SIGHUP, EOF, EIO); SIGHUP alone: the signal
     without the rest (plain `fdi run` takes it as reload)."""
     state = tmp_path / "state"
-    screen = TmuxScreen([sys.executable, "-m", "fdi_daemon", "run", "--dashboard",
-                         "--state-dir", str(state)], 80, 24, cwd=tmp_path)
+    screen = TmuxScreen(
+        [sys.executable, "-m", "fdi_daemon", "run", "--dashboard", "--state-dir", str(state)],
+        80,
+        24,
+        cwd=tmp_path,
+    )
     pids = []
     try:
         screen.wait_for("MONITORING", timeout_s=60.0)

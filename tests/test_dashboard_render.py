@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 
 import pytest
+from conftest_dashboard import STATES, make_snapshot, screen_text
 from rich.console import Console
 
-from conftest_dashboard import STATES, make_snapshot, screen_text
 from fdi_daemon.dashboard.plot import BraillePlot, Series, render_lines
 from fdi_daemon.dashboard.render import STATE_BADGES, render
 
@@ -33,10 +33,22 @@ def test_state_numbers_and_alarms_shown_at_every_size(state, width, height):
 @pytest.mark.parametrize("width,height", [(80, 24), (200, 50)])
 def test_link_health_model_and_plot_titles(width, height):
     text = screen_text(render(make_snapshot("monitoring")), width, height)
-    for expected in ("256.0 Hz", "33280", "gaps 3", "CRC 7", "bad 0", "42 µs/317 µs",
-                     "deadline miss", "3.210e-02", "configs/sim/model.yaml",
-                     "tool: fdi signature", "band [-0.05, 0.05]", "band [-0.08, 0.08]",
-                     "sig 2.4", "t 100.0 … 130.0 s"):
+    for expected in (
+        "256.0 Hz",
+        "33280",
+        "gaps 3",
+        "CRC 7",
+        "bad 0",
+        "42 µs/317 µs",
+        "deadline miss",
+        "3.210e-02",
+        "configs/sim/model.yaml",
+        "tool: fdi signature",
+        "band [-0.05, 0.05]",
+        "band [-0.08, 0.08]",
+        "sig 2.4",
+        "t 100.0 … 130.0 s",
+    ):
         assert expected in text, expected
 
 
@@ -49,8 +61,9 @@ def test_plots_use_braille_cells_and_leave_them_out_without_history():
 
 
 def test_calibrating_with_nan_theta_and_no_band():
-    snapshot = make_snapshot("calibrating", theta=(math.nan, math.nan), band=None,
-                             history_points=0, n_alarms=0)
+    snapshot = make_snapshot(
+        "calibrating", theta=(math.nan, math.nan), band=None, history_points=0, n_alarms=0
+    )
     text = screen_text(render(snapshot))
     assert "CALIBRATING" in text
     assert "θ1 —" in text and "θ2 —" in text
@@ -99,9 +112,13 @@ def test_notice_with_last_known_snapshot_and_without_any():
 
 
 def test_malformed_sections_do_not_break_the_view():
-    snapshot = {"state": "monitoring", "link": None, "monitor": {"theta1": "x", "band": [1],
-                                                                 "history": {"t": [1, 2]}},
-                "alarms": ["not a dict"], "model": {"provenance": {"nested": {"k": [1.5, 2]}}}}
+    snapshot = {
+        "state": "monitoring",
+        "link": None,
+        "monitor": {"theta1": "x", "band": [1], "history": {"t": [1, 2]}},
+        "alarms": ["not a dict"],
+        "model": {"provenance": {"nested": {"k": [1.5, 2]}}},
+    }
     text = screen_text(render(snapshot))
     assert "MONITORING" in text and "no link information" in text
     assert "nested.k: 1.5, 2" in text
@@ -122,8 +139,10 @@ def test_signature_far_off_scale_is_marked_not_drawn():
 
 def test_trace_rows_follow_the_values():
     """A rising ramp puts its first point in the bottom row and its last in the top row."""
-    plot = BraillePlot(series=[Series(style="", t=[0.0, 1.0, 2.0, 3.0], y=[0.0, 1.0, 2.0, 3.0])],
-                       y_range=(0.0, 3.0))
+    plot = BraillePlot(
+        series=[Series(style="", t=[0.0, 1.0, 2.0, 3.0], y=[0.0, 1.0, 2.0, 3.0])],
+        y_range=(0.0, 3.0),
+    )
     lines = [line.plain for line in render_lines(plot, 30, 4)]
     assert lines[0].startswith("      3┤") and lines[-1].startswith("      0┤")
     body = [line[8:] for line in lines]
@@ -132,9 +151,13 @@ def test_trace_rows_follow_the_values():
 
 
 def test_band_level_drawn_dashed_on_its_row():
-    plot = BraillePlot(series=[Series(style="", level=1.0, dashed=True),
-                               Series(style="", t=[0.0, 1.0], y=[0.0, 0.0])],
-                       y_range=(0.0, 1.0))
+    plot = BraillePlot(
+        series=[
+            Series(style="", level=1.0, dashed=True),
+            Series(style="", t=[0.0, 1.0], y=[0.0, 0.0]),
+        ],
+        y_range=(0.0, 1.0),
+    )
     top = render_lines(plot, 40, 3)[0].plain[8:]
     assert top.count(" ") > 10 and top.strip()
 
@@ -157,10 +180,16 @@ def test_theta_plane_only_where_there_is_room():
 def test_provenance_sections_are_summarised_first():
     snapshot = make_snapshot()
     snapshot["model"]["provenance"] = {
-        "identify": {"source": "/data/chirp.csv", "date_utc": "2026-11-21T17:06:06+00:00",
-                     "metrics": {"fit_percent": 94.241, "band_hz": [1.5, 18.75]}},
-        "signature": {"source": "/data/sig.csv", "date_utc": "2026-11-21T17:06:19+00:00",
-                      "cost_profile": {"gamma_f": 2.94153, "flat": True}},
+        "identify": {
+            "source": "/data/chirp.csv",
+            "date_utc": "2026-11-21T17:06:06+00:00",
+            "metrics": {"fit_percent": 94.241, "band_hz": [1.5, 18.75]},
+        },
+        "signature": {
+            "source": "/data/sig.csv",
+            "date_utc": "2026-11-21T17:06:19+00:00",
+            "cost_profile": {"gamma_f": 2.94153, "flat": True},
+        },
     }
     text = screen_text(render(snapshot), 240, 40)
     assert "identify: fit 94.2 %, 2026-11-21, chirp.csv" in text
@@ -176,22 +205,47 @@ def daemon_events() -> list[dict]:
     """Events as the daemon writes them (fields of a real `fdi run`)."""
     common = {"statistic": 1.27, "threshold": 30.0, "method": "sequential"}
     return [
-        {"t": 2.38671875, "kind": "calibrated", "theta1": 0.0474, "theta2": -1.67, **common,
-         "friction_level": 0.0474, "band": {"theta1": [0.03, 0.06], "theta2": [-1.9, -1.3]},
-         "samples": 256},
-        {"t": 20.01953125, "kind": "fault_detected", "theta1": 0.0262, "theta2": -1.4,
-         **common, "statistic": 64.72, "friction_level": 0.0262, "path": "fast"},
-        {"t": 20.546875, "kind": "friction_isolated", "theta1": 1.43, "theta2": 0.805,
-         **common, "friction_level": 1.43, "coulomb_change": 1.6048,
-         "friction_evidence": "harmonics"},
+        {
+            "t": 2.38671875,
+            "kind": "calibrated",
+            "theta1": 0.0474,
+            "theta2": -1.67,
+            **common,
+            "friction_level": 0.0474,
+            "band": {"theta1": [0.03, 0.06], "theta2": [-1.9, -1.3]},
+            "samples": 256,
+        },
+        {
+            "t": 20.01953125,
+            "kind": "fault_detected",
+            "theta1": 0.0262,
+            "theta2": -1.4,
+            **common,
+            "statistic": 64.72,
+            "friction_level": 0.0262,
+            "path": "fast",
+        },
+        {
+            "t": 20.546875,
+            "kind": "friction_isolated",
+            "theta1": 1.43,
+            "theta2": 0.805,
+            **common,
+            "friction_level": 1.43,
+            "coulomb_change": 1.6048,
+            "friction_evidence": "harmonics",
+        },
     ]
 
 
 def test_event_rows_at_80x24_show_kind_time_and_key_fields_whole():
     snapshot = make_snapshot("friction_isolated", n_alarms=0)
     snapshot["alarms"] = daemon_events()
-    rows = [line for line in lines_of(screen_text(render(snapshot), 80, 24))
-            if " s " in line and ("_" in line or "calibrated" in line)]
+    rows = [
+        line
+        for line in lines_of(screen_text(render(snapshot), 80, 24))
+        if " s " in line and ("_" in line or "calibrated" in line)
+    ]
     text = "\n".join(rows)
     assert "20.547 s friction_isolated  Δθ1 +1.6 harmonics" in text
     assert "20.020 s fault_detected     stat 64.7/30 fast" in text
@@ -200,27 +254,27 @@ def test_event_rows_at_80x24_show_kind_time_and_key_fields_whole():
 
 
 def test_theta_plot_titles_are_their_legend():
-    from fdi_daemon.dashboard.render import (BAND_STYLE, SIGNATURE_STYLE, TRACE_STYLE,
-                                             theta_title)
+    from fdi_daemon.dashboard.render import BAND_STYLE, SIGNATURE_STYLE, TRACE_STYLE, theta_title
 
     monitor = make_snapshot("friction_isolated", theta=(0.98, 2.3))["monitor"]
     title = theta_title(monitor, 0, 50, "drawn")
     assert title.plain == "━ θ1 +0.98 ━ sig 1 ╍ band [-0.05, 0.05]"
-    styles = {title.plain[span.start:span.end].split()[1]: span.style for span in title.spans}
+    styles = {title.plain[span.start : span.end].split()[1]: span.style for span in title.spans}
     assert styles == {"θ1": TRACE_STYLE, "sig": SIGNATURE_STYLE, "band": BAND_STYLE}
 
 
 def test_model_panel_at_80x24_gives_one_row_to_file_paths():
     import yaml
-
     from conftest_detect import MODEL
 
     snapshot = make_snapshot()
-    snapshot["model"] = {"path": "/home/user/rigs/fdi_daemon/data/model_sim_rig.yaml",
-                         "provenance": yaml.safe_load(MODEL.read_text())["provenance"]}
+    snapshot["model"] = {
+        "path": "/home/user/rigs/fdi_daemon/data/model_sim_rig.yaml",
+        "provenance": yaml.safe_load(MODEL.read_text())["provenance"],
+    }
     lines = lines_of(screen_text(render(snapshot), 80, 24))
     top = next(i for i, line in enumerate(lines) if "─ model ─" in line)
-    panel = [line[:30] for line in lines[top + 1:] if line.startswith("│")]
+    panel = [line[:30] for line in lines[top + 1 :] if line.startswith("│")]
     assert "model_sim_rig.yaml" in panel[0]
     assert sum("/" in row for row in panel) == 1, panel  # paths: the model file only
     assert any("identify: fit" in row for row in panel)

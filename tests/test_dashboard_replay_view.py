@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import pytest
-
 from conftest_dashboard import make_snapshot, screen_text
+
 from fdi_daemon.dashboard.app import LatestSnapshot
 from fdi_daemon.dashboard.render import render
 from fdi_daemon.dashboard.replay_view import ALARM_ROWS, ReplayStatus
@@ -30,8 +30,17 @@ class FakeClock:
 def test_counts_lateness_events_and_publishes_at_the_period():
     clock, board, monitor = FakeClock(), LatestSnapshot(), FakeMonitor()
     fs = 256.0
-    status = ReplayStatus("rec.csv", "model.yaml", {"tool": "test"}, 1000, fs, board,
-                          period_s=0.1, deadline_s=0.05, clock=clock)
+    status = ReplayStatus(
+        "rec.csv",
+        "model.yaml",
+        {"tool": "test"},
+        1000,
+        fs,
+        board,
+        period_s=0.1,
+        deadline_s=0.05,
+        clock=clock,
+    )
     late = {100: 0.2, 101: 0.06}  # sample index -> seconds late
     for k in range(512):
         clock.now = 50.0 + k / fs + late.get(k, 0.0)
@@ -39,8 +48,10 @@ def test_counts_lateness_events_and_publishes_at_the_period():
         if k == 300:
             events = [{"t": k / fs, "kind": "data_gap", "missing_samples": 3}]
         if k == 400:
-            events = [{"t": k / fs, "kind": "bad_sample"},
-                      {"t": k / fs, "kind": "fault_detected", "theta1": 0.3, "theta2": 0.4}]
+            events = [
+                {"t": k / fs, "kind": "bad_sample"},
+                {"t": k / fs, "kind": "fault_detected", "theta1": 0.3, "theta2": 0.4},
+            ]
         status.on_tick(monitor, k / fs, events)
     # 2 s of samples, one snapshot per 0.1 s rounded up to whole samples (27 -> 0.105 s)
     assert 17 <= monitor.calls <= 20

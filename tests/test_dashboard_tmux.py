@@ -14,7 +14,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest_dashboard import TMUX, ScriptedStatusServer, TmuxScreen, make_snapshot
 
 pytestmark = pytest.mark.skipif(TMUX is None, reason="tmux is not installed")
@@ -30,16 +29,28 @@ def sock_path(tmp_path):
 
 
 def scripted_run() -> list[dict]:
-    states = (["starting"] * 3 + ["calibrating"] * 8 + ["monitoring"] * 8
-              + ["fault_detected"] * 8 + ["friction_isolated"])
-    theta = {"starting": (float("nan"),) * 2, "calibrating": (float("nan"),) * 2,
-             "monitoring": (0.01, -0.02), "fault_detected": (0.4, 0.9),
-             "friction_isolated": (0.97, 2.35)}
+    states = (
+        ["starting"] * 3
+        + ["calibrating"] * 8
+        + ["monitoring"] * 8
+        + ["fault_detected"] * 8
+        + ["friction_isolated"]
+    )
+    theta = {
+        "starting": (float("nan"),) * 2,
+        "calibrating": (float("nan"),) * 2,
+        "monitoring": (0.01, -0.02),
+        "fault_detected": (0.4, 0.9),
+        "friction_isolated": (0.97, 2.35),
+    }
     snapshots = []
     for i, state in enumerate(states):
-        snap = make_snapshot(state, theta=theta[state], t_now=30.0 + 0.1 * i,
-                             n_alarms=0 if state in ("starting", "calibrating", "monitoring")
-                             else 2)
+        snap = make_snapshot(
+            state,
+            theta=theta[state],
+            t_now=30.0 + 0.1 * i,
+            n_alarms=0 if state in ("starting", "calibrating", "monitoring") else 2,
+        )
         snapshots.append(snap)
     return snapshots
 
@@ -72,19 +83,33 @@ def test_dashboard_in_tmux_follows_daemon_to_the_fault_and_quits_on_q(sock_path)
 @pytest.mark.slow
 def test_realtime_replay_with_dashboard_in_tmux(tmp_path):
     """`fdi replay --realtime --dashboard`: the in-process view of a paced replay."""
-    from hil_sim.scenarios import load_scenario, simulate
-
     from fdi_daemon.io.recordings import write_recording
     from fdi_daemon.service.config import load_config
+    from hil_sim.scenarios import load_scenario, simulate
 
     model = load_config().model_path
     if not model.exists():
         pytest.skip(f"{model.name} is not in fdi_daemon/data")
-    scenario = load_scenario(Path(__file__).parents[1] / "configs" / "scenarios"
-                             / "test_case_2.yaml")
+    scenario = load_scenario(
+        Path(__file__).parents[1] / "configs" / "scenarios" / "test_case_2.yaml"
+    )
     write_recording(tmp_path / "rec.csv", simulate(scenario, seed=0))
-    screen = TmuxScreen([sys.executable, "-m", "fdi_daemon", "replay", "rec.csv", "--model",
-                         str(model), "--realtime", "--dashboard"], 100, 30, cwd=tmp_path)
+    screen = TmuxScreen(
+        [
+            sys.executable,
+            "-m",
+            "fdi_daemon",
+            "replay",
+            "rec.csv",
+            "--model",
+            str(model),
+            "--realtime",
+            "--dashboard",
+        ],
+        100,
+        30,
+        cwd=tmp_path,
+    )
     try:
         text = screen.wait_for("finished, press q to quit", timeout_s=40.0)
         assert "FRICTION ISOLATED" in text and "replay" in text

@@ -7,29 +7,42 @@ import math
 import re
 
 import pytest
-
 from conftest_dashboard import make_snapshot, screen_text
-from fdi_daemon.dashboard.render import _trend_layers, render
 from test_dashboard_render import SIZES, daemon_events, lines_of
+
+from fdi_daemon.dashboard.render import _trend_layers, render
 
 BASELINE, STEPS = 0.08, [0.25, 0.5, 1.0]
 
 
-def alarm_section(mean: list | None, state: str = "unacknowledged", priority: int = 2,
-                  **extra) -> dict:
-    trend = None if mean is None else {
-        "bucket_s": 600, "end": 1_780_000_200, "mean": mean,
-        "max": [None if m is None else round(m + 0.05, 3) for m in mean]}
-    return {"state": state, "state_code": {"normal": 0, "unacknowledged": 1,
-                                           "acknowledged": 2}.get(state, 3),
-            "priority": priority, "shelved_until": None, "baseline_level": BASELINE,
-            "steps": STEPS, "trend": trend, **extra}
+def alarm_section(
+    mean: list | None, state: str = "unacknowledged", priority: int = 2, **extra
+) -> dict:
+    trend = (
+        None
+        if mean is None
+        else {
+            "bucket_s": 600,
+            "end": 1_780_000_200,
+            "mean": mean,
+            "max": [None if m is None else round(m + 0.05, 3) for m in mean],
+        }
+    )
+    return {
+        "state": state,
+        "state_code": {"normal": 0, "unacknowledged": 1, "acknowledged": 2}.get(state, 3),
+        "priority": priority,
+        "shelved_until": None,
+        "baseline_level": BASELINE,
+        "steps": STEPS,
+        "trend": trend,
+        **extra,
+    }
 
 
 def wear(n: int = 36) -> list:
     """Flat at the baseline, a rest (3 empty buckets), then rising 0.03 per bucket."""
-    return [None if 10 <= i < 13 else round(BASELINE + max(0, i - 21) * 0.03, 3)
-            for i in range(n)]
+    return [None if 10 <= i < 13 else round(BASELINE + max(0, i - 21) * 0.03, 3) for i in range(n)]
 
 
 def panel_rows(text: str, title: str) -> list[str]:
@@ -38,7 +51,7 @@ def panel_rows(text: str, title: str) -> list[str]:
     top = next(i for i, line in enumerate(lines) if "╭─ " + title in line)
     start = lines[top].index("╭─ " + title)
     rows = []
-    for line in lines[top + 1:]:
+    for line in lines[top + 1 :]:
         rows.append(line[start:])
         if line[start] == "╰":
             return rows
@@ -93,8 +106,7 @@ def test_no_trend_yet_and_the_alarm_states():
     assert "alarm P3 acknowledged" in screen_text(render(snapshot), 80, 24)
     snapshot["alarm"] = alarm_section(wear(), state="returned_unacknowledged")
     assert "returned, unacknowledged" in screen_text(render(snapshot), 80, 24)
-    snapshot["alarm"] = alarm_section(wear(), state_code=4,
-                                      shelved_until=1_780_003_600.0)
+    snapshot["alarm"] = alarm_section(wear(), state_code=4, shelved_until=1_780_003_600.0)
     text = screen_text(render(snapshot), 80, 24)
     assert "shelved until " in text and "ALARM" not in text
 
@@ -109,9 +121,13 @@ def test_without_an_alarm_section_the_layout_is_as_before():
 @pytest.mark.parametrize("width,height", SIZES)
 def test_malformed_trend_never_breaks_the_view(width, height):
     snapshot = make_snapshot("monitoring")
-    for trend in ({"bucket_s": "x", "mean": [1]}, {"bucket_s": 600, "mean": "abc"},
-                  {"bucket_s": 600, "mean": [None, None], "max": [None]},
-                  {"bucket_s": 600, "mean": [0.1, float("nan")], "max": [0.2]}, [1, 2]):
+    for trend in (
+        {"bucket_s": "x", "mean": [1]},
+        {"bucket_s": 600, "mean": "abc"},
+        {"bucket_s": 600, "mean": [None, None], "max": [None]},
+        {"bucket_s": 600, "mean": [0.1, float("nan")], "max": [0.2]},
+        [1, 2],
+    ):
         snapshot["alarm"] = {"trend": trend, "steps": "bad", "baseline_level": "x"}
         lines = lines_of(screen_text(render(snapshot), width, height))
         assert len(lines) == height
@@ -129,13 +145,27 @@ def test_event_rows_at_80x24_stay_whole_with_the_trend_panel():
 
 def test_alarm_event_rows_show_priority_step_and_level():
     snapshot = make_snapshot("friction_isolated", n_alarms=0)
-    common = {"time": 1_780_000_000.0, "alarm_id": 1, "state": "unacknowledged",
-              "shelved": False}
+    common = {"time": 1_780_000_000.0, "alarm_id": 1, "state": "unacknowledged", "shelved": False}
     snapshot["alarms"] = daemon_events() + [
-        {"t": 20.020, "kind": "alarm_raised", **common, "priority": 1, "level": 1.33,
-         "cause": "fault_detected", "classification": "friction"},
-        {"t": 89.137, "kind": "alarm_priority", **common, "priority": 2, "level": 1.331,
-         "previous": 1, "step": 0.5}]
+        {
+            "t": 20.020,
+            "kind": "alarm_raised",
+            **common,
+            "priority": 1,
+            "level": 1.33,
+            "cause": "fault_detected",
+            "classification": "friction",
+        },
+        {
+            "t": 89.137,
+            "kind": "alarm_priority",
+            **common,
+            "priority": 2,
+            "level": 1.331,
+            "previous": 1,
+            "step": 0.5,
+        },
+    ]
     snapshot["alarm"] = alarm_section(wear())
     text = screen_text(render(snapshot), 80, 24)
     assert "89.137 s alarm_priority     prio 2 level 1.33" in text

@@ -6,15 +6,15 @@ import functools
 
 import numpy as np
 import pytest
-
 from conftest_detect import model_copy, scenario_recording, sim_rig_model
+
 from fdi_daemon.detect.detector import STATES, Detector
 from fdi_daemon.detect.monitor import Monitor
 from fdi_daemon.io.recordings import Recording
 from fdi_daemon.io.sample import Sample
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _incident():
     """240 s of changing operation with friction creeping in (the bench's incident)."""
     from fdi_daemon.bench.incident import creeping_fault_scenarios
@@ -27,8 +27,11 @@ def _stepped(monitor, rec):
     seq = np.asarray(rec.columns.get("seq", np.arange(len(rec))))
     events, stat, state, theta1 = [], [], [], []
     for k in range(len(rec)):
-        events.extend(monitor.step(Sample(int(seq[k]), float(rec.t[k]), float(rec.v_in[k]),
-                                          float(rec.accel[k]))))
+        events.extend(
+            monitor.step(
+                Sample(int(seq[k]), float(rec.t[k]), float(rec.v_in[k]), float(rec.accel[k]))
+            )
+        )
         det = monitor.detector
         stat.append(det.statistic)
         state.append(STATES.index(det.state))
@@ -53,8 +56,10 @@ def test_an_incident_replays_with_python_only_on_event_ticks(monkeypatch):
     rec = _incident()
     calls = _count_decisions(monkeypatch)
     events, trace = Monitor(sim_rig_model()).run(rec)
-    episode_states = np.isin(trace.state, [STATES.index(s) for s in (
-        "fault_detected", "friction_isolated", "other_fault")])
+    episode_states = np.isin(
+        trace.state,
+        [STATES.index(s) for s in ("fault_detected", "friction_isolated", "other_fault")],
+    )
     assert any(e["kind"] == "fault_detected" for e in events)
     assert episode_states.sum() > 20 * 256  # many seconds inside episodes ...
     detector_events = [e for e in events if e["kind"] not in ("bad_sample", "data_gap")]
@@ -75,12 +80,15 @@ def test_an_incident_is_bit_equal_per_tick_and_batch():
 def test_a_gap_inside_an_episode_is_handled_alike(method):
     """A data gap while an episode runs restarts its windows (the episode goes on)."""
     rec = scenario_recording("test_case_2" if method == "sequential" else "test_case_1")
-    model = sim_rig_model() if method == "sequential" else model_copy(
-        detector={**(sim_rig_model().detector or {}), "method": "band"})
+    model = (
+        sim_rig_model()
+        if method == "sequential"
+        else model_copy(detector={**(sim_rig_model().detector or {}), "method": "band"})
+    )
     _, trace = Monitor(model).run(rec)
     k = int(np.flatnonzero(trace.state >= STATES.index("fault_detected"))[0])
     keep = np.ones(len(rec), dtype=bool)
-    keep[k + 40:k + 60] = False  # 20 samples lost during the episode
+    keep[k + 40 : k + 60] = False  # 20 samples lost during the episode
     cols = {name: np.asarray(v)[keep] for name, v in rec.columns.items()}
     if "seq" not in cols:
         cols["seq"] = np.flatnonzero(keep)

@@ -29,9 +29,27 @@ def _signature(tmp_path_factory, method):
     root = tmp_path_factory.mktemp(method)
     rec = write_recording(root / "paired.npz", scenario_recording(CALIBRATION))
     out = root / "model.yaml"
-    assert main(["signature", str(rec), "--model", str(MODEL), "--fault-window", "22:42",
-                 "--reference-window", "1:21", "--lowpass-hz", "10",
-                 "--velocity-method", method, "-o", str(out)]) == 0
+    assert (
+        main(
+            [
+                "signature",
+                str(rec),
+                "--model",
+                str(MODEL),
+                "--fault-window",
+                "22:42",
+                "--reference-window",
+                "1:21",
+                "--lowpass-hz",
+                "10",
+                "--velocity-method",
+                method,
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return load_model(out)
 
 
@@ -68,8 +86,9 @@ def test_gamma_f_within_20_percent_of_the_rigs_with_an_interval_holding_it(obser
     assert sig["fault_filter_vaf_percent_full_band"] >= 50.0
 
 
-@pytest.mark.parametrize("case, fault_t, low, high", [("test_case_1", 3.05, 0.35, 0.5),
-                                                     ("test_case_2", 2.9, 2.0, 2.6)])
+@pytest.mark.parametrize(
+    "case, fault_t, low, high", [("test_case_1", 3.05, 0.35, 0.5), ("test_case_2", 2.9, 2.0, 2.6)]
+)
 def test_the_shipped_model_reports_a_fault_at_its_size(case, fault_t, low, high):
     """The shipped model (high-pass velocity, `fdi signature` on signature_calibration.yaml,
     fault window 11-40 s): test case 1 (bearing supply 65 %) and test case 2 (supply cut)
@@ -80,18 +99,23 @@ def test_the_shipped_model_reports_a_fault_at_its_size(case, fault_t, low, high)
     rec = scenario_recording(case)
     cal = scenario_recording("signature_calibration")
     inside = (cal.t >= 11.0) & (cal.t < 40.0)
-    truth = float(np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5])
-                  / np.mean(cal.columns["contact_force"][inside]))
+    truth = float(
+        np.mean(rec.columns["contact_force"][rec.t >= fault_t + 0.5])
+        / np.mean(cal.columns["contact_force"][inside])
+    )
     assert low < truth < high  # the scenario is what this test means it to be
     events, level = _level(sim_rig_model(), rec, fault_t + 1.5)
     assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "friction_isolated"]
     assert abs(np.median(level) / truth - 1) <= 0.10
 
 
-@pytest.mark.xfail(strict=True, reason="measured +48 % (0.628 for 0.424): after the fault the "
-                   "observer's velocity still carries the model's free motion into g2 (θ2 8.1 "
-                   "against γ_f θ1 = 1.3), and the level on the signature's direction (1, γ_f) "
-                   "counts it; θ1 alone read -8 % (docs/detector.md §4a)")
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured +48 % (0.628 for 0.424): after the fault the "
+    "observer's velocity still carries the model's free motion into g2 (θ2 8.1 "
+    "against γ_f θ1 = 1.3), and the level on the signature's direction (1, γ_f) "
+    "counts it; θ1 alone read -8 % (docs/detector.md §4a)",
+)
 def test_with_the_observer_a_fault_of_known_size_is_reported_at_its_size(observer_model):
     """Test case 1 (bearing supply 65 %, 0.42 of the calibrated fault): within ±10 %."""
     rec = scenario_recording("test_case_1")
@@ -102,9 +126,12 @@ def test_with_the_observer_a_fault_of_known_size_is_reported_at_its_size(observe
     assert abs(np.median(level) / truth - 1) <= 0.10
 
 
-@pytest.mark.xfail(strict=True, reason="measured: a bearing supply cut (2.3x the calibrated "
-                   "fault, the load held 12 % of the time) reads 0.59 and is other_fault "
-                   "with the observer (docs/detector.md)")
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured: a bearing supply cut (2.3x the calibrated "
+    "fault, the load held 12 % of the time) reads 0.59 and is other_fault "
+    "with the observer (docs/detector.md)",
+)
 def test_a_large_fault_is_reported_at_its_size(observer_model):
     rec = scenario_recording("test_case_2")
     truth = _fault_size(rec, 2.9)
@@ -141,10 +168,13 @@ def test_the_shipped_models_steady_fault_level_stays_within_20_percent_of_its_me
     assert level.size > 0.5 * np.sum(rec.t >= 30.0)  # shown most of the time
 
 
-@pytest.mark.xfail(strict=True, reason="measured: 5th-95th percentile at -77/+36 % of the "
-                   "median (1.00 against a truth of 1.0): the observer's velocity is trusted "
-                   "at every operation, and on this rig G_e from one 6 Hz calibration does not "
-                   "describe friction at 1-3 Hz (docs/identification.md)")
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured: 5th-95th percentile at -77/+36 % of the "
+    "median (1.00 against a truth of 1.0): the observer's velocity is trusted "
+    "at every operation, and on this rig G_e from one 6 Hz calibration does not "
+    "describe friction at 1-3 Hz (docs/identification.md)",
+)
 def test_a_steady_faults_level_stays_within_20_percent_of_its_median(observer_model):
     rec = _steady()
     _, level = _level(observer_model, rec, 30.0)
@@ -188,11 +218,20 @@ def test_with_position_a_steady_fault_is_one_episode(position_model):
 #: a calibration run with low-frequency content and one amplitude (issue 12's procedure):
 #: four equal tones at 2, 3.3, 5 and 8 Hz, bearing supply 45 % from 4 s, fault window 5-20 s
 LOW_FREQUENCY_CALIBRATION = {
-    "name": "low_frequency_calibration", "duration_s": 20.0, "seed": 0,
+    "name": "low_frequency_calibration",
+    "duration_s": 20.0,
+    "seed": 0,
     "centring_gain_v_per_m": 30.0,
-    "excitation": [{"kind": "multisine", "amplitudes_v": [0.45] * 4,
-                    "frequencies_hz": [2.0, 3.3, 5.0, 8.0], "duration_s": 20.0}],
-    "events": [{"t_s": 4.0, "bearing_supply": 0.45}]}
+    "excitation": [
+        {
+            "kind": "multisine",
+            "amplitudes_v": [0.45] * 4,
+            "frequencies_hz": [2.0, 3.3, 5.0, 8.0],
+            "duration_s": 20.0,
+        }
+    ],
+    "events": [{"t_s": 4.0, "bearing_supply": 0.45}],
+}
 
 
 @pytest.fixture(scope="module")
@@ -209,8 +248,22 @@ def low_frequency_models(tmp_path_factory):
     models = {}
     for name, extra in (("default", []), ("highpass", ["--velocity-method", "highpass"])):
         out = root / f"{name}.yaml"
-        assert main(["signature", str(rec), "--model", str(root / "plant.yaml"),
-                     "--fault-window", "5:20", *extra, "-o", str(out)]) == 0
+        assert (
+            main(
+                [
+                    "signature",
+                    str(rec),
+                    "--model",
+                    str(root / "plant.yaml"),
+                    "--fault-window",
+                    "5:20",
+                    *extra,
+                    "-o",
+                    str(out),
+                ]
+            )
+            == 0
+        )
         models[name] = load_model(out)
     return cal, models
 
@@ -229,10 +282,13 @@ def test_auto_keeps_the_velocity_whose_signature_fits(low_frequency_models):
     assert models["default"].velocity["method"] == "model_observer"
     assert models["highpass"].velocity.get("method", "highpass") == "highpass"
     steady = _steady()
-    truth = (np.mean(steady.columns["contact_force"][steady.t >= 20.5])
-             / np.mean(cal.columns["contact_force"][cal.t >= 5.0]))
-    error = {name: abs(np.median(_level(model, steady, 30.0)[1]) / truth - 1)
-             for name, model in models.items()}
+    truth = np.mean(steady.columns["contact_force"][steady.t >= 20.5]) / np.mean(
+        cal.columns["contact_force"][cal.t >= 5.0]
+    )
+    error = {
+        name: abs(np.median(_level(model, steady, 30.0)[1]) / truth - 1)
+        for name, model in models.items()
+    }
     assert error["default"] < error["highpass"]
 
 
@@ -241,13 +297,17 @@ def test_with_the_observer_a_clipping_accelerometer_is_not_friction(low_frequenc
     observer's sign(v̂) switches: without the rail check the harmonics check called the
     residual pulses friction. Clipped windows are no friction evidence: an other fault."""
     _, models = low_frequency_models
-    events, _ = Monitor(models["default"]).run(scenario_recording("fault_accel_saturation",
-                                                                 duration_s=64.0))
-    assert [e["kind"] for e in events if e["kind"] != "calibrated"] == ["fault_detected",
-                                                                      "other_fault"]
+    events, _ = Monitor(models["default"]).run(
+        scenario_recording("fault_accel_saturation", duration_s=64.0)
+    )
+    assert [e["kind"] for e in events if e["kind"] != "calibrated"] == [
+        "fault_detected",
+        "other_fault",
+    ]
     assert events[-1]["accel_clipping"] is True  # the event says why
-    events, _ = Monitor(models["default"]).run(scenario_recording("fault_valve_gain",
-                                                                 duration_s=64.0))
+    events, _ = Monitor(models["default"]).run(
+        scenario_recording("fault_valve_gain", duration_s=64.0)
+    )
     assert events[-1]["kind"] == "other_fault" and "accel_clipping" not in events[-1]
 
 

@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 import pytest
+from conftest_detect import msd_system, scenario_recording, sim_rig_model
 from scipy.signal import butter, lfilter
 
-from conftest_detect import msd_system, scenario_recording, sim_rig_model
 from fdi_daemon.core.compiled import Arena
 from fdi_daemon.core.kernels import solve_packed as solve_packed_kernel
 from fdi_daemon.core.kernels import sums_floats, sums_push
@@ -22,8 +22,11 @@ from fdi_daemon.io.recordings import Recording
 from fdi_daemon.io.sample import Sample
 
 N = 128
-METHODS = {"highpass": {"lead_compensation_hz": 8.0}, "model_observer": {"method":
-           "model_observer"}, "position_observer": {"method": "position_observer"}}
+METHODS = {
+    "highpass": {"lead_compensation_hz": 8.0},
+    "model_observer": {"method": "model_observer"},
+    "position_observer": {"method": "position_observer"},
+}
 
 
 def _push_all(rows, window):
@@ -35,9 +38,9 @@ def _push_all(rows, window):
     out = np.empty_like(rows)
     sl = fo + (window + 2) * w
     for k, row in enumerate(rows):
-        arena.f[src:src + w] = row
+        arena.f[src : src + w] = row
         sums_push(arena.f, arena.i, fo, window, w, io, src)
-        out[k] = arena.f[sl:sl + w]
+        out[k] = arena.f[sl : sl + w]
     return out, int(arena.i[io + 1])
 
 
@@ -48,11 +51,11 @@ def test_window_sums_equal_direct_sums_and_do_not_drift():
     got, count = _push_all(rows, window)
     assert count == window
     for k in (0, 5, window - 1, window, 1000, 4999):
-        direct = rows[max(0, k - window + 1):k + 1].sum(axis=0)
+        direct = rows[max(0, k - window + 1) : k + 1].sum(axis=0)
         np.testing.assert_allclose(got[k], direct, rtol=1e-12)
     # at the end of every block the sums are the block's own additions: exact
     k = 100 * window - 1
-    np.testing.assert_array_equal(got[k], np.cumsum(rows[k - window + 1:k + 1], axis=0)[-1])
+    np.testing.assert_array_equal(got[k], np.cumsum(rows[k - window + 1 : k + 1], axis=0)[-1])
 
 
 def test_solve_packed_kernel_is_the_float_path_bit_for_bit():
@@ -105,10 +108,18 @@ def test_chain_matches_the_reference_blocks(method):
     k = 1200
     sl = slice(k - N + 1, k + 1)
     g = np.column_stack([out.g1[sl], out.g2[sl]])
-    np.testing.assert_allclose(out.sums[k], [g[:, 0] @ g[:, 0], g[:, 0] @ g[:, 1],
-                                             g[:, 1] @ g[:, 1], g[:, 0] @ out.residual[sl],
-                                             g[:, 1] @ out.residual[sl],
-                                             out.residual[sl] @ out.residual[sl]], rtol=1e-9)
+    np.testing.assert_allclose(
+        out.sums[k],
+        [
+            g[:, 0] @ g[:, 0],
+            g[:, 0] @ g[:, 1],
+            g[:, 1] @ g[:, 1],
+            g[:, 0] @ out.residual[sl],
+            g[:, 1] @ out.residual[sl],
+            out.residual[sl] @ out.residual[sl],
+        ],
+        rtol=1e-9,
+    )
 
 
 def test_the_trusted_flag_matches_a_direct_computation():
@@ -126,8 +137,8 @@ def test_the_trusted_flag_matches_a_direct_computation():
     v = velocity_from_settings(model.velocity, model.fs).run(accel)
     low = lfilter(*butter(2, pl.trusted_from_hz, fs=model.fs), v)
     k = np.arange(N - 1, t.size)
-    low2 = np.array([low[i - N + 1:i + 1] @ low[i - N + 1:i + 1] for i in k])
-    v2 = np.array([v[i - N + 1:i + 1] @ v[i - N + 1:i + 1] for i in k])
+    low2 = np.array([low[i - N + 1 : i + 1] @ low[i - N + 1 : i + 1] for i in k])
+    v2 = np.array([v[i - N + 1 : i + 1] @ v[i - N + 1 : i + 1] for i in k])
     share = low2 / v2
     clear = np.abs(share - 0.3) > 1e-6
     np.testing.assert_array_equal(np.array(got)[k][clear], (share <= 0.3)[clear])
@@ -144,9 +155,17 @@ def _rig_model(method):
 def _stepped(monitor, cols):
     events, trace = [], []
     for k in range(len(cols["t"])):
-        events.extend(monitor.step(Sample(int(cols["seq"][k]), float(cols["t"][k]),
-                                          float(cols["v_in"][k]), float(cols["accel"][k]),
-                                          float(cols["position"][k]))))
+        events.extend(
+            monitor.step(
+                Sample(
+                    int(cols["seq"][k]),
+                    float(cols["t"][k]),
+                    float(cols["v_in"][k]),
+                    float(cols["accel"][k]),
+                    float(cols["position"][k]),
+                )
+            )
+        )
         det = monitor.detector
         trace.append((det.statistic, STATES.index(det.state), det.theta1, det.theta2))
     return events, np.array(trace)
@@ -213,9 +232,11 @@ def test_a_full_calibration_buffer_is_not_written_past_when_its_code_is_ignored(
     det = monitor.detector
     f, ii = monitor.arena.f, monitor.arena.i
     end = det.fo + K.E_CAL + 2 * det.calibration_samples
-    after = f[end:det.epo + 64].copy()
-    codes = [K.monitor_tick(f, ii, det.io, float(u), float(a), math.nan, 0.0)
-             for u, a in zip(rec.v_in, rec.accel)]
+    after = f[end : det.epo + 64].copy()
+    codes = [
+        K.monitor_tick(f, ii, det.io, float(u), float(a), math.nan, 0.0)
+        for u, a in zip(rec.v_in, rec.accel)
+    ]
     assert codes.count(K.CALIBRATED) > 100  # ignored again and again
     assert ii[det.io + K.D_CAL_COUNT] == det.calibration_samples
-    np.testing.assert_array_equal(f[end:det.epo + 64], after)
+    np.testing.assert_array_equal(f[end : det.epo + 64], after)

@@ -5,8 +5,8 @@ import math
 
 import numpy as np
 import pytest
-
 from conftest_detect import first_event, model_copy, scenario_recording, sim_rig_model
+
 from fdi_daemon.detect.detector import STATES
 from fdi_daemon.detect.monitor import Monitor
 from fdi_daemon.errors import ConfigError
@@ -16,8 +16,10 @@ from fdi_daemon.io.sample import Sample
 
 def _samples(rec):
     seq = rec.columns.get("seq", np.arange(len(rec)))
-    return [Sample(int(s), float(t), float(v), float(a))
-            for s, t, v, a in zip(seq, rec.t, rec.v_in, rec.accel)]
+    return [
+        Sample(int(s), float(t), float(v), float(a))
+        for s, t, v, a in zip(seq, rec.t, rec.v_in, rec.accel)
+    ]
 
 
 def _stepped(monitor, rec, thetas=None):
@@ -34,9 +36,10 @@ def _stepped(monitor, rec, thetas=None):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scenario,method", [("test_case_2", "sequential"),
-                                             ("fault_valve_gain", "sequential"),
-                                             ("test_case_1", "band")])
+@pytest.mark.parametrize(
+    "scenario,method",
+    [("test_case_2", "sequential"), ("fault_valve_gain", "sequential"), ("test_case_1", "band")],
+)
 def test_step_and_batch_give_the_same_events_and_statistic(scenario, method):
     rec = scenario_recording(scenario)
     model = model_copy(detector={"method": method})
@@ -75,25 +78,29 @@ def test_during_an_episode_theta_is_fitted_on_the_data_since_the_change():
     k_d = int(np.flatnonzero(trace.state == STATES.index("fault_detected"))[0])
 
     def direct(first, k):
-        g = np.column_stack([chain.g1[first:k + 1], chain.g2[first:k + 1]])
-        return np.linalg.lstsq(g, chain.residual[first:k + 1], rcond=None)[0]
+        g = np.column_stack([chain.g1[first : k + 1], chain.g2[first : k + 1]])
+        return np.linalg.lstsq(g, chain.residual[first : k + 1], rcond=None)[0]
 
     post = k_d - det.lag_samples + 1  # the newest lag rows at the detection start the fit
     settled = k_d + det.iso_samples + 1
-    for first, k in ((post, post + det.iso_samples - 1), (post, k_d + 100),
-                     (post, settled + det.iso_samples - 2),
-                     (settled, settled + det.iso_samples - 1),
-                     (settled, settled + det.window_samples - 1)):
-        np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]], direct(first, k),
-                                   rtol=1e-7)
+    for first, k in (
+        (post, post + det.iso_samples - 1),
+        (post, k_d + 100),
+        (post, settled + det.iso_samples - 2),
+        (settled, settled + det.iso_samples - 1),
+        (settled, settled + det.window_samples - 1),
+    ):
+        np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]], direct(first, k), rtol=1e-7)
     # before the isolation window is full: the sliding window's θ
     k = post + det.iso_samples - 2
-    np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]],
-                               direct(k - det.window_samples + 1, k), rtol=1e-7)
+    np.testing.assert_allclose(
+        [trace.theta1[k], trace.theta2[k]], direct(k - det.window_samples + 1, k), rtol=1e-7
+    )
     # a window later, the settled window is the sliding window
     k = settled + det.window_samples + 10
-    np.testing.assert_allclose([trace.theta1[k], trace.theta2[k]],
-                               direct(k - det.window_samples + 1, k), rtol=1e-7)
+    np.testing.assert_allclose(
+        [trace.theta1[k], trace.theta2[k]], direct(k - det.window_samples + 1, k), rtol=1e-7
+    )
 
 
 def test_bad_samples_and_gaps():
@@ -110,8 +117,10 @@ def test_bad_samples_and_gaps():
     ev_step, _, _ = _stepped(Monitor(model), gappy)
     assert events == ev_step
     bad = [e for e in events if e["kind"] == "bad_sample"]
-    assert [(e["count"], e["reason"]) for e in bad] == [(3, "accel not finite"),
-                                                        (1, "v_in not finite")]
+    assert [(e["count"], e["reason"]) for e in bad] == [
+        (3, "accel not finite"),
+        (1, "v_in not finite"),
+    ]
     assert bad[0]["t"] == pytest.approx(rec.t[300])
     gaps = [e for e in events if e["kind"] == "data_gap"]
     assert len(gaps) == 1 and gaps[0]["missing_samples"] == 10
@@ -133,8 +142,12 @@ def test_long_recordings_give_the_events_of_step_across_chunks(with_seq):
     keep[25_000:25_010] = False
     numbered = Recording({k: v[keep] for k, v in cols.items()}, dict(rec.meta))
     assert len(numbered) > 2 * 16384
-    rec = (numbered if with_seq else  # without seq the time column tells the gap
-           Recording({k: v for k, v in numbered.columns.items() if k != "seq"}, rec.meta))
+    rec = (
+        numbered
+        if with_seq
+        # without seq the time column tells the gap
+        else Recording({k: v for k, v in numbered.columns.items() if k != "seq"}, rec.meta)
+    )
     model = sim_rig_model()
     events, trace = Monitor(model).run(rec)
     ev_step, stat_step, _ = _stepped(Monitor(model), numbered)
@@ -144,8 +157,9 @@ def test_long_recordings_give_the_events_of_step_across_chunks(with_seq):
     assert kinds.count("data_gap") == 1 and kinds.count("bad_sample") == 1
 
 
-@pytest.mark.parametrize("defect", ["t", "v_in", "accel", "limit", "gap", "duplicate",
-                                    "seq_jump", "position"])
+@pytest.mark.parametrize(
+    "defect", ["t", "v_in", "accel", "limit", "gap", "duplicate", "seq_jump", "position"]
+)
 def test_a_chunk_with_any_defect_is_not_clean(defect):
     from fdi_daemon.detect.monitor import _NO_SEQ, _clean_chunk
 
@@ -154,8 +168,9 @@ def test_a_chunk_with_any_defect_is_not_clean(defect):
     v_in, accel, position = np.zeros(n), np.ones(n), np.zeros(n)
     seq = np.arange(n, dtype=np.int64) if defect == "seq_jump" else _NO_SEQ
     args = dict(needs_position=defect == "position", limit=10.0)
-    assert _clean_chunk(t, v_in, accel, position, args["needs_position"], 0, n,
-                        args["limit"], 256.0, seq, False)
+    assert _clean_chunk(
+        t, v_in, accel, position, args["needs_position"], 0, n, args["limit"], 256.0, seq, False
+    )
     if defect in ("t", "v_in", "accel", "position"):
         {"t": t, "v_in": v_in, "accel": accel, "position": position}[defect][30] = np.nan
     elif defect == "limit":
@@ -166,8 +181,9 @@ def test_a_chunk_with_any_defect_is_not_clean(defect):
         t[30] = t[29]
     else:
         seq[30:] += 1
-    assert not _clean_chunk(t, v_in, accel, position, args["needs_position"], 0, n,
-                            args["limit"], 256.0, seq, False)
+    assert not _clean_chunk(
+        t, v_in, accel, position, args["needs_position"], 0, n, args["limit"], 256.0, seq, False
+    )
 
 
 def test_duplicates_and_backwards_samples_are_dropped():
@@ -201,9 +217,20 @@ def test_snapshot_schema():
     rec = scenario_recording("test_case_2")
     mon.run(rec)
     snap = mon.snapshot()
-    assert set(snap) == {"state", "theta1", "theta2", "friction_level", "friction_level_spread",
-                         "baseline_level", "band", "signature",
-                         "residual_rms", "statistic", "threshold", "history"}
+    assert set(snap) == {
+        "state",
+        "theta1",
+        "theta2",
+        "friction_level",
+        "friction_level_spread",
+        "baseline_level",
+        "band",
+        "signature",
+        "residual_rms",
+        "statistic",
+        "threshold",
+        "history",
+    }
     assert snap["state"] in STATES
     assert snap["signature"] == [1.0, model.fault_filter.gamma_f]
     assert set(snap["band"]) == {"theta1", "theta2"}
@@ -231,8 +258,10 @@ def test_settings_of_another_tool_are_ignored_with_a_warning(caplog):
     them; a typo of a known key is still refused."""
     rec = scenario_recording("test_case_2")
     plain, _ = Monitor(sim_rig_model()).run(rec)
-    shared = model_copy(detector={"cusum_drift": 0.5, "threshold": 30.0},
-                        velocity={**sim_rig_model().velocity, "estimator": "kalman"})
+    shared = model_copy(
+        detector={"cusum_drift": 0.5, "threshold": 30.0},
+        velocity={**sim_rig_model().velocity, "estimator": "kalman"},
+    )
     with caplog.at_level("WARNING", logger="fdi.model"):
         events, _ = Monitor(shared).run(rec)
     assert events == plain
@@ -264,11 +293,20 @@ def test_quiet_on_a_fault_free_recording():
 def test_rig_at_rest_then_moving_raises_no_alarm():
     from hil_sim.scenarios import scenario_from_dict, simulate
 
-    rec = simulate(scenario_from_dict({
-        "name": "rest_then_sine", "duration_s": 20.0,
-        "excitation": [{"kind": "zero", "duration_s": 8.0},
-                       {"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0, "duration_s": 6.0},
-                       {"kind": "zero"}]}), seed=3)
+    rec = simulate(
+        scenario_from_dict(
+            {
+                "name": "rest_then_sine",
+                "duration_s": 20.0,
+                "excitation": [
+                    {"kind": "zero", "duration_s": 8.0},
+                    {"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0, "duration_s": 6.0},
+                    {"kind": "zero"},
+                ],
+            }
+        ),
+        seed=3,
+    )
     events, trace = Monitor(sim_rig_model()).run(rec)
     assert [e["kind"] for e in events] == ["calibrated"]
     at_rest = trace.t < 8.0

@@ -15,26 +15,33 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
-
 from conftest_detect import SCENARIOS
+
 from fdi_daemon.detect.monitor import Monitor
 
 FRICTION = [("test_case_1", 3.05, 1.5), ("test_case_2", 2.9, 0.7)]
-NON_FRICTION = ["fault_accel_bias", "fault_valve_gain", "fault_supply_pressure",
-                "fault_accel_dropout", "fault_accel_saturation"]
+NON_FRICTION = [
+    "fault_accel_bias",
+    "fault_valve_gain",
+    "fault_supply_pressure",
+    "fault_accel_dropout",
+    "fault_accel_saturation",
+]
 
 
 def rig_variant(index: int) -> dict[str, float]:
     """RigParams overrides of random rig variant ``index`` (seeded)."""
     rng = np.random.default_rng(1000 + index)
-    rig = {"bearing_mass_kg": rng.uniform(0.6, 1.8),
-           "viscous_damping_n_s_per_m": rng.uniform(25.0, 80.0),
-           "valve_bandwidth_hz": rng.uniform(8.0, 16.0),
-           "valve_gain_per_v": rng.uniform(0.22, 0.38),
-           "seal_coulomb_n": rng.uniform(0.03, 0.12),
-           "bearing_time_constant_s": rng.uniform(0.003, 0.02),
-           "bearing_mu_kinetic": rng.uniform(0.2, 0.35),
-           "force_noise_n": rng.uniform(0.02, 0.06)}
+    rig = {
+        "bearing_mass_kg": rng.uniform(0.6, 1.8),
+        "viscous_damping_n_s_per_m": rng.uniform(25.0, 80.0),
+        "valve_bandwidth_hz": rng.uniform(8.0, 16.0),
+        "valve_gain_per_v": rng.uniform(0.22, 0.38),
+        "seal_coulomb_n": rng.uniform(0.03, 0.12),
+        "bearing_time_constant_s": rng.uniform(0.003, 0.02),
+        "bearing_mu_kinetic": rng.uniform(0.2, 0.35),
+        "force_noise_n": rng.uniform(0.02, 0.06),
+    }
     rig["seal_static_n"] = 2.0 * rig["seal_coulomb_n"]
     rig["bearing_mu_static"] = 1.1 * rig["bearing_mu_kinetic"]
     return {key: float(value) for key, value in rig.items()}
@@ -58,20 +65,46 @@ def model_of(rig: dict, tmp):
     for name in ("ident_chirp", "ident_chirp_long", "signature_calibration"):
         write_recording(tmp / f"{name}.npz", record(rig, name))
     model = tmp / "model.yaml"
-    assert main(["identify", str(tmp / "ident_chirp.npz"), "-o", str(model),
-                 "--validate", str(tmp / "ident_chirp_long.npz")]) == 0
-    assert main(["signature", str(tmp / "signature_calibration.npz"), "--model", str(model),
-                 "--fault-window", "11:40", "-o", str(model)]) == 0
+    assert (
+        main(
+            [
+                "identify",
+                str(tmp / "ident_chirp.npz"),
+                "-o",
+                str(model),
+                "--validate",
+                str(tmp / "ident_chirp_long.npz"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "signature",
+                str(tmp / "signature_calibration.npz"),
+                "--model",
+                str(model),
+                "--fault-window",
+                "11:40",
+                "-o",
+                str(model),
+            ]
+        )
+        == 0
+    )
     return load_model(model)
 
 
 VARIANTS = range(8)
 #: (variant, test case) whose small friction fault the fast test does not see
 MISSED = {(4, "test_case_1"), (5, "test_case_1")}
-MISSED_WHY = ("light load (0.60 and 0.70 kg), low contact friction and a noisier residual "
-              "(σ_ref 0.077 m/s²): the statistic peaks at 24 and 19.5 against h = 30; the "
-              "level path raises the alarm 2.8 s after the fault, too late to isolate it "
-              "before the 6 s recording ends")
+MISSED_WHY = (
+    "light load (0.60 and 0.70 kg), low contact friction and a noisier residual "
+    "(σ_ref 0.077 m/s²): the statistic peaks at 24 and 19.5 against h = 30; the "
+    "level path raises the alarm 2.8 s after the fault, too late to isolate it "
+    "before the 6 s recording ends"
+)
 
 
 @pytest.fixture(scope="module")
@@ -81,9 +114,11 @@ def variant_model(tmp_path_factory):
 
     def get(variant: int):
         if variant not in models:
-            models[variant] = model_of(rig_variant(variant),
-                                       tmp_path_factory.mktemp(f"variant{variant}"))
+            models[variant] = model_of(
+                rig_variant(variant), tmp_path_factory.mktemp(f"variant{variant}")
+            )
         return models[variant]
+
     return get
 
 
@@ -92,10 +127,18 @@ def _kinds(model, rec):
     return [(e["kind"], e["t"]) for e in events if e["kind"] != "calibrated"]
 
 
-@pytest.mark.parametrize("variant,name,fault_s,isolate_s", [
-    pytest.param(v, name, fault_s, isolate_s, marks=pytest.mark.xfail(strict=True, reason=MISSED_WHY))
-    if (v, name) in MISSED else (v, name, fault_s, isolate_s)
-    for v in VARIANTS for name, fault_s, isolate_s in FRICTION])
+@pytest.mark.parametrize(
+    "variant,name,fault_s,isolate_s",
+    [
+        pytest.param(
+            v, name, fault_s, isolate_s, marks=pytest.mark.xfail(strict=True, reason=MISSED_WHY)
+        )
+        if (v, name) in MISSED
+        else (v, name, fault_s, isolate_s)
+        for v in VARIANTS
+        for name, fault_s, isolate_s in FRICTION
+    ],
+)
 def test_friction_is_detected_and_isolated(variant_model, variant, name, fault_s, isolate_s):
     """Detected within the default rig's delays (test case 1: 63 ms, the bearing touches down
     late; test case 2: the paper's 35 ms), isolated within the paper's tracking times."""
@@ -118,8 +161,7 @@ def test_no_other_fault_is_called_friction(variant_model, variant):
 
 
 @pytest.mark.parametrize("name", NON_FRICTION)
-def test_on_variant_1_every_other_fault_is_detected_and_isolated_as_other(variant_model,
-                                                                          name):
+def test_on_variant_1_every_other_fault_is_detected_and_isolated_as_other(variant_model, name):
     kinds = _kinds(variant_model(1), record(rig_variant(1), name))
     assert [k for k, _ in kinds] == ["fault_detected", "other_fault"]
     assert kinds[0][1] >= 4.0
@@ -129,5 +171,6 @@ def test_on_variant_1_every_other_fault_is_detected_and_isolated_as_other(varian
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_fault_free_changing_operation_raises_no_alarm(variant_model, variant):
     """10 minutes of the changing-operation scenario on every variant."""
-    assert _kinds(variant_model(variant),
-                  record(rig_variant(variant), "fault_free_hour", 600.0)) == []
+    assert (
+        _kinds(variant_model(variant), record(rig_variant(variant), "fault_free_hour", 600.0)) == []
+    )

@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from conftest_detect import msd_system
 from scipy.signal import lfilter
 
-from conftest_detect import msd_system
 from fdi_daemon.core.velocity import VelocityEstimator
 from fdi_daemon.core.window_ls import solve_sums
 from fdi_daemon.detect.pipeline import Pipeline
@@ -33,8 +33,9 @@ def test_batch_matches_references(system):
     sol = solve_sums(out.sums, out.counts, N, 1e-6, (0.0, 0.0))
     for k in (N - 1, 700, 1000, 1535):
         sl = slice(k - N + 1, k + 1)
-        ref = np.linalg.lstsq(np.column_stack([out.g1[sl], out.g2[sl]]), out.residual[sl],
-                              rcond=None)[0]
+        ref = np.linalg.lstsq(
+            np.column_stack([out.g1[sl], out.g2[sl]]), out.residual[sl], rcond=None
+        )[0]
         np.testing.assert_allclose([sol.theta1[k], sol.theta2[k]], ref, rtol=1e-8)
 
 
@@ -83,8 +84,7 @@ def test_step_run_and_chunks_agree(system, observer):
     got = []
     for v, a in zip(v_in.tolist(), accel.tolist()):
         one.step(v, a)
-        got.append((one.xhat, one.residual, one.v, one.g1, one.g2, one.wls.theta1,
-                    one.wls.theta2))
+        got.append((one.xhat, one.residual, one.v, one.g1, one.g2, one.wls.theta1, one.wls.theta2))
     got = np.array(got)
     for col, name in enumerate(("xhat", "residual", "velocity", "g1", "g2")):
         np.testing.assert_allclose(got[:, col], getattr(ref, name), rtol=1e-12, atol=1e-13)
@@ -94,8 +94,9 @@ def test_step_run_and_chunks_agree(system, observer):
     cuts = np.sort(rng.choice(np.arange(1, v_in.size), 30, replace=False))
     chunked = Pipeline(model, N)
     parts = [chunked.run(v_in[idx], accel[idx]) for idx in np.split(np.arange(v_in.size), cuts)]
-    np.testing.assert_allclose(np.concatenate([p.g1 for p in parts]), ref.g1, rtol=1e-12,
-                               atol=1e-13)
+    np.testing.assert_allclose(
+        np.concatenate([p.g1 for p in parts]), ref.g1, rtol=1e-12, atol=1e-13
+    )
     np.testing.assert_array_equal(np.concatenate([p.sums for p in parts]), ref.sums)
 
 
@@ -196,9 +197,17 @@ def test_a_missing_position_is_a_bad_sample_in_step_and_batch():
     one = Monitor(model)
     stepped = []
     for k in range(len(rec)):
-        stepped.extend(one.step(Sample(int(cols["seq"][k]), float(cols["t"][k]),
-                                       float(cols["v_in"][k]), float(cols["accel"][k]),
-                                       float(cols["position"][k]))))
+        stepped.extend(
+            one.step(
+                Sample(
+                    int(cols["seq"][k]),
+                    float(cols["t"][k]),
+                    float(cols["v_in"][k]),
+                    float(cols["accel"][k]),
+                    float(cols["position"][k]),
+                )
+            )
+        )
     stepped.extend(one.finish())
     assert [(e["kind"], e["t"]) for e in stepped] == [(e["kind"], e["t"]) for e in events]
 
@@ -223,7 +232,7 @@ def _clipped_reference(accel, run, window):
         found = first + run - 1
         before = previous.get(accel[first] > 0)
         if before is not None and accel[first] == accel[before] and found - before <= window:
-            last_clip[found:last + 1] = np.arange(found, last + 1)
+            last_clip[found : last + 1] = np.arange(found, last + 1)
         previous[accel[first] > 0] = last
     return np.arange(accel.size) - np.maximum.accumulate(last_clip) < window
 
@@ -238,7 +247,7 @@ def test_a_recurring_flat_top_is_the_accelerometers_rail_not_a_quantised_peak(sy
     model, _ = system
     rng = np.random.default_rng(11)
     t = np.arange(20 * 256) / 256.0
-    lsb = 2 ** -8
+    lsb = 2**-8
     wave = 3.0 * np.sin(2 * np.pi * 0.7 * t) + 0.0005 * rng.standard_normal(t.size)
     quantised = np.round(wave / lsb) * lsb
     assert len(_flat_tops(quantised, CLIP_RUN)) >= 5  # the test has something to refuse
@@ -254,4 +263,4 @@ def test_a_recurring_flat_top_is_the_accelerometers_rail_not_a_quantised_peak(sy
         reference = _clipped_reference(accel, CLIP_RUN, N)
         np.testing.assert_array_equal(flags, reference)
         assert reference.any() == expect_any
-    assert not reference[: 5 * 256].any() and reference[6 * 256:].mean() > 0.9
+    assert not reference[: 5 * 256].any() and reference[6 * 256 :].mean() > 0.9

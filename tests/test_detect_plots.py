@@ -6,8 +6,8 @@ from __future__ import annotations
 import matplotlib.patches as mpatches
 import numpy as np
 import pytest
-
 from conftest_detect import scenario_recording, sim_rig_model
+
 from fdi_daemon.detect.monitor import Monitor
 from fdi_daemon.detect.plots import CALIBRATION_NOTE, replay_figure
 from fdi_daemon.io.recordings import Recording
@@ -51,15 +51,19 @@ def test_calibration_period_gaps_and_band_are_marked(test_case_2):
     (cal,) = [e for e in events if e["kind"] == "calibrated"]
     (gap,) = [e for e in events if e["kind"] == "data_gap"]
     onset = float(rec.t[np.flatnonzero(rec["fault_active"] > 0.5)[0]])
-    fig = replay_figure(trace, events, monitor.gamma_f, monitor.detector.band,
-                        monitor.detector.threshold, onset)
+    fig = replay_figure(
+        trace, events, monitor.gamma_f, monitor.detector.band, monitor.detector.threshold, onset
+    )
     ax_a, ax_1, ax_2 = fig.axes[:3]
     found = spans(ax_a)
     period = 1 / 256
-    assert any(abs(x0 - (cal["t"] - cal["samples"] * period)) < 1e-6
-               and abs(x1 - cal["t"]) < 1e-6 for x0, x1 in found), found
-    assert any(abs(x0 - (gap["t"] - 11 * period)) < 1e-6 and abs(x1 - gap["t"]) < 1e-6
-               for x0, x1 in found), found
+    assert any(
+        abs(x0 - (cal["t"] - cal["samples"] * period)) < 1e-6 and abs(x1 - cal["t"]) < 1e-6
+        for x0, x1 in found
+    ), found
+    assert any(
+        abs(x0 - (gap["t"] - 11 * period)) < 1e-6 and abs(x1 - gap["t"]) < 1e-6 for x0, x1 in found
+    ), found
     labels = ax_a.get_legend().get_texts()
     assert {"calibration (learnt as normal)", "data gap"} <= {t.get_text() for t in labels}
     for ax, key in ((ax_1, "theta1"), (ax_2, "theta2")):
@@ -79,7 +83,9 @@ def test_a_fault_present_during_calibration_is_explained():
     onset = 0.3  # pretend: the ground truth says the fault was there from 0.3 s
     monitor, events, trace = replay(rec)
     assert not [e for e in events if e["kind"] == "fault_detected" and e["t"] < 2.9]
-    fig = replay_figure(trace, events, monitor.gamma_f, monitor.detector.band,
-                        monitor.detector.threshold, onset)
-    assert "calibrated on these data: a fault present here is learnt as normal" in \
-        text_of(fig).replace("\n", " ")
+    fig = replay_figure(
+        trace, events, monitor.gamma_f, monitor.detector.band, monitor.detector.threshold, onset
+    )
+    assert "calibrated on these data: a fault present here is learnt as normal" in text_of(
+        fig
+    ).replace("\n", " ")

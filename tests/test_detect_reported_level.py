@@ -4,8 +4,8 @@ numpy, and in the monitor (where the level is valid, a restart at an episode's s
 import math
 
 import numpy as np
-
 from conftest_detect import scenario_recording, sim_rig_model
+
 from fdi_daemon.core.compiled import Arena
 from fdi_daemon.detect.friction_level import FrictionLevel, level_restart, level_tick
 from fdi_daemon.detect.monitor import Monitor
@@ -51,8 +51,9 @@ def test_level_and_spread_match_a_direct_computation():
             level_restart(arena.f, arena.i, block.io)
         level_tick(arena.f, arena.i, block.io, float(theta1[k]), bool(valid[k]))
         got[k] = block.level, block.spread
-    level, spread = _reference(theta1, valid, block.pick_samples, block.capacity, restart,
-                               block.settle_samples)
+    level, spread = _reference(
+        theta1, valid, block.pick_samples, block.capacity, restart, block.settle_samples
+    )
     assert block.pick_samples == 64 and block.capacity == 40
     np.testing.assert_array_equal(got[:, 0], level)
     np.testing.assert_array_equal(got[:, 1], spread)
@@ -107,8 +108,9 @@ def test_the_monitor_reports_the_level_of_a_fault_from_its_own_picks():
     before = trace.friction_level[(trace.t > 2.0) & (trace.t < 2.9)]
     after = trace.friction_level[trace.t > isolated + 1.0]
     batch = Pipeline(model, 256).run(rec.v_in, rec.accel)
-    direct = _window_levels(batch.g1, batch.g2, batch.residual, model.fault_filter.gamma_f,
-                            256)[rec.t > isolated + 1.0]
+    direct = _window_levels(batch.g1, batch.g2, batch.residual, model.fault_filter.gamma_f, 256)[
+        rec.t > isolated + 1.0
+    ]
     assert np.all(np.abs(before[np.isfinite(before)]) < 0.2)
     assert np.isfinite(after).all()
     assert abs(np.median(after) / np.median(direct) - 1) < 0.05
@@ -124,8 +126,11 @@ def test_events_and_the_replay_summary_carry_the_reported_level_not_theta1(tmp_p
     rec = scenario_recording("test_case_2")
     write_recording(tmp_path / "tc2.npz", rec)
     save_model(tmp_path / "model.yaml", sim_rig_model())
-    replay = replay_recording(tmp_path / "tc2.npz", tmp_path / "model.yaml",
-                              runner=lambda monitor, r, stride: monitor.run(r, trace_every=1))
+    replay = replay_recording(
+        tmp_path / "tc2.npz",
+        tmp_path / "model.yaml",
+        runner=lambda monitor, r, stride: monitor.run(r, trace_every=1),
+    )
     trace = replay.trace
     decided = [e for e in replay.events if e["kind"] in ("fault_detected", "friction_isolated")]
     assert [e["kind"] for e in decided] == ["fault_detected", "friction_isolated"]
@@ -154,7 +159,10 @@ def test_the_level_direction_is_the_gamma_that_g_e_was_fitted_at():
     unidentified = replace(model, fault_filter=replace(model.fault_filter, gamma_f=None))
     unidentified.provenance = {"signature": {"gamma_at_least_cost": 10.0}}
     assert Pipeline(unidentified, 256).signature_gamma == 10.0
-    for provenance in ({}, {"signature": {"gamma_at_least_cost": "ten"}},
-                       {"signature": {"gamma_at_least_cost": float("nan")}}):
+    for provenance in (
+        {},
+        {"signature": {"gamma_at_least_cost": "ten"}},
+        {"signature": {"gamma_at_least_cost": float("nan")}},
+    ):
         unidentified.provenance = provenance
         assert Pipeline(unidentified, 256).signature_gamma == 0.0

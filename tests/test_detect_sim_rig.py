@@ -6,15 +6,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest_detect import MODEL, SCENARIOS, first_event, scenario_recording, sim_rig_model
+
 from fdi_daemon.detect.monitor import Monitor
 from fdi_daemon.detect.settings import DetectorSettings
 
 #: (scenario, fault time in the scenario (s), detection target (s), isolation target (s))
 TEST_CASES = [("test_case_1", 3.05, 0.015, 1.5), ("test_case_2", 2.9, 0.035, 0.7)]
-OTHER_FAULTS = ["fault_accel_bias", "fault_valve_gain", "fault_supply_pressure",
-                "fault_accel_dropout", "fault_accel_saturation"]
+OTHER_FAULTS = [
+    "fault_accel_bias",
+    "fault_valve_gain",
+    "fault_supply_pressure",
+    "fault_accel_dropout",
+    "fault_accel_saturation",
+]
 
 
 def _replay(name, **kwargs):
@@ -38,17 +43,21 @@ def test_test_case_2_detected_within_35_ms():
     assert first_event(events, "fault_detected")["t"] - 2.9 <= 0.035
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "measured 63 ms after the 3.05 s event: the bearing touches down at +16 ms, but the "
-    "friction's residual during the sliding half-cycle fades within ~20 ms (the plant's "
-    "stiffness) and lifts the statistic to ~12 only; it crosses h = 30 at the first velocity "
-    "reversal under friction, +59 ms (also on rig variants with contact at +4 ms)"))
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "measured 63 ms after the 3.05 s event: the bearing touches down at +16 ms, but the "
+        "friction's residual during the sliding half-cycle fades within ~20 ms (the plant's "
+        "stiffness) and lifts the statistic to ~12 only; it crosses h = 30 at the first velocity "
+        "reversal under friction, +59 ms (also on rig variants with contact at +4 ms)"
+    ),
+)
 def test_test_case_1_detected_within_15_ms():
     events, _ = _replay("test_case_1")
     assert first_event(events, "fault_detected")["t"] - 3.05 <= 0.015
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def own_signature(name, fault_s, tmp):
     """The paper's §IV-B procedure: G_e and γ_f fitted on a recording of the same input and
     fault (another seed, 20 s, the fault window from 1.1 s after the fault) with
@@ -61,8 +70,21 @@ def own_signature(name, fault_s, tmp):
     rec = simulate(load_scenario(SCENARIOS / f"{name}.yaml"), seed=1, duration_s=20.0)
     path, model_path = Path(tmp) / f"{name}.npz", Path(tmp) / f"{name}.yaml"
     write_recording(path, rec)
-    assert main(["signature", str(path), "--model", str(MODEL), "--fault-window",
-                 f"{fault_s + 1.1}:20", "-o", str(model_path)]) == 0
+    assert (
+        main(
+            [
+                "signature",
+                str(path),
+                "--model",
+                str(MODEL),
+                "--fault-window",
+                f"{fault_s + 1.1}:20",
+                "-o",
+                str(model_path),
+            ]
+        )
+        == 0
+    )
     model = load_model(model_path)
     return model, Monitor(model).run(scenario_recording(name))[1]
 
@@ -76,17 +98,24 @@ def test_theta1_of_test_case_1_settles_on_its_own_signature(tmp_path_factory):
     assert np.all(np.abs(trace.theta1[k:] - 1.0) <= 0.15)
 
 
-CASE_1_THETA2 = pytest.mark.xfail(strict=True, reason=(
-    "case 1: θ1 is within ±1.1 % of 1 from +1.5 s, but θ2 ranges over 0.56-1.02 against "
-    "γ_f = 0.80 (29 % off): under a single 8 Hz sine g1 and g2 are nearly collinear, the γ "
-    "profile of the signature is flat (γ_f is arbitrary) and θ2 moves along the "
-    "least-squares valley"))
+CASE_1_THETA2 = pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "case 1: θ1 is within ±1.1 % of 1 from +1.5 s, but θ2 ranges over 0.56-1.02 against "
+        "γ_f = 0.80 (29 % off): under a single 8 Hz sine g1 and g2 are nearly collinear, the γ "
+        "profile of the signature is flat (γ_f is arbitrary) and θ2 moves along the "
+        "least-squares valley"
+    ),
+)
 
 
-@pytest.mark.parametrize("name,fault_s,_detect,isolate_s", [
-    pytest.param(*TEST_CASES[0], marks=CASE_1_THETA2), TEST_CASES[1]])
-def test_theta_tracks_the_signature_within_15_percent(name, fault_s, _detect, isolate_s,
-                                                      tmp_path_factory):
+@pytest.mark.parametrize(
+    "name,fault_s,_detect,isolate_s",
+    [pytest.param(*TEST_CASES[0], marks=CASE_1_THETA2), TEST_CASES[1]],
+)
+def test_theta_tracks_the_signature_within_15_percent(
+    name, fault_s, _detect, isolate_s, tmp_path_factory
+):
     """The paper's tracking target, against a signature calibrated on another recording of
     the same input and fault (§IV-B): from the tracking time on, θ within ±15 % of (1, γ_f)."""
     model, trace = own_signature(name, fault_s, tmp_path_factory.getbasetemp())
@@ -146,17 +175,32 @@ SINE = {"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0}
 
 
 def test_friction_that_starts_while_the_guard_holds_is_found_by_the_level_path():
-    events = _scenario({"name": "guard", "duration_s": 14.0, "excitation": [
-        {"kind": "sine", "amplitude_v": 1.0, "frequency_hz": 6.0, "duration_s": 6.0}, SINE],
-        "events": [{"t_s": 6.3, "bearing_supply": 0.45}]})
+    events = _scenario(
+        {
+            "name": "guard",
+            "duration_s": 14.0,
+            "excitation": [
+                {"kind": "sine", "amplitude_v": 1.0, "frequency_hz": 6.0, "duration_s": 6.0},
+                SINE,
+            ],
+            "events": [{"t_s": 6.3, "bearing_supply": 0.45}],
+        }
+    )
     assert _kinds(events) == ["fault_detected", "friction_isolated"]
     assert events[1]["path"] == "level" and 6.3 < events[1]["t"] < 6.3 + 2.0 + 1.5
 
 
 def test_creeping_friction_is_found_by_the_level_path():
-    events = _scenario({"name": "creep", "duration_s": 90.0, "excitation": [SINE],
-                        "drift": {"bearing_supply": {"times_s": [0, 10, 80, 90],
-                                                     "values": [1.0, 1.0, 0.3, 0.3]}}})
+    events = _scenario(
+        {
+            "name": "creep",
+            "duration_s": 90.0,
+            "excitation": [SINE],
+            "drift": {
+                "bearing_supply": {"times_s": [0, 10, 80, 90], "values": [1.0, 1.0, 0.3, 0.3]}
+            },
+        }
+    )
     assert _kinds(events) == ["fault_detected", "friction_isolated"]
     assert events[1]["path"] == "level"
 
@@ -166,32 +210,67 @@ def test_friction_that_grows_after_the_isolation_timeout_turns_other_fault_into_
     multisine: the alarm comes 1.1 s after the ramp starts, while the Coulomb increase is
     still below friction_min_level, so the timeout says other_fault; the evidence follows
     and the episode becomes friction (one episode)."""
-    events = _scenario({"name": "ramp", "duration_s": 12.0, "excitation": [
-        {"kind": "multisine", "amplitudes_v": [0.6, 0.6, 0.6],
-         "frequencies_hz": [3.3, 5.0, 8.0]}],
-        "drift": {"bearing_supply": {"times_s": [0, 5, 6, 12], "values": [1.0, 1.0, 0.65, 0.65]}}})
+    events = _scenario(
+        {
+            "name": "ramp",
+            "duration_s": 12.0,
+            "excitation": [
+                {
+                    "kind": "multisine",
+                    "amplitudes_v": [0.6, 0.6, 0.6],
+                    "frequencies_hz": [3.3, 5.0, 8.0],
+                }
+            ],
+            "drift": {
+                "bearing_supply": {"times_s": [0, 5, 6, 12], "values": [1.0, 1.0, 0.65, 0.65]}
+            },
+        }
+    )
     assert _kinds(events) == ["fault_detected", "other_fault", "friction_isolated"]
     assert 5.0 < events[1]["t"] < 6.5 and events[3]["t"] < 9.0
 
 
 @pytest.mark.slow
 def test_persistent_friction_under_changing_operation_is_one_episode():
-    events = _scenario({"name": "changing", "duration_s": 200.0, "excitation": [
-        {"kind": "random", "amplitude_v": [0.3, 1.6], "frequency_hz": [1.0, 12.0],
-         "segment_s": [5.0, 60.0]}], "events": [{"t_s": 120.0, "bearing_supply": 0.3}]})
+    events = _scenario(
+        {
+            "name": "changing",
+            "duration_s": 200.0,
+            "excitation": [
+                {
+                    "kind": "random",
+                    "amplitude_v": [0.3, 1.6],
+                    "frequency_hz": [1.0, 12.0],
+                    "segment_s": [5.0, 60.0],
+                }
+            ],
+            "events": [{"t_s": 120.0, "bearing_supply": 0.3}],
+        }
+    )
     assert _kinds(events) == ["fault_detected", "friction_isolated"]
     assert 120.0 <= events[1]["t"] < 120.2
 
 
-@pytest.mark.parametrize("fault,kind", [({"bearing_supply": 0.0}, "friction_isolated"),
-                                        ({"fault": "valve_gain", "value": 0.6}, "other_fault")])
+@pytest.mark.parametrize(
+    "fault,kind",
+    [
+        ({"bearing_supply": 0.0}, "friction_isolated"),
+        ({"fault": "valve_gain", "value": 0.6}, "other_fault"),
+    ],
+)
 def test_cleared_when_the_fault_goes_away(fault, kind):
     """Cleared once the fault has been gone for friction_clear_s (friction) or clear_s."""
     defaults = DetectorSettings()
     hold = defaults.friction_clear_s if kind == "friction_isolated" else defaults.clear_s
     off = {"bearing_supply": 1.0} if "bearing_supply" in fault else {**fault, "value": 1.0}
-    events = _scenario({"name": "onoff", "duration_s": 8.0 + hold + 6.0, "excitation": [SINE],
-                        "events": [{"t_s": 4.0, **fault}, {"t_s": 8.0, **off}]})
+    events = _scenario(
+        {
+            "name": "onoff",
+            "duration_s": 8.0 + hold + 6.0,
+            "excitation": [SINE],
+            "events": [{"t_s": 4.0, **fault}, {"t_s": 8.0, **off}],
+        }
+    )
     assert _kinds(events) == ["fault_detected", kind, "cleared"]
     assert 8.0 + hold < events[-1]["t"] < 8.0 + hold + 3.5
 
@@ -200,8 +279,9 @@ def test_a_steady_fault_is_not_cleared_where_the_high_pass_level_vanishes():
     """The shipped (high-pass) model under changing operation: at 1.5-3.7 Hz θ1 reads 0.05
     of the fault, but the residual against the pre-fault reference still shows it, so the
     episode stays open (before, it was cleared at 100 s and raised again at 109.5 s)."""
-    events = Monitor(sim_rig_model()).run(
-        scenario_recording("steady_friction_changing_operation"))[0]
+    events = Monitor(sim_rig_model()).run(scenario_recording("steady_friction_changing_operation"))[
+        0
+    ]
     assert _kinds(events) == ["fault_detected", "friction_isolated"]
 
 
@@ -210,45 +290,89 @@ def test_friction_removed_under_changing_operation_is_cleared(supply):
     """Friction from 30 s to 90 s under random 1-9 Hz operation: the frozen reference was
     fitted on other operation than the one after the fault, and still clears it."""
     hold = DetectorSettings().friction_clear_s
-    events = _scenario({"name": "removed", "duration_s": 90.0 + hold + 10.0, "excitation": [
-        {"kind": "random", "amplitude_v": [0.8, 1.6], "frequency_hz": [1.0, 9.0],
-         "segment_s": [5.0, 40.0]}], "events": [{"t_s": 30.0, "bearing_supply": supply},
-                                                {"t_s": 90.0, "bearing_supply": 1.0}]},
-        seed=0)
+    events = _scenario(
+        {
+            "name": "removed",
+            "duration_s": 90.0 + hold + 10.0,
+            "excitation": [
+                {
+                    "kind": "random",
+                    "amplitude_v": [0.8, 1.6],
+                    "frequency_hz": [1.0, 9.0],
+                    "segment_s": [5.0, 40.0],
+                }
+            ],
+            "events": [
+                {"t_s": 30.0, "bearing_supply": supply},
+                {"t_s": 90.0, "bearing_supply": 1.0},
+            ],
+        },
+        seed=0,
+    )
     kinds = _kinds(events)
     assert kinds[0] == "fault_detected" and "friction_isolated" in kinds
     assert kinds[-1] == "cleared" and kinds.count("cleared") == 1
     assert 90.0 + hold < events[-1]["t"] < 90.0 + hold + 3.0
 
 
-@pytest.mark.parametrize("fault,kind", [({"bearing_supply": 0.35}, "friction_isolated"),
-                                        ({"fault": "accel_dropout", "value": 1.0},
-                                         "other_fault")])
+@pytest.mark.parametrize(
+    "fault,kind",
+    [
+        ({"bearing_supply": 0.35}, "friction_isolated"),
+        ({"fault": "accel_dropout", "value": 1.0}, "other_fault"),
+    ],
+)
 def test_a_fault_is_not_cleared_while_the_rig_rests(fault, kind):
     """Start-stop operation (8 Hz bursts of 5 s, 3 s at rest): at rest nothing shows the
     fault, nor its absence, so the episode stays open through the rests. Before, the
     friction episode was cleared 2 s into the first rest and found again after it."""
     burst = [{**SINE, "duration_s": 5.0}, {"kind": "zero", "duration_s": 3.0}]
-    events = _scenario({"name": "bursts", "duration_s": 40.0, "excitation": burst * 5,
-                        "events": [{"t_s": 10.0, **fault}]})
+    events = _scenario(
+        {
+            "name": "bursts",
+            "duration_s": 40.0,
+            "excitation": burst * 5,
+            "events": [{"t_s": 10.0, **fault}],
+        }
+    )
     assert _kinds(events) == ["fault_detected", kind]
     assert 10.0 <= events[1]["t"] < 10.1
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("excitation", [
-    [{"kind": "steps", "levels_v": [1.0, -1.0], "hold_s": 0.25, "duration_s": 300.0}],
-    [{"kind": "steps", "levels_v": [0.8, -0.8], "hold_s": 1.0, "duration_s": 300.0}],
-    [{"kind": "steps", "levels_v": [0.3, -0.5, 0.9, -0.2, 0.6, -1.0, 0.1], "hold_s": 0.4,
-      "duration_s": 300.0}],
-    [{**SINE, "duration_s": 5.0}, {"kind": "zero", "duration_s": 3.0}] * 30,
-    [{"kind": "sine", "amplitude_v": 0.6, "frequency_hz": 6.0, "duration_s": 7.0},
-     {"kind": "zero", "duration_s": 2.0}] * 30,
-], ids=["square_2hz", "square_0.5hz", "random_steps", "bursts_8hz", "bursts_6hz_low"])
+@pytest.mark.parametrize(
+    "excitation",
+    [
+        [{"kind": "steps", "levels_v": [1.0, -1.0], "hold_s": 0.25, "duration_s": 300.0}],
+        [{"kind": "steps", "levels_v": [0.8, -0.8], "hold_s": 1.0, "duration_s": 300.0}],
+        [
+            {
+                "kind": "steps",
+                "levels_v": [0.3, -0.5, 0.9, -0.2, 0.6, -1.0, 0.1],
+                "hold_s": 0.4,
+                "duration_s": 300.0,
+            }
+        ],
+        [{**SINE, "duration_s": 5.0}, {"kind": "zero", "duration_s": 3.0}] * 30,
+        [
+            {"kind": "sine", "amplitude_v": 0.6, "frequency_hz": 6.0, "duration_s": 7.0},
+            {"kind": "zero", "duration_s": 2.0},
+        ]
+        * 30,
+    ],
+    ids=["square_2hz", "square_0.5hz", "random_steps", "bursts_8hz", "bursts_6hz_low"],
+)
 def test_operation_unlike_the_fault_free_hour_raises_no_alarm(excitation):
     """Fault-free regimes the detector was not tuned on (the fault-free hour holds sines,
     multisines and chirps only): square waves, level steps, start-stop bursts; 4-5 min each."""
     duration = sum(segment["duration_s"] for segment in excitation)
-    events = _scenario({"name": "unseen", "duration_s": duration,
-                        "centring_gain_v_per_m": 30.0, "excitation": excitation}, seed=0)
+    events = _scenario(
+        {
+            "name": "unseen",
+            "duration_s": duration,
+            "centring_gain_v_per_m": 30.0,
+            "excitation": excitation,
+        },
+        seed=0,
+    )
     assert _kinds(events) == []

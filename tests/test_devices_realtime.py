@@ -7,12 +7,21 @@ from hil_sim.devices.realtime import ScheduledFault, realtime_rig
 from hil_sim.scenarios import scenario_from_dict, simulate
 
 SCENARIO = {
-    "duration_s": 3.0, "centring_gain_v_per_m": 30.0,
-    "excitation": [{"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0, "duration_s": 1.0},
-                   {"kind": "random", "amplitude_v": [0.5, 1.5], "frequency_hz": [2, 10],
-                    "segment_s": [0.3, 0.8]}],
-    "events": [{"t_s": 1.2, "bearing_supply": 0.4}, {"t_s": 2.0, "fault": "accel_bias",
-                                                     "value": 0.5}],
+    "duration_s": 3.0,
+    "centring_gain_v_per_m": 30.0,
+    "excitation": [
+        {"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0, "duration_s": 1.0},
+        {
+            "kind": "random",
+            "amplitude_v": [0.5, 1.5],
+            "frequency_hz": [2, 10],
+            "segment_s": [0.3, 0.8],
+        },
+    ],
+    "events": [
+        {"t_s": 1.2, "bearing_supply": 0.4},
+        {"t_s": 2.0, "fault": "accel_bias", "value": 0.5},
+    ],
 }
 
 

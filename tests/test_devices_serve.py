@@ -23,7 +23,11 @@ class Served:
     def __init__(self, *args):
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "fdi_daemon", "sim", "serve", *args],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         self.lines: queue.Queue[str] = queue.Queue()
         threading.Thread(target=self._pump, daemon=True).start()
         self.where = self.line(timeout_s=30.0)
@@ -93,15 +97,17 @@ def test_serve_modbus_tcp_on_a_free_port_with_fault_registers():
     try:
         host, port = dev.where.rsplit(":", 1)
         assert host == "127.0.0.1" and int(port) > 0
-        link = make_link({"kind": "modbus-tcp", "host": host, "port": int(port),
-                          "word_order": "little"})
+        link = make_link(
+            {"kind": "modbus-tcp", "host": host, "port": int(port), "word_order": "little"}
+        )
         link.open()
         assert len(read_n(link, 30)) >= 30
         link.close()
         client = ModbusTcpClient(host, port=int(port))
         client.connect()
-        client.write_registers(mm.FAULT_REGISTERS["bearing_supply"][0],
-                               mm.encode_f32(0.25, "little"), device_id=1)
+        client.write_registers(
+            mm.FAULT_REGISTERS["bearing_supply"][0], mm.encode_f32(0.25, "little"), device_id=1
+        )
         status = dev.command({"status": True})["status"]
         assert status["faults"]["bearing_supply"] == pytest.approx(0.25, rel=1e-7)
         # the device's tick clock is this machine's monotonic clock
@@ -129,8 +135,12 @@ def test_serve_modbus_rtu_keeps_a_symlink_and_stops_on_sigint(tmp_path):
 
 
 def test_serve_rejects_a_bad_address_in_one_line():
-    proc = subprocess.run([sys.executable, "-m", "fdi_daemon", "sim", "serve", "--modbus-tcp",
-                           "localhost"], capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "fdi_daemon", "sim", "serve", "--modbus-tcp", "localhost"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "HOST:PORT" in proc.stderr
 
@@ -138,13 +148,17 @@ def test_serve_rejects_a_bad_address_in_one_line():
 def test_serve_names_a_link_in_a_missing_directory(tmp_path):
     """It said "[Errno 2] No such file or directory: '/dev/pts/3' -> '.../link.tmp123'"."""
     link = tmp_path / "no" / "rig"
-    proc = subprocess.run([sys.executable, "-m", "fdi_daemon", "sim", "serve", "--serial",
-                           "--link", str(link)], capture_output=True, text=True, timeout=60,
-                          stdin=subprocess.DEVNULL)
+    proc = subprocess.run(
+        [sys.executable, "-m", "fdi_daemon", "sim", "serve", "--serial", "--link", str(link)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+    )
     assert proc.returncode == 2
     assert proc.stderr.splitlines() == [
-        f"fdi sim: error: --link {link}: cannot write there: directory {link.parent} does "
-        f"not exist"]
+        f"fdi sim: error: --link {link}: cannot write there: directory {link.parent} does not exist"
+    ]
 
 
 @pytest.mark.slow
@@ -152,14 +166,12 @@ def test_link_measurement_tool_reports_every_transport(tmp_path):
     from hil_sim.devices import measure
 
     out = tmp_path / "links.json"
-    assert measure.main(["--seconds", "0.5", "--decoder-frames", "2000",
-                         "--json", str(out)]) == 0
+    assert measure.main(["--seconds", "0.5", "--decoder-frames", "2000", "--json", str(out)]) == 0
     figures = json.loads(out.read_text())
     for kind in ("modbus-tcp", "modbus-rtu", "serial"):
         assert figures[kind]["samples_per_s"] > 0
         assert figures[kind]["latency_ms"]["p50"] <= figures[kind]["latency_ms"]["max"]
     assert figures["serial_decoder_frames_per_s"] > 0
-
 
 
 @pytest.mark.parametrize("transport", ["modbus-tcp", "modbus-rtu"])

@@ -24,18 +24,31 @@ def _plant(kind: str = "acceleration") -> AugmentedPlant:
     np.testing.assert_allclose(a_force, a)
     path = AugmentedPlant(FS, b_force, a, kind, 0.2)
     b_path = np.zeros(len(path.a_dom))
-    b_path[:len(path.b_dom)] = path.b_dom
+    b_path[: len(path.b_dom)] = path.b_dom
     #: forces in the loop: friction that opposes motion, a hardening spring, a stiffer
     #: linear spring (input units)
-    force = {"coulomb_friction": 0.05, "stribeck_friction": 0.05, "cubic_stiffness": 1e4,
-             "stiffness_change": 10.0, "mass_change": 5.0}
+    force = {
+        "coulomb_friction": 0.05,
+        "stribeck_friction": 0.05,
+        "cubic_stiffness": 1e4,
+        "stiffness_change": 10.0,
+        "mass_change": 5.0,
+    }
     effects = []
-    for name, param in [("coulomb_friction", None), ("stribeck_friction", 0.05),
-                        ("cubic_stiffness", None), ("stiffness_change", None),
-                        ("mass_change", None),
-                        ("dead_time", 2.6), ("mode_damping", 1.7), ("mode_mass", 1.2),
-                        ("backlash", 0.1),
-                        ("dead_zone", 0.05), ("output_saturation", 5.0), ("sensor_offset", None)]:
+    for name, param in [
+        ("coulomb_friction", None),
+        ("stribeck_friction", 0.05),
+        ("cubic_stiffness", None),
+        ("stiffness_change", None),
+        ("mass_change", None),
+        ("dead_time", 2.6),
+        ("mode_damping", 1.7),
+        ("mode_mass", 1.2),
+        ("backlash", 0.1),
+        ("dead_zone", 0.05),
+        ("output_saturation", 5.0),
+        ("sensor_offset", None),
+    ]:
         spec = SPECS[name]
         n_reg = 2 if name == "stribeck_friction" else 1
         if name in force:
@@ -45,8 +58,9 @@ def _plant(kind: str = "acceleration") -> AugmentedPlant:
         else:
             coefs = [0.1 * rng.standard_normal(1)]
         centre = 0.05 if name in ("dead_zone", "output_saturation") else 0.0
-        effects.append(FittedEffect(name, param, coefs, n_linear=sum(c.size for c in coefs),
-                                    centre=centre))
+        effects.append(
+            FittedEffect(name, param, coefs, n_linear=sum(c.size for c in coefs), centre=centre)
+        )
     return AugmentedPlant(FS, b, a, kind, 0.2, effects)
 
 
@@ -56,8 +70,9 @@ def _same_state(s1, s2):
         if x is None or y is None:
             assert x is None and y is None
         else:
-            np.testing.assert_allclose(np.asarray(x, float), np.asarray(y, float),
-                                       rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(
+                np.asarray(x, float), np.asarray(y, float), rtol=1e-12, atol=1e-12
+            )
 
 
 @pytest.mark.parametrize("kind", ["acceleration", "velocity"])
@@ -84,8 +99,9 @@ def test_step_chunks_and_whole_array_agree(kind):
 def test_without_effects_it_is_the_plain_plant():
     b, a = nominal_model()
     u = np.random.default_rng(2).standard_normal(500)
-    np.testing.assert_allclose(AugmentedPlant(FS, b, a).run(u), signal.lfilter(b, a, u),
-                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        AugmentedPlant(FS, b, a).run(u), signal.lfilter(b, a, u), rtol=1e-12, atol=1e-12
+    )
 
 
 @pytest.mark.parametrize("kind", ["acceleration", "velocity"])
@@ -98,10 +114,14 @@ def test_model_file_round_trip(kind):
     np.testing.assert_allclose(back.run(u), _plant(kind).run(u), rtol=1e-12, atol=1e-12)
 
 
-@pytest.mark.parametrize("hidden,named", [
-    (lambda: recording("coulomb_friction"), "coulomb_friction"),
-    # the refit's damping line (`mode_lines`), an output effect with its own filter
-    (lambda: changed_recording("damping_n_s_per_m", 1.5), "mode_damping")])
+@pytest.mark.parametrize(
+    "hidden,named",
+    [
+        (lambda: recording("coulomb_friction"), "coulomb_friction"),
+        # the refit's damping line (`mode_lines`), an output effect with its own filter
+        (lambda: changed_recording("damping_n_s_per_m", 1.5), "mode_damping"),
+    ],
+)
 def test_augmented_plant_reproduces_the_workflow(hidden, named):
     rec = hidden()
     b, a = nominal_model()
@@ -109,24 +129,36 @@ def test_augmented_plant_reproduces_the_workflow(hidden, named):
     assert named in [e.name for e in result.selection.named]
     model = FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": result.plant.to_extra()})
     plant = AugmentedPlant.from_model(model_from_dict(model.to_dict()))
-    np.testing.assert_allclose(plant.run(rec.v_in), result.y_after, rtol=1e-9,
-                               atol=1e-9 * np.max(np.abs(result.y_after)))
+    np.testing.assert_allclose(
+        plant.run(rec.v_in), result.y_after, rtol=1e-9, atol=1e-9 * np.max(np.abs(result.y_after))
+    )
 
 
 def test_bad_effects_section_is_a_config_error():
     b, a = nominal_model()
-    for section in ({"items": [{"name": "warp_drive"}]},
-                    {"items": [{"name": "dead_zone", "coefficients": [[1.0]]}]},
-                    {"output_kind": "jerk", "items": []}):
+    for section in (
+        {"items": [{"name": "warp_drive"}]},
+        {"items": [{"name": "dead_zone", "coefficients": [[1.0]]}]},
+        {"output_kind": "jerk", "items": []},
+    ):
         with pytest.raises(ConfigError):
-            AugmentedPlant.from_model(FdiModel(fs=FS, plant_b=b, plant_a=a,
-                                               extra={"effects": section}))
+            AugmentedPlant.from_model(
+                FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": section})
+            )
     # a mode line on a plant that has no mode (a first-order plant)
-    line = {"items": [{"name": "mode_damping", "param": {"name": "damping_scale", "value": 2.0},
-                       "coefficients": [[1.0]]}]}
+    line = {
+        "items": [
+            {
+                "name": "mode_damping",
+                "param": {"name": "damping_scale", "value": 2.0},
+                "coefficients": [[1.0]],
+            }
+        ]
+    }
     with pytest.raises(ConfigError, match="no pole pair"):
-        AugmentedPlant.from_model(FdiModel(fs=FS, plant_b=[0.1], plant_a=[1.0, -0.9],
-                                           extra={"effects": line}))
+        AugmentedPlant.from_model(
+            FdiModel(fs=FS, plant_b=[0.1], plant_a=[1.0, -0.9], extra={"effects": line})
+        )
 
 
 def test_monitor_pipeline_uses_the_augmented_model_and_its_residual_shrinks(tmp_path):
@@ -140,8 +172,11 @@ def test_monitor_pipeline_uses_the_augmented_model_and_its_residual_shrinks(tmp_
     result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
     ff = FaultFilter(b=np.array([0.01, 0.02]), f=np.array([1.0, -0.5]), nk=0, gamma_f=1.0)
     plain = FdiModel(fs=FS, plant_b=b, plant_a=a, fault_filter=ff)
-    augmented = model_from_dict(FdiModel(fs=FS, plant_b=b, plant_a=a, fault_filter=ff,
-                                         extra={"effects": result.plant.to_extra()}).to_dict())
+    augmented = model_from_dict(
+        FdiModel(
+            fs=FS, plant_b=b, plant_a=a, fault_filter=ff, extra={"effects": result.plant.to_extra()}
+        ).to_dict()
+    )
     test = slice(len(rec.t) * 2 // 3, None)
     r_plain = Pipeline(plain, 256).run(rec.v_in, rec.accel).residual
     batch = Pipeline(augmented, 256)
@@ -153,13 +188,23 @@ def test_monitor_pipeline_uses_the_augmented_model_and_its_residual_shrinks(tmp_
     for v, acc in zip(rec.v_in[:600].tolist(), rec.accel[:600].tolist()):
         ticks.step(v, acc)
         per_tick.append(ticks.residual)
-    np.testing.assert_allclose(per_tick, r_aug[:600], rtol=1e-9,
-                               atol=1e-9 * np.max(np.abs(r_aug)))
+    np.testing.assert_allclose(per_tick, r_aug[:600], rtol=1e-9, atol=1e-9 * np.max(np.abs(r_aug)))
     # and `fdi replay` takes the augmented model file as its nominal model
     save_model(tmp_path / "aug.yaml", augmented)
     write_recording(tmp_path / "rec.csv", rec)
-    assert main(["replay", str(tmp_path / "rec.csv"), "--model", str(tmp_path / "aug.yaml"),
-                 "--summary", str(tmp_path / "s.json")]) == 0
+    assert (
+        main(
+            [
+                "replay",
+                str(tmp_path / "rec.csv"),
+                "--model",
+                str(tmp_path / "aug.yaml"),
+                "--summary",
+                str(tmp_path / "s.json"),
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "s.json").exists()
 
 
@@ -178,24 +223,35 @@ def test_a_model_file_without_force_loop_keeps_its_fed_forward_meaning():
     plant = _plant()
     extra = plant.to_extra()
     del extra["force_loop"]
-    old = AugmentedPlant.from_model(model_from_dict(
-        FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": extra}).to_dict()))
+    old = AugmentedPlant.from_model(
+        model_from_dict(FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": extra}).to_dict())
+    )
     assert not old.force_loop
     u = 0.5 * np.random.default_rng(2).standard_normal(500)
     fed = old.run_signals(u)
     # fed forward: the output is ŷ₀ plus each effect's own part, nothing in a loop
     assert "force_loop" not in fed["parts"]
-    np.testing.assert_allclose(fed["y"], fed["y0"] + sum(fed["parts"].values()), rtol=1e-12,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        fed["y"], fed["y0"] + sum(fed["parts"].values()), rtol=1e-12, atol=1e-12
+    )
     assert not np.allclose(fed["y"], plant.run(u))
 
 
 def test_an_old_dead_time_item_is_refused_not_misread():
     # before issue 14 dead_time was u(t − τ) − u(t) through a numerator; now a pure shift
     b, a = nominal_model()
-    items = [{"name": "dead_time", "param": {"name": "dead_time_s", "value": 0.01},
-              "coefficients": [[0.1, 0.2, 0.0, 0.0, 0.0]]}]
-    model = FdiModel(fs=FS, plant_b=b, plant_a=a,
-                     extra={"effects": {"output_kind": "acceleration", "items": items}})
+    items = [
+        {
+            "name": "dead_time",
+            "param": {"name": "dead_time_s", "value": 0.01},
+            "coefficients": [[0.1, 0.2, 0.0, 0.0, 0.0]],
+        }
+    ]
+    model = FdiModel(
+        fs=FS,
+        plant_b=b,
+        plant_a=a,
+        extra={"effects": {"output_kind": "acceleration", "items": items}},
+    )
     with pytest.raises(ConfigError, match="older fdi diagnose"):
         AugmentedPlant.from_model(model_from_dict(model.to_dict()))

@@ -18,8 +18,9 @@ from tests.diagnose_cases import FS, nominal_model, recording
 def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("diag")
     b, a = nominal_model()
-    save_model(d / "nominal.yaml", FdiModel(fs=FS, plant_b=b, plant_a=a,
-                                            provenance={"source": "test"}))
+    save_model(
+        d / "nominal.yaml", FdiModel(fs=FS, plant_b=b, plant_a=a, provenance={"source": "test"})
+    )
     write_recording(d / "coulomb.csv", recording("coulomb_friction"))
     write_recording(d / "clean.npz", recording(None))
     return d
@@ -28,14 +29,24 @@ def files(tmp_path_factory):
 def test_report_model_and_plot(files, capsys):
     out = files / "out"
     out.mkdir(exist_ok=True)
-    rc = main(["diagnose", str(files / "coulomb.csv"), "--model", str(files / "nominal.yaml"),
-               "--json", str(out / "r.json"), "--plot", str(out / "p.png"),
-               "-o", str(out / "aug.yaml")])
+    rc = main(
+        [
+            "diagnose",
+            str(files / "coulomb.csv"),
+            "--model",
+            str(files / "nominal.yaml"),
+            "--json",
+            str(out / "r.json"),
+            "--plot",
+            str(out / "p.png"),
+            "-o",
+            str(out / "aug.yaml"),
+        ]
+    )
     assert rc == 0
     assert "coulomb_friction" in capsys.readouterr().out
     report = json.loads((out / "r.json").read_text())
-    for key in ("effect", "gap_before", "gap_after", "gap_metric", "ranking", "params",
-                "regions"):
+    for key in ("effect", "gap_before", "gap_after", "gap_metric", "ranking", "params", "regions"):
         assert key in report
     assert report["effect"] == "coulomb_friction"
     assert report["gap_metric"] == "nrmse"
@@ -59,8 +70,19 @@ def test_report_model_and_plot(files, capsys):
 
 
 def test_fit_linear_velocity_output_and_no_effect(files, capsys):
-    rc = main(["diagnose", str(files / "clean.npz"), "--fit-linear", "--output-kind", "velocity",
-               "--json", str(files / "v.json"), "-o", str(files / "v.yaml")])
+    rc = main(
+        [
+            "diagnose",
+            str(files / "clean.npz"),
+            "--fit-linear",
+            "--output-kind",
+            "velocity",
+            "--json",
+            str(files / "v.json"),
+            "-o",
+            str(files / "v.yaml"),
+        ]
+    )
     assert rc == 0
     assert "no significant missing effect" in capsys.readouterr().out
     report = json.loads((files / "v.json").read_text())
@@ -80,14 +102,19 @@ def _bad(args, capsys):
 def test_bad_input_is_one_line_and_exit_2(files, tmp_path, capsys):
     model = str(files / "nominal.yaml")
     assert "no such file" in _bad([str(tmp_path / "none.csv"), "--model", model], capsys)
-    assert "--output torque: no column" in _bad([str(files / "coulomb.csv"), "--model", model,
-                                                "--output", "torque"], capsys)
-    assert "--input u: no column" in _bad([str(files / "coulomb.csv"), "--model", model,
-                                           "--input", "u"], capsys)
-    save_model(tmp_path / "m128.yaml", FdiModel(fs=128.0, plant_b=np.array([0.0, 1.0]),
-                                                plant_a=np.array([1.0, -0.5])))
-    assert "fs" in _bad([str(files / "coulomb.csv"), "--model", str(tmp_path / "m128.yaml")],
-                        capsys)
+    assert "--output torque: no column" in _bad(
+        [str(files / "coulomb.csv"), "--model", model, "--output", "torque"], capsys
+    )
+    assert "--input u: no column" in _bad(
+        [str(files / "coulomb.csv"), "--model", model, "--input", "u"], capsys
+    )
+    save_model(
+        tmp_path / "m128.yaml",
+        FdiModel(fs=128.0, plant_b=np.array([0.0, 1.0]), plant_a=np.array([1.0, -0.5])),
+    )
+    assert "fs" in _bad(
+        [str(files / "coulomb.csv"), "--model", str(tmp_path / "m128.yaml")], capsys
+    )
     rec = recording("coulomb_friction")
     cols = {k: v.copy() for k, v in rec.columns.items()}
     cols["accel"][100] = np.nan
@@ -102,23 +129,37 @@ def test_bad_input_is_one_line_and_exit_2(files, tmp_path, capsys):
     assert "constant" in _bad([str(tmp_path / "flat.csv"), "--fit-linear"], capsys)
     keep = np.ones(len(rec.t), bool)
     keep[500:510] = False
-    write_recording(tmp_path / "gap.csv",
-                    Recording({k: v[keep] for k, v in rec.columns.items()}, dict(rec.meta)))
+    write_recording(
+        tmp_path / "gap.csv",
+        Recording({k: v[keep] for k, v in rec.columns.items()}, dict(rec.meta)),
+    )
     assert "irregular sampling" in _bad([str(tmp_path / "gap.csv"), "--fit-linear"], capsys)
     (tmp_path / "broken.yaml").write_text("fs: [\n")
-    assert "YAML" in _bad([str(files / "coulomb.csv"), "--model",
-                           str(tmp_path / "broken.yaml")], capsys)
-    assert "does not exist" in _bad([str(files / "coulomb.csv"), "--model", model, "--json",
-                                   str(tmp_path / "missing_dir" / "r.json")], capsys)
+    assert "YAML" in _bad(
+        [str(files / "coulomb.csv"), "--model", str(tmp_path / "broken.yaml")], capsys
+    )
+    assert "does not exist" in _bad(
+        [
+            str(files / "coulomb.csv"),
+            "--model",
+            model,
+            "--json",
+            str(tmp_path / "missing_dir" / "r.json"),
+        ],
+        capsys,
+    )
     # the report overwrote the recording; a plot's unknown ending was a traceback at the end
     rec_before = (files / "coulomb.csv").read_bytes()
-    assert "is also an input" in _bad([str(files / "coulomb.csv"), "--model", model, "--json",
-                                       str(files / "coulomb.csv")], capsys)
-    assert "is also an input" in _bad([str(files / "coulomb.csv"), "--model", model, "-o",
-                                       str(files / "coulomb.csv")], capsys)
+    assert "is also an input" in _bad(
+        [str(files / "coulomb.csv"), "--model", model, "--json", str(files / "coulomb.csv")], capsys
+    )
+    assert "is also an input" in _bad(
+        [str(files / "coulomb.csv"), "--model", model, "-o", str(files / "coulomb.csv")], capsys
+    )
     assert (files / "coulomb.csv").read_bytes() == rec_before
-    assert "cannot write a plot as .foo" in _bad([str(files / "coulomb.csv"), "--model", model,
-                                                  "--plot", str(tmp_path / "x.foo")], capsys)
+    assert "cannot write a plot as .foo" in _bad(
+        [str(files / "coulomb.csv"), "--model", model, "--plot", str(tmp_path / "x.foo")], capsys
+    )
 
 
 def test_any_column_names(tmp_path, capsys):
@@ -127,28 +168,73 @@ def test_any_column_names(tmp_path, capsys):
 
     rec = stage_recording()
     path = tmp_path / "stage.csv"
-    write_recording(path, Recording({"t": rec.t, "force": rec["force"], "vel": rec["vel"]},
-                                    dict(rec.meta)))
-    rc = main(["diagnose", str(path), "--fit-linear", "--input", "force", "--output", "vel",
-               "--output-kind", "velocity", "--json", str(tmp_path / "a.json")])
+    write_recording(
+        path, Recording({"t": rec.t, "force": rec["force"], "vel": rec["vel"]}, dict(rec.meta))
+    )
+    rc = main(
+        [
+            "diagnose",
+            str(path),
+            "--fit-linear",
+            "--input",
+            "force",
+            "--output",
+            "vel",
+            "--output-kind",
+            "velocity",
+            "--json",
+            str(tmp_path / "a.json"),
+        ]
+    )
     assert rc == 0
     out = capsys.readouterr().out
     assert "coulomb_friction" in out and "inverse_dynamics" in out
     report = json.loads((tmp_path / "a.json").read_text())
-    for key in ("form", "form_reason", "noise_floor", "gap_before_to_floor", "dead_time",
-                "linear_check", "held_by_later", "force_balance"):
+    for key in (
+        "form",
+        "form_reason",
+        "noise_floor",
+        "gap_before_to_floor",
+        "dead_time",
+        "linear_check",
+        "held_by_later",
+        "force_balance",
+    ):
         assert key in report
     # the shared --columns mapping gives the same answer
-    rc = main(["diagnose", str(path), "--fit-linear", "--columns", "v_in=force,velocity=vel",
-               "--output-kind", "velocity", "--json", str(tmp_path / "b.json")])
+    rc = main(
+        [
+            "diagnose",
+            str(path),
+            "--fit-linear",
+            "--columns",
+            "v_in=force,velocity=vel",
+            "--output-kind",
+            "velocity",
+            "--json",
+            str(tmp_path / "b.json"),
+        ]
+    )
     assert rc == 0
     again = json.loads((tmp_path / "b.json").read_text())
     assert again["effect"] == report["effect"]
     assert again["gap_after"] == pytest.approx(report["gap_after"], rel=1e-12)
     # the inverse-dynamics form cannot be simulated: -o says so in one line
-    assert "inverse-dynamics" in _bad([str(path), "--fit-linear", "--input", "force",
-                                       "--output", "vel", "--output-kind", "velocity",
-                                       "-o", str(tmp_path / "m.yaml")], capsys)
+    assert "inverse-dynamics" in _bad(
+        [
+            str(path),
+            "--fit-linear",
+            "--input",
+            "force",
+            "--output",
+            "vel",
+            "--output-kind",
+            "velocity",
+            "-o",
+            str(tmp_path / "m.yaml"),
+        ],
+        capsys,
+    )
     with pytest.raises(SystemExit) as exc:  # argparse rejects a malformed mapping
         main(["diagnose", str(path), "--fit-linear", "--columns", "v_in"])
     assert exc.value.code == 2
@@ -161,21 +247,29 @@ def test_a_recording_without_a_time_column_takes_its_rate_from_fs(tmp_path, caps
 
     rec = duffing_recording(3e5)
     bare = tmp_path / "bare.csv"
-    np.savetxt(bare, np.column_stack([rec.v_in, rec["position"]]), delimiter=",",
-               header="V1,V2", comments="", fmt="%.10g")  # the digits `write_recording` keeps
+    np.savetxt(
+        bare,
+        np.column_stack([rec.v_in, rec["position"]]),
+        delimiter=",",
+        header="V1,V2",
+        comments="",
+        fmt="%.10g",
+    )  # the digits `write_recording` keeps
     args = ["--fit-linear", "--input", "V1", "--output", "V2", "--output-kind", "position"]
     assert "missing column(s) t" in _bad([str(bare)] + args, capsys)
     rc = main(["diagnose", str(bare), *args, "--fs", str(FS), "--json", str(tmp_path / "a.json")])
     assert rc == 0
     timed = tmp_path / "timed.csv"
-    write_recording(timed, Recording({"t": rec.t, "V1": rec.v_in, "V2": rec["position"]},
-                                     dict(rec.meta)))
+    write_recording(
+        timed, Recording({"t": rec.t, "V1": rec.v_in, "V2": rec["position"]}, dict(rec.meta))
+    )
     rc = main(["diagnose", str(timed), *args, "--json", str(tmp_path / "b.json")])
     assert rc == 0
     bare_report = json.loads((tmp_path / "a.json").read_text())
     assert bare_report["effect"] == "cubic_stiffness"
     assert bare_report["gap_after"] == pytest.approx(
-        json.loads((tmp_path / "b.json").read_text())["gap_after"], rel=1e-9)
+        json.loads((tmp_path / "b.json").read_text())["gap_after"], rel=1e-9
+    )
     # a time column and a rate that disagree: one line, no traceback
     assert "not 100 Hz" in _bad([str(timed)] + args + ["--fs", "100"], capsys)
     assert "--fs must be a positive" in _bad([str(bare)] + args + ["--fs", "0"], capsys)

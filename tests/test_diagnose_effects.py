@@ -7,17 +7,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil_sim.msd import MsdParams, simulate_recording
 from fdi_daemon.diagnose.effects import EFFECT_NAMES, FittedEffect, friction_form
 from fdi_daemon.diagnose.select import map_share
 from fdi_daemon.diagnose.workflow import run_diagnose
+from hil_sim.msd import MsdParams, simulate_recording
 from tests.diagnose_cases import FS, HIDDEN, changed_recording, nominal_model, recording
 
 #: effects the §V simulator cannot hide, with the test that hides them
-ELSEWHERE = {"gain_fault": "test_a_gain_fault_is_named_with_its_ratio",
-             "force_offset": "test_diagnose_machines.py::test_closed_loop_stage",
-             "stiffness_change": "test_a_changed_spring_is_named_with_its_ratio",
-             "mass_change": "test_a_changed_mass_is_named_with_its_ratio"}
+ELSEWHERE = {
+    "gain_fault": "test_a_gain_fault_is_named_with_its_ratio",
+    "force_offset": "test_diagnose_machines.py::test_closed_loop_stage",
+    "stiffness_change": "test_a_changed_spring_is_named_with_its_ratio",
+    "mass_change": "test_a_changed_mass_is_named_with_its_ratio",
+}
 
 
 def test_every_library_effect_has_a_case():
@@ -34,25 +36,32 @@ def test_hidden_effect_is_named_and_gap_halves(effect):
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-@pytest.mark.parametrize("gain, refit_gain, plausible", [
-    (1.0, 0.0, True), (1.2, 0.2, True), (0.02, 0.0, False), (-0.0025, 0.0, False)])
+@pytest.mark.parametrize(
+    "gain, refit_gain, plausible",
+    [(1.0, 0.0, True), (1.2, 0.2, True), (0.02, 0.0, False), (-0.0025, 0.0, False)],
+)
 def test_a_map_is_possible_only_with_its_own_gain(gain, refit_gain, plausible):
     # a sensor that clips maps the output as a saturation maps the input: φ = sat(w) − w
     # enters with the gain of w itself, (1 + r) with the numerator refit's gain r
     refit = FittedEffect("linear_refit", None, [np.zeros(3)], physical={"input_gain": refit_gain})
-    clip = FittedEffect("output_saturation", 0.6, [np.array([gain])],
-                        physical={"gain": gain, "plausible": True})
+    clip = FittedEffect(
+        "output_saturation", 0.6, [np.array([gain])], physical={"gain": gain, "plausible": True}
+    )
     map_share([refit, clip])
     assert clip.physical["map_share"] == pytest.approx(gain / (1.0 + refit_gain))
     assert clip.physical["plausible"] is plausible
 
 
-@pytest.mark.parametrize("coulomb, excess, possible, named_as", [
-    (0.3, 0.7, True, "stribeck_friction"),   # static 1.0 above the Coulomb level 0.3
-    (-0.3, -0.7, True, "stribeck_friction"),  # the same in the other sign convention
-    (-0.27, 0.18, True, "coulomb_friction"),  # 0.09 at rest, 0.27 in motion: built up
-    (0.3, -0.3, True, "coulomb_friction"),   # none at rest: a smooth sign
-    (0.3, -0.5, False, None)])               # −0.2 at rest: the friction reversed
+@pytest.mark.parametrize(
+    "coulomb, excess, possible, named_as",
+    [
+        (0.3, 0.7, True, "stribeck_friction"),  # static 1.0 above the Coulomb level 0.3
+        (-0.3, -0.7, True, "stribeck_friction"),  # the same in the other sign convention
+        (-0.27, 0.18, True, "coulomb_friction"),  # 0.09 at rest, 0.27 in motion: built up
+        (0.3, -0.3, True, "coulomb_friction"),  # none at rest: a smooth sign
+        (0.3, -0.5, False, None),
+    ],
+)  # −0.2 at rest: the friction reversed
 def test_a_stribeck_form_is_named_by_its_level_at_rest(coulomb, excess, possible, named_as):
     out: dict = {}
     assert friction_form(out, coulomb, excess) is possible
@@ -103,8 +112,10 @@ def test_a_gain_fault_is_named_with_its_ratio():
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-@pytest.mark.parametrize("kind,ratio", [("acceleration", 0.8), ("acceleration", 1.2),
-                                        ("velocity", 0.8), ("position", 0.8)])
+@pytest.mark.parametrize(
+    "kind,ratio",
+    [("acceleration", 0.8), ("acceleration", 1.2), ("velocity", 0.8), ("position", 0.8)],
+)
 def test_a_changed_spring_is_named_with_its_ratio(kind, ratio):
     # every force effect brings the loop's free spring, so each would close this gap; a
     # linear change of the mechanics is named after the parameter of the mode that moved
@@ -119,20 +130,20 @@ def test_a_changed_spring_is_named_with_its_ratio(kind, ratio):
     assert params["stiffness_ratio"] == pytest.approx(ratio, abs=0.02)
     f0 = MsdParams().stiffness_n_per_m ** 0.5 / (2 * np.pi)  # 1 kg
     assert params["resonance_hz_nominal"] == pytest.approx(f0, rel=1e-6)
-    assert params["resonance_hz"] == pytest.approx(f0 * ratio ** 0.5, abs=0.05)
+    assert params["resonance_hz"] == pytest.approx(f0 * ratio**0.5, abs=0.05)
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-@pytest.mark.parametrize("kind,ratio", [("acceleration", 1.25), ("velocity", 0.8),
-                                        ("position", 0.8)])
+@pytest.mark.parametrize(
+    "kind,ratio", [("acceleration", 1.25), ("velocity", 0.8), ("position", 0.8)]
+)
 def test_a_changed_mass_is_named_with_its_ratio(kind, ratio):
     # a mass moves the mode as a spring does (ω² = k/m), and its damping per unit mass by
     # the same ratio (2ζω = c/m), which a spring leaves alone: the same fit as a changed
     # spring, named after the mode it moves
     rec = changed_recording("mass_kg", ratio)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind,
-                          b, a)
+    result = run_diagnose(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind, b, a)
     assert result.named[0] == "mass_change"
     params = result.selection.named[0].physical
     assert params["mode_change"] == "mass"
@@ -148,14 +159,14 @@ def test_added_damping_is_viscous_friction_with_its_coefficient(kind):
     # each output's state chain
     rec = recording("viscous_friction")
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind,
-                          b, a)
+    result = run_diagnose(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind, b, a)
     assert result.named == ["viscous_friction"]
     viscous = result.selection.named[0].physical
     assert viscous["mode_change"] == "damping"
     p = MsdParams()  # ζ = c / (2 √(k m)), 1 kg
-    true_zeta = ((p.damping_n_s_per_m + HIDDEN["viscous_friction"]["coefficient_n_s_per_m"])
-                 / (2 * p.stiffness_n_per_m ** 0.5))
+    true_zeta = (p.damping_n_s_per_m + HIDDEN["viscous_friction"]["coefficient_n_s_per_m"]) / (
+        2 * p.stiffness_n_per_m**0.5
+    )
     assert viscous["damping_ratio"] == pytest.approx(true_zeta, abs=0.005)
     # its size from the mode: Δ(c/m) = 2 N·s/m / 1 kg
     assert viscous["damping_change_per_s"] == pytest.approx(2.0, rel=0.02)
@@ -173,8 +184,7 @@ def test_a_dead_time_is_named_with_its_value_not_absorbed_by_the_refit():
     assert abs(result.info["dead_time_by_correlation_s"] - true_s) < 1.0 / FS
 
 
-@pytest.mark.parametrize("effect", ["coulomb_friction", "viscous_friction",
-                                    "stribeck_friction"])
+@pytest.mark.parametrize("effect", ["coulomb_friction", "viscous_friction", "stribeck_friction"])
 def test_named_friction_is_physically_possible(effect):
     rec = recording(effect)
     b, a = nominal_model()
@@ -200,9 +210,9 @@ def test_fit_linear_baseline(effect):
         assert result.gap_after <= 0.5 * result.gap_before
 
 
-@pytest.mark.parametrize("kind,effect", [("velocity", "coulomb_friction"),
-                                         ("position", "dead_zone"),
-                                         ("velocity", None)])
+@pytest.mark.parametrize(
+    "kind,effect", [("velocity", "coulomb_friction"), ("position", "dead_zone"), ("velocity", None)]
+)
 def test_velocity_and_position_outputs(kind, effect):
     rec = recording(effect)
     b, a = nominal_model()

@@ -10,8 +10,14 @@ from scipy import signal
 from fdi_daemon.diagnose.effects import Context
 from fdi_daemon.diagnose.floor import delay_by_correlation, noise_floor, repeated_input
 from fdi_daemon.diagnose.force import ForceLoop
-from fdi_daemon.diagnose.inverse import baseline, measured_motion, \
-    noise_floor as inverse_noise_floor, noise_sigma
+from fdi_daemon.diagnose.inverse import (
+    baseline,
+    measured_motion,
+    noise_sigma,
+)
+from fdi_daemon.diagnose.inverse import (
+    noise_floor as inverse_noise_floor,
+)
 from fdi_daemon.diagnose.signals import StateChain, make_split
 
 FS = 256.0
@@ -21,8 +27,7 @@ A = np.array([1.0, -1.6, 0.8])  # a stable resonance
 def _loop(n_kind=0):
     chain = StateChain(n_kind, FS, 0.2).coefficients
     cols = [(0, 0.0), (2, 0.05), (3, 0.0), (5, 0.0)]  # sign v, Stribeck, x³, x
-    nums = np.array([[0.01, -0.02, 0.01], [0.02, 0.01, -0.01], [5.0, 1.0, 0.0],
-                     [0.1, 0.05, 0.0]])
+    nums = np.array([[0.01, -0.02, 0.01], [0.02, 0.01, -0.01], [5.0, 1.0, 0.0], [0.1, 0.05, 0.0]])
     return ForceLoop(A, cols, nums, chain)
 
 
@@ -66,8 +71,7 @@ def test_force_loop_contract_holds_through_stick_slip(n_kind):
 def _mass_with_coulomb(drive_amplitude):
     """a = F_drive/m − (F_c/m)·s on a free mass (acceleration output, F_c/m = 1 m/s²):
     1 s of a 2 Hz drive, then 1 s without."""
-    loop = ForceLoop(np.array([1.0]), [(0, 0.0)], [[-1.0]],
-                     StateChain(0, FS, 0.2).coefficients)
+    loop = ForceLoop(np.array([1.0]), [(0, 0.0)], [[-1.0]], StateChain(0, FS, 0.2).coefficients)
     t = np.arange(512) / FS
     drive = np.where(t < 1.0, drive_amplitude * np.sin(2 * np.pi * 2.0 * t), 0.0)
     accel, phi, velocity = loop.trace(drive)
@@ -101,7 +105,7 @@ def test_coulomb_friction_breaks_away_slides_and_brings_the_mass_to_rest():
     stopped = int(np.argmax((np.arange(accel.size) > FS) & (accel == 0.0)))
     assert FS < stopped < 1.5 * FS
     np.testing.assert_array_equal(accel[stopped:], 0.0)
-    np.testing.assert_array_equal(s[stopped + 1:], 0.0)
+    np.testing.assert_array_equal(s[stopped + 1 :], 0.0)
     np.testing.assert_array_equal(velocity[stopped:], 0.0)
 
 
@@ -119,8 +123,9 @@ def _periodic(n_periods=6, sigma=0.05, seed=5, realisations=1):
     through a first-order filter, with white noise σ on the output."""
     rng = np.random.default_rng(seed)
     period = 512
-    u = np.concatenate([np.tile(rng.standard_normal(period), n_periods)
-                        for _ in range(realisations)])
+    u = np.concatenate(
+        [np.tile(rng.standard_normal(period), n_periods) for _ in range(realisations)]
+    )
     y_clean = signal.lfilter([0.2, 0.1], [1.0, -0.7], u)
     return u, y_clean, y_clean + sigma * rng.standard_normal(u.size)
 
@@ -132,8 +137,11 @@ def test_periodic_floor_is_the_period_to_period_noise(n_periods, realisations):
     u, y_clean, y = _periodic(n_periods, realisations=realisations)
     period, repeating = repeated_input(u, 50, settle=60)
     assert period == 512
-    expected = [k for r in range(realisations) for k in
-                range(r * n_periods * 512 + 60 - 1, (r * n_periods + n_periods - 1) * 512)]
+    expected = [
+        k
+        for r in range(realisations)
+        for k in range(r * n_periods * 512 + 60 - 1, (r * n_periods + n_periods - 1) * 512)
+    ]
     np.testing.assert_array_equal(repeating, expected)
     test = slice(2 * len(u) // 3, None)
     floor = noise_floor(y, y - y_clean, u, FS, warmup=60, test=test)
@@ -179,7 +187,7 @@ def test_force_balance_recovers_mass_damping_and_the_motions_lag(lag):
     rng = np.random.default_rng(8)
     u = signal.lfilter(*signal.butter(2, 5.0, fs=fs), 50 * rng.standard_normal(20000)) + 30.0
     v = signal.lfilter([0.0, (1 - d) / damping], [1.0, -d], u)
-    v = np.concatenate([np.full(lag, v[0]), v[:len(v) - lag]])
+    v = np.concatenate([np.full(lag, v[0]), v[: len(v) - lag]])
     base = baseline(u, v, "velocity", fs, make_split(len(u), 200))
     assert base["lag"] == lag
     assert base["coefficients"]["mass"] == pytest.approx(mass, rel=0.01)
@@ -193,8 +201,9 @@ def test_the_floor_of_a_quantised_velocity_is_unknown():
     x = np.round(0.1 * np.clip(np.sin(2 * np.pi * 0.5 * t), -0.5, 0.5) / 1e-6) * 1e-6
     v = np.diff(x, prepend=x[0]) * 1000.0
     lp = signal.butter(2, 20.0, fs=1000.0)
-    floor = inverse_noise_floor(v, "velocity", v, v, {"mass": 1.0, "damping": 1.0}, lp,
-                                1000.0, slice(10000, None))
+    floor = inverse_noise_floor(
+        v, "velocity", v, v, {"mass": 1.0, "damping": 1.0}, lp, 1000.0, slice(10000, None)
+    )
     assert floor["floor"] is None
     assert "unknown" in floor["method"]
 
@@ -215,9 +224,16 @@ def test_the_noise_of_a_motion_with_fast_content_is_read_above_the_input_band():
     fs, sigma = 610.35, 1e-3
     u = signal.lfilter(*signal.butter(8, 80.0, fs=fs), rng.standard_normal(60000))
     y = signal.lfilter(*signal.butter(2, 60.0, fs=fs), u) + sigma * rng.standard_normal(u.size)
-    floor = inverse_noise_floor(y, "position", u, u, {"mass": 1.0, "damping": 1.0,
-                                                      "stiffness": 1.0},
-                                signal.butter(2, 100.0, fs=fs), fs, slice(20000, None))
+    floor = inverse_noise_floor(
+        y,
+        "position",
+        u,
+        u,
+        {"mass": 1.0, "damping": 1.0, "stiffness": 1.0},
+        signal.butter(2, 100.0, fs=fs),
+        fs,
+        slice(20000, None),
+    )
     assert noise_sigma(y) > 10 * sigma
     assert floor["output_noise"] == pytest.approx(sigma, rel=0.1)
 
@@ -232,29 +248,31 @@ def test_the_floor_is_the_output_noise_through_the_force_balance(kind):
     t = np.arange(60000) / fs
     noise = sigma * rng.standard_normal(t.size)
     motion = 0.01 * np.sin(2 * np.pi * 0.7 * t) + 0.004 * np.sin(2 * np.pi * 2.3 * t)
-    coefficients = {"mass": 95.0, "damping": 200.0} | ({"stiffness": 3000.0}
-                                                      if kind == "position" else {})
+    coefficients = {"mass": 95.0, "damping": 200.0} | (
+        {"stiffness": 3000.0} if kind == "position" else {}
+    )
     lp = signal.butter(2, 20.0, fs=fs)
     terms = measured_motion(noise, kind, fs)
     balance = [terms["a"], terms["v"]] + ([terms["x"]] if kind == "position" else [])
-    noise_force = signal.lfilter(*lp, sum(c * b for c, b in zip(coefficients.values(),
-                                                                balance)))
+    noise_force = signal.lfilter(*lp, sum(c * b for c, b in zip(coefficients.values(), balance)))
     target = 50.0 + 30.0 * np.sin(2 * np.pi * 1.1 * t)
     test = slice(20000, None)
     expected = float(np.std(noise_force[test]) / np.std(target[test]))
-    floor = inverse_noise_floor(motion + noise, kind, target, target, coefficients, lp, fs,
-                                test)
+    floor = inverse_noise_floor(motion + noise, kind, target, target, coefficients, lp, fs, test)
     assert floor["floor"] == pytest.approx(expected, rel=0.05)
     assert floor["output_noise"] == pytest.approx(sigma, rel=0.05)
 
 
-@pytest.mark.parametrize("change,expected", [
-    ({"stiffness_n_per_m": 0.8 * 987.0}, "stiffness"),
-    ({"damping_n_s_per_m": 6.3 + 3.0}, "damping"),
-    ({"mass_kg": 1.25}, "mass"),
-    ({"mass_kg": 0.8}, "mass"),
-    ({"stiffness_n_per_m": 987.0 * 1.0001}, "none"),
-])
+@pytest.mark.parametrize(
+    "change,expected",
+    [
+        ({"stiffness_n_per_m": 0.8 * 987.0}, "stiffness"),
+        ({"damping_n_s_per_m": 6.3 + 3.0}, "damping"),
+        ({"mass_kg": 1.25}, "mass"),
+        ({"mass_kg": 0.8}, "mass"),
+        ({"stiffness_n_per_m": 987.0 * 1.0001}, "none"),
+    ],
+)
 def test_mode_shift_reads_the_mode_of_a_system_whose_change_we_chose(change, expected):
     # position output (x = y): the loop's denominator is Â − B_x, so B_x = Â₀ − Â₁ makes
     # it the exact ZOH denominator of the changed §V model, whose mode is known in closed
@@ -267,25 +285,29 @@ def test_mode_shift_reads_the_mode_of_a_system_whose_change_we_chose(change, exp
 
     nominal, changed = MsdParams(), MsdParams(**change)
     a0, a1 = friction_tf(nominal)[1], friction_tf(changed)[1]
-    ctx = SimpleNamespace(chain=StateChain(2, FS, 0.2).coefficients, a_dom=a0,
-                          split=make_split(int(40 * FS), 0))
+    ctx = SimpleNamespace(
+        chain=StateChain(2, FS, 0.2).coefficients, a_dom=a0, split=make_split(int(40 * FS), 0)
+    )
     out = mode_shift(ctx, a0 - a1)
 
     def mode(p):
         w = np.sqrt(p.stiffness_n_per_m / p.mass_kg)
-        return w / (2 * np.pi), p.damping_n_s_per_m / (2 * np.sqrt(p.stiffness_n_per_m
-                                                                  * p.mass_kg))
+        return w / (2 * np.pi), p.damping_n_s_per_m / (2 * np.sqrt(p.stiffness_n_per_m * p.mass_kg))
 
     assert (out["resonance_hz_nominal"], out["damping_ratio_nominal"]) == pytest.approx(
-        mode(nominal), rel=1e-6)
-    assert (out["resonance_hz"], out["damping_ratio"]) == pytest.approx(mode(changed),
-                                                                        rel=1e-6)
+        mode(nominal), rel=1e-6
+    )
+    assert (out["resonance_hz"], out["damping_ratio"]) == pytest.approx(mode(changed), rel=1e-6)
     assert out["stiffness_ratio"] == pytest.approx(  # ω₁²/ω₀²
         (changed.stiffness_n_per_m / changed.mass_kg)
-        / (nominal.stiffness_n_per_m / nominal.mass_kg), rel=1e-6)
+        / (nominal.stiffness_n_per_m / nominal.mass_kg),
+        rel=1e-6,
+    )
     assert out["damping_change_per_s"] == pytest.approx(  # Δ(c/m)
-        changed.damping_n_s_per_m / changed.mass_kg
-        - nominal.damping_n_s_per_m / nominal.mass_kg, rel=1e-6, abs=1e-9)
+        changed.damping_n_s_per_m / changed.mass_kg - nominal.damping_n_s_per_m / nominal.mass_kg,
+        rel=1e-6,
+        abs=1e-9,
+    )
     assert out["mode_change"] == expected
     if expected == "mass":
         assert out["mass_ratio"] == pytest.approx(changed.mass_kg / nominal.mass_kg, rel=1e-6)
@@ -296,11 +318,22 @@ def test_a_long_records_parameter_search_sees_the_force_balance_of_its_own_sampl
     # inverse-dynamics form the force balance's columns must be cut with them (a 131 072-
     # sample oscillator record failed with "operands could not be broadcast")
     n, head = 1000, 300
-    ctx = Context(u=np.zeros(n), v=np.zeros(n), x=np.zeros(n), y0=np.zeros(n),
-                  target=np.zeros(n), a_dom=np.ones(1), b_dom=np.ones(1),
-                  split=make_split(n, 10), fs_hz=100.0, output_kind="velocity", ref_hz=1.0,
-                  max_delay_samples=1, form="inverse_dynamics",
-                  base_columns=np.arange(2.0 * n).reshape(n, 2))
+    ctx = Context(
+        u=np.zeros(n),
+        v=np.zeros(n),
+        x=np.zeros(n),
+        y0=np.zeros(n),
+        target=np.zeros(n),
+        a_dom=np.ones(1),
+        b_dom=np.ones(1),
+        split=make_split(n, 10),
+        fs_hz=100.0,
+        output_kind="velocity",
+        ref_hz=1.0,
+        max_delay_samples=1,
+        form="inverse_dynamics",
+        base_columns=np.arange(2.0 * n).reshape(n, 2),
+    )
     cut = ctx.head(head)
     assert cut.base_columns.shape == (head, 2)
     assert np.array_equal(cut.base_columns, ctx.base_columns[:head])
@@ -309,7 +342,8 @@ def test_a_long_records_parameter_search_sees_the_force_balance_of_its_own_sampl
 
 @pytest.mark.parametrize("mean_x,possible", [(0.3, False), (0.0, True)])
 def test_a_force_that_is_mostly_a_constant_acceleration_is_not_a_force_of_the_motion(
-        mean_x, possible):
+    mean_x, possible
+):
     # the mean acceleration of a bounded motion is zero: a force effect whose output is
     # mostly its mean is a sensor's offset (`force.STEADY_SHARE`). A cubic spring on a
     # position that sits at 0.3 with a small swing, against one that swings about 0
@@ -321,13 +355,14 @@ def test_a_force_that_is_mostly_a_constant_acceleration_is_not_a_force_of_the_mo
     n = int(20 * FS)
     swing = 0.02 if mean_x else 1.0
     x = mean_x + swing * np.sin(2 * np.pi * 3.0 * np.arange(n) / FS)
-    ctx = SimpleNamespace(chain=StateChain(0, FS, 0.2).coefficients, a_dom=A,
-                          split=make_split(n, 0))
+    ctx = SimpleNamespace(
+        chain=StateChain(0, FS, 0.2).coefficients, a_dom=A, split=make_split(n, 0)
+    )
     b = np.array([0.1, 0.05, 0.0])
     eff = FittedEffect("cubic_stiffness", None, [b], n_linear=3)
-    out = force_report(eff, ctx, np.zeros(n), (x ** 3)[:, None], np.zeros(n), b)
+    out = force_report(eff, ctx, np.zeros(n), (x**3)[:, None], np.zeros(n), b)
     # the output's mean square against its energy, the output filtered by scipy
-    steady = signal.lfilter(b, A, x ** 3)
+    steady = signal.lfilter(b, A, x**3)
     expected = np.mean(steady[ctx.split.fit]) ** 2 / np.mean(steady[ctx.split.fit] ** 2)
     assert out["steady_share"] == pytest.approx(expected, rel=1e-9)
     assert (out["steady_share"] > 0.9) == (not possible)

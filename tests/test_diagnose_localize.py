@@ -15,7 +15,7 @@ FS = 256.0
 def test_time_segments_find_an_injected_burst():
     rng = np.random.default_rng(0)
     e = 0.1 * rng.standard_normal(int(30 * FS))
-    e[int(12.2 * FS):int(12.8 * FS)] += 2.0 * np.sin(np.arange(int(0.6 * FS)))
+    e[int(12.2 * FS) : int(12.8 * FS)] += 2.0 * np.sin(np.arange(int(0.6 * FS)))
     top = time_segments(e, FS)[0]
     assert top["t0"] <= 12.2 < top["t1"]
     assert top["ratio_to_median"] > 5
@@ -63,8 +63,7 @@ def test_localize_cross_correlation_flags_a_missed_input_path():
 def test_least_squares_matches_numpy_on_collinear_columns():
     rng = np.random.default_rng(4)
     base = rng.standard_normal(3000)
-    x = np.column_stack([base, np.roll(base, 1) * 0.999 + 1e-3 * base,
-                         rng.standard_normal(3000)])
+    x = np.column_stack([base, np.roll(base, 1) * 0.999 + 1e-3 * base, rng.standard_normal(3000)])
     y = x @ np.array([1.0, -2.0, 0.5]) + 0.01 * rng.standard_normal(3000)
     theta = least_squares(x, y)
     ref = np.linalg.lstsq(x, y, rcond=None)[0]

@@ -11,8 +11,13 @@ from scipy import signal
 
 from fdi_daemon.diagnose.workflow import run_diagnose
 from tests import silverbox_like
-from tests.diagnose_cases import FS, arrow_recording, duffing_recording, positioner_recording, \
-    stage_recording
+from tests.diagnose_cases import (
+    FS,
+    arrow_recording,
+    duffing_recording,
+    positioner_recording,
+    stage_recording,
+)
 
 pytestmark = pytest.mark.slow
 

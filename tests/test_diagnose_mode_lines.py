@@ -27,12 +27,15 @@ def _force(seed=7, n=4096):
     return signal.lfilter(*signal.butter(4, 20.0, fs=FS), rng.standard_normal(n))
 
 
-@pytest.mark.parametrize("line,changed", [
-    ("damping", {"damping": 3.0 * DAMPING_N_S_PER_M}),
-    ("stiffness", {"stiffness": 0.8 * STIFFNESS_N_PER_M}),
-    ("mass", {"mass": 1.25 * MASS_KG}),
-    ("damping", {"damping": 0.5 * DAMPING_N_S_PER_M}),
-])
+@pytest.mark.parametrize(
+    "line,changed",
+    [
+        ("damping", {"damping": 3.0 * DAMPING_N_S_PER_M}),
+        ("stiffness", {"stiffness": 0.8 * STIFFNESS_N_PER_M}),
+        ("mass", {"mass": 1.25 * MASS_KG}),
+        ("damping", {"damping": 0.5 * DAMPING_N_S_PER_M}),
+    ],
+)
 def test_a_line_moves_the_mode_as_the_parameter_does(line, changed):
     params = {"mass": MASS_KG, "damping": DAMPING_N_S_PER_M, "stiffness": STIFFNESS_N_PER_M}
     ratio = next(changed[k] / params[k] for k in changed)

@@ -38,18 +38,21 @@ def _possible(result):
 STRONG = {"rms_v": 0.8, "duration_s": 40.0}
 
 
-@pytest.mark.parametrize("fault,value,right,excitation", [
-    ("accel_bias", 0.3, {"sensor_offset"}, {}),
-    # at 0.8 V the free force path once read the bias as a constant force (`force_offset`),
-    # which moves no steady acceleration of a load held by its air spring
-    ("accel_bias", 0.5, {"sensor_offset"}, STRONG),
-    ("accel_saturation", 0.05, {"output_saturation"}, STRONG),
-    # contact friction: Coulomb with a little stiction (μs/μk = 1.1)
-    ("bearing_supply", 0.75, {"coulomb_friction", "stribeck_friction"}, STRONG),
-    # heavy contact friction: the mass sticks for long stretches
-    ("bearing_supply", 0.55, {"coulomb_friction", "stribeck_friction"}, STRONG),
-    ("bearing_supply", 0.65, {"coulomb_friction", "stribeck_friction"}, STRONG),
-])
+@pytest.mark.parametrize(
+    "fault,value,right,excitation",
+    [
+        ("accel_bias", 0.3, {"sensor_offset"}, {}),
+        # at 0.8 V the free force path once read the bias as a constant force (`force_offset`),
+        # which moves no steady acceleration of a load held by its air spring
+        ("accel_bias", 0.5, {"sensor_offset"}, STRONG),
+        ("accel_saturation", 0.05, {"output_saturation"}, STRONG),
+        # contact friction: Coulomb with a little stiction (μs/μk = 1.1)
+        ("bearing_supply", 0.75, {"coulomb_friction", "stribeck_friction"}, STRONG),
+        # heavy contact friction: the mass sticks for long stretches
+        ("bearing_supply", 0.55, {"coulomb_friction", "stribeck_friction"}, STRONG),
+        ("bearing_supply", 0.65, {"coulomb_friction", "stribeck_friction"}, STRONG),
+    ],
+)
 def test_rig_fault_is_named_first_and_gap_halves(fault, value, right, excitation):
     result = _diagnose(fault, value, **excitation)
     assert right & set(result.named[:1]), f"{fault}: named {result.named}"
@@ -67,9 +70,12 @@ def test_rig_accelerometer_bias_is_a_sensor_offset_alone_with_its_size():
 
 
 #: an input effect's size as `fdi diagnose` reports it, and the simulator's
-_INPUT_SIZE = {"dead_time": ("dead_time_s", "delay_s"),
-               "dead_zone": ("half_width", "half_width_v"),
-               "input_saturation": ("level", "level_v"), "backlash": ("gap", "gap_v")}
+_INPUT_SIZE = {
+    "dead_time": ("dead_time_s", "delay_s"),
+    "dead_zone": ("half_width", "half_width_v"),
+    "input_saturation": ("level", "level_v"),
+    "backlash": ("gap", "gap_v"),
+}
 
 
 @pytest.mark.parametrize("effect", sorted(RIG_INPUT_EFFECTS))
@@ -81,7 +87,8 @@ def test_rig_input_effect_is_named_first_with_its_size(effect):
     u, y = rig_recording(input_effect=effect, **STRONG)
     b, a = rig_model()
     _assert_named_first_with_its_size(
-        _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a)), effect)
+        _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a)), effect
+    )
 
 
 def _assert_named_first_with_its_size(result, effect):
@@ -100,20 +107,23 @@ def _assert_named_first_with_its_size(result, effect):
         assert size == pytest.approx(truth, rel=0.2)
 
 
-@pytest.mark.parametrize("damping_n_s_per_m,excitation", [
-    (67.5, STRONG),
-    # twice the load's damping: the seal's Coulomb friction was named with its loop's
-    # spring, whose mode read as a mass × 0.835 (10.52 -> 11.25 Hz); an output-error fit
-    # moves the mode along the damping alone (10.20 -> 10.34 Hz, ζω 18.4 -> 33.2 /s)
-    (90.0, STRONG),
-    # three times: named a gain of 0.63 with the seal's friction until the refit's
-    # explanations had the mode's damping line (`mode_lines`)
-    (135.0, STRONG),
-    # the lower drive: × 1.5 was named a gain of 0.867 (the seal's friction is a larger
-    # share of the damping there)
-    (67.5, {}),
-    (135.0, {}),
-])
+@pytest.mark.parametrize(
+    "damping_n_s_per_m,excitation",
+    [
+        (67.5, STRONG),
+        # twice the load's damping: the seal's Coulomb friction was named with its loop's
+        # spring, whose mode read as a mass × 0.835 (10.52 -> 11.25 Hz); an output-error fit
+        # moves the mode along the damping alone (10.20 -> 10.34 Hz, ζω 18.4 -> 33.2 /s)
+        (90.0, STRONG),
+        # three times: named a gain of 0.63 with the seal's friction until the refit's
+        # explanations had the mode's damping line (`mode_lines`)
+        (135.0, STRONG),
+        # the lower drive: × 1.5 was named a gain of 0.867 (the seal's friction is a larger
+        # share of the damping there)
+        (67.5, {}),
+        (135.0, {}),
+    ],
+)
 def test_rig_added_viscous_damping_is_named_viscous_friction(damping_n_s_per_m, excitation):
     # the load's linear damping (45 N s/m nominal, a 1.35 kg load) raised; the seal's
     # friction may rightly come with it. The damper is named by the refit's damping line
@@ -121,8 +131,7 @@ def test_rig_added_viscous_damping_is_named_viscous_friction(damping_n_s_per_m, 
     # Δ(c/m) is read from the mode
     from hil_sim.rig import RigParams
 
-    u, y = rig_recording(variant=(("viscous_damping_n_s_per_m", damping_n_s_per_m),),
-                         **excitation)
+    u, y = rig_recording(variant=(("viscous_damping_n_s_per_m", damping_n_s_per_m),), **excitation)
     b, a = rig_model()
     result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
     assert "viscous_friction" in result.named
@@ -134,21 +143,28 @@ def test_rig_added_viscous_damping_is_named_viscous_friction(damping_n_s_per_m, 
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-@pytest.mark.parametrize("coulomb_n,excitation", [
-    (0.5, STRONG), (2.0, STRONG), (0.5, {"rms_v": 0.4, "duration_s": 30.0}),
-    # 2.5 m/s² on the 1.35 kg load: the loop's spring, softened beside the friction while
-    # the record's linear part reads the mode stiffer, was named a stiffness change × 0.716
-    (3.4, STRONG),
-    # under random excitation the loop's spring read a mass × 0.884 beside it, where the
-    # record's linear part is the damping line (the friction's describing function)
-    (3.4, {**STRONG, "excitation": "noise 1-15 Hz"})])
+@pytest.mark.parametrize(
+    "coulomb_n,excitation",
+    [
+        (0.5, STRONG),
+        (2.0, STRONG),
+        (0.5, {"rms_v": 0.4, "duration_s": 30.0}),
+        # 2.5 m/s² on the 1.35 kg load: the loop's spring, softened beside the friction while
+        # the record's linear part reads the mode stiffer, was named a stiffness change × 0.716
+        (3.4, STRONG),
+        # under random excitation the loop's spring read a mass × 0.884 beside it, where the
+        # record's linear part is the damping line (the friction's describing function)
+        (3.4, {**STRONG, "excitation": "noise 1-15 Hz"}),
+    ],
+)
 def test_rig_hidden_coulomb_friction_is_named_coulomb_friction(coulomb_n, excitation):
     # the rod seal's friction raised to a pure Coulomb friction (no stiction: static =
     # Coulomb). Its loop fits best a Stribeck form whose excess takes friction away near
     # rest (a force that builds up after each reversal), which is named by what it is:
     # Coulomb friction (`effects.friction_form`; it was named stribeck_friction)
-    u, y = rig_recording(variant=(("seal_coulomb_n", coulomb_n), ("seal_static_n", coulomb_n)),
-                         **excitation)
+    u, y = rig_recording(
+        variant=(("seal_coulomb_n", coulomb_n), ("seal_static_n", coulomb_n)), **excitation
+    )
     b, a = rig_model()
     result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
     assert result.named == ["coulomb_friction"]
@@ -171,8 +187,10 @@ def test_rig_heavy_coulomb_friction_under_a_small_excitation_holds_the_map_named
     for held in report["held_by_later"]:
         assert held["held_by"] == ["coulomb_friction"]
         assert held["sse_without"] <= 1.05 * held["sse_with"]
-        assert any(line.startswith(f"{held['effect']} was named first and is not kept")
-                   for line in summary_lines(report))
+        assert any(
+            line.startswith(f"{held['effect']} was named first and is not kept")
+            for line in summary_lines(report)
+        )
 
 
 def test_rig_without_fault_names_nothing_or_its_seal_friction():
@@ -235,8 +253,7 @@ def test_rig_payload_under_random_excitation_is_one_mass_change_with_its_size():
     # mass changes (× 1.378 and × 0.973). One effect has one name, read on the line
     from hil_sim.rig import RigParams
 
-    u, y = rig_recording(variant=(("bearing_mass_kg", 1.5),), excitation="noise 1-15 Hz",
-                         **STRONG)
+    u, y = rig_recording(variant=(("bearing_mass_kg", 1.5),), excitation="noise 1-15 Hz", **STRONG)
     b, a = rig_model()
     result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
     assert result.named[:1] == ["mass_change"] and result.named.count("mass_change") == 1
@@ -312,25 +329,28 @@ def test_a_rig_variant_pure_coulomb_friction_is_named_by_a_possible_fit(tmp_path
     rig, model = _variant_and_its_model(0, tmp_path, monkeypatch)
     seal = {**rig, "seal_coulomb_n": 0.5, "seal_static_n": 0.5}
     u, y = rig_recording(variant=tuple(sorted(seal.items())), **STRONG)
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b,
-                                    model.plant_a))
+    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
     assert result.named == ["coulomb_friction"]
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-@pytest.mark.parametrize("index,effect", [
-    # v0: the refit is a pure shift (99.8 % of what it removes), but beside the seal's
-    # friction the shift's coefficient traded to 1.57, outside a shift's range, and the
-    # refit swallowed the delay (Stribeck friction alone) until the explanation kept the
-    # judgement it had alone (docs/diagnose.md §4.1)
-    (0, "dead_time"),
-    # v1: the refit alone is the map's Bussgang gain (0.867); on top of the map a gain of
-    # 1.018 was named first, a remainder of the map's fit, until an explanation on top had
-    # to change the model the way it did alone (docs/diagnose.md §4.1)
-    (1, "dead_zone"),
-])
-def test_a_rig_variant_input_effect_is_named_first_with_its_size(index, effect, tmp_path,
-                                                                 monkeypatch):
+@pytest.mark.parametrize(
+    "index,effect",
+    [
+        # v0: the refit is a pure shift (99.8 % of what it removes), but beside the seal's
+        # friction the shift's coefficient traded to 1.57, outside a shift's range, and the
+        # refit swallowed the delay (Stribeck friction alone) until the explanation kept the
+        # judgement it had alone (docs/diagnose.md §4.1)
+        (0, "dead_time"),
+        # v1: the refit alone is the map's Bussgang gain (0.867); on top of the map a gain of
+        # 1.018 was named first, a remainder of the map's fit, until an explanation on top had
+        # to change the model the way it did alone (docs/diagnose.md §4.1)
+        (1, "dead_zone"),
+    ],
+)
+def test_a_rig_variant_input_effect_is_named_first_with_its_size(
+    index, effect, tmp_path, monkeypatch
+):
     # a rig variant with its own model, the drive's effect of the default rig's test
     # (a dead time of two samples, a dead zone of ±0.15 V), 40 s at 0.8 V
     rig, model = _variant_and_its_model(index, tmp_path, monkeypatch)

@@ -22,11 +22,11 @@ import urllib.request
 
 import pytest
 import yaml
+from mqtt_support import Broker, Subscriber, needs_mosquitto
 from prometheus_client.parser import text_string_to_metric_families
 
 from fdi_daemon.detect.events import ALARM_KINDS as DETECTOR_ALARMS
 from fdi_daemon.service.config import default_config_path, load_config
-from mqtt_support import Broker, Subscriber, needs_mosquitto
 
 DEFAULT = load_config()
 ALARMS = ("fault_detected", "friction_isolated", "other_fault")
@@ -44,9 +44,13 @@ class Daemon:
     def __init__(self, config, cwd) -> None:
         self.lines: list[str] = []
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "fdi_daemon", "run", "--config", str(config)], cwd=cwd,
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+            [sys.executable, "-m", "fdi_daemon", "run", "--config", str(config)],
+            cwd=cwd,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
         threading.Thread(target=self._collect, daemon=True).start()
 
     def _collect(self) -> None:
@@ -86,8 +90,11 @@ def read_jsonl(path) -> list[dict]:
 def scrape(url: str) -> dict[str, float]:
     with urllib.request.urlopen(url, timeout=10) as reply:
         text = reply.read().decode()
-    return {s.name + ("" if not s.labels else json.dumps(s.labels, sort_keys=True)): s.value
-            for family in text_string_to_metric_families(text) for s in family.samples}
+    return {
+        s.name + ("" if not s.labels else json.dumps(s.labels, sort_keys=True)): s.value
+        for family in text_string_to_metric_families(text)
+        for s in family.samples
+    }
 
 
 def test_embedded_run_publishes_its_fault_across_a_broker_restart(tmp_path):
@@ -106,28 +113,47 @@ def test_embedded_run_publishes_its_fault_across_a_broker_restart(tmp_path):
     try:
         explain = lambda: broker.tail() + daemon.output()  # noqa: E731
         url = daemon.wait_line("metrics ").split()[1]
-        sub.wait(lambda s: any(m["payload"]["kind"] == "calibrated" for m in s.on("/event")),
-                 180, "the calibrated event over MQTT", explain)
+        sub.wait(
+            lambda s: any(m["payload"]["kind"] == "calibrated" for m in s.on("/event")),
+            180,
+            "the calibrated event over MQTT",
+            explain,
+        )
         online = sub.on("/status")[0]["payload"]
         assert online["online"] is True
 
         broker.stop()  # the broker goes away before the fault and stays away during it
         events = wait_until(
-            lambda: (lambda ev: ev if "friction_isolated" in [e["kind"] for e in ev]
-                     else None)(read_jsonl(state / "events.jsonl")),
-            120, "friction_isolated in the event log", explain)
+            lambda: (lambda ev: ev if "friction_isolated" in [e["kind"] for e in ev] else None)(
+                read_jsonl(state / "events.jsonl")
+            ),
+            120,
+            "friction_isolated in the event log",
+            explain,
+        )
         for line in events:
             assert line["schema"] == 2 and line["time"].endswith("Z") and "kind" in line
         outbox = wait_until(
             lambda: (lambda msgs: msgs if len(msgs) >= 2 else None)(
-                [r["msg"] for r in read_jsonl(state / "mqtt-outbox.jsonl")
-                 if "msg" in r and r["msg"]["kind"] in DETECTOR_ALARMS]),
-            30, "the alarms in the outbox file", explain)
+                [
+                    r["msg"]
+                    for r in read_jsonl(state / "mqtt-outbox.jsonl")
+                    if "msg" in r and r["msg"]["kind"] in DETECTOR_ALARMS
+                ]
+            ),
+            30,
+            "the alarms in the outbox file",
+            explain,
+        )
         assert [m["kind"] for m in outbox][:2] == ["fault_detected", "friction_isolated"]
 
         # the level is measured from one window (1 s) after the detection
-        metrics = wait_until(lambda: (lambda m: m if m["fdi_friction_level"] > 0 else None)(
-            scrape(url)), 30, "the friction level in the metrics", explain)
+        metrics = wait_until(
+            lambda: (lambda m: m if m["fdi_friction_level"] > 0 else None)(scrape(url)),
+            30,
+            "the friction level in the metrics",
+            explain,
+        )
         assert metrics["fdi_samples_total"] > 0
         assert metrics["fdi_alarm_episodes_total"] >= 1
         assert metrics["fdi_state"] in (3.0, 4.0)
@@ -135,9 +161,15 @@ def test_embedded_run_publishes_its_fault_across_a_broker_restart(tmp_path):
         assert metrics["fdi_mqtt_connected"] == 0 and metrics["fdi_mqtt_buffered_alarms"] >= 2
 
         broker.start()  # back: the waiting alarms arrive, in order, each at least once
-        sub.wait(lambda s: {"fault_detected", "friction_isolated"} <= {
-            m["payload"]["kind"] for m in s.on("/event")}, 60, "the alarms after the restart",
-            explain)
+        sub.wait(
+            lambda s: (
+                {"fault_detected", "friction_isolated"}
+                <= {m["payload"]["kind"] for m in s.on("/event")}
+            ),
+            60,
+            "the alarms after the restart",
+            explain,
+        )
         alarms = [m["payload"] for m in sub.on("/event") if "id" in m["payload"]]
         first_seen = list(dict.fromkeys(a["id"] for a in alarms))
         assert first_seen == sorted(first_seen) and first_seen[0] == 1
@@ -154,20 +186,35 @@ def test_embedded_run_publishes_its_fault_across_a_broker_restart(tmp_path):
 
         # a subscriber that comes later gets the retained status: online, the friction level
         late.append(Subscriber(broker.port, "fdi/lab/e2e/status", client_id="late-1"))
-        retained = late[0].wait(lambda s: [m for m in s.on("/status") if m["retain"]], 30,
-                                "the retained status", explain)[0]["payload"]
+        retained = late[0].wait(
+            lambda s: [m for m in s.on("/status") if m["retain"]],
+            30,
+            "the retained status",
+            explain,
+        )[0]["payload"]
         assert retained["online"] is True and retained["state"] in ALARMS
         assert retained["friction_level"] > 0 and retained["alarm_episodes"] >= 1
 
         daemon.proc.send_signal(signal.SIGKILL)  # dies without a word: the last will
         daemon.proc.wait(30)
-        sub.wait(lambda s: s.on("/status")[-1]["payload"].get("state") == "offline", 60,
-                 "the last will", explain)
-        assert sub.on("/status")[-1]["payload"] == {"schema": 2, "online": False,
-                                                    "state": "offline"}
+        sub.wait(
+            lambda s: s.on("/status")[-1]["payload"].get("state") == "offline",
+            60,
+            "the last will",
+            explain,
+        )
+        assert sub.on("/status")[-1]["payload"] == {
+            "schema": 2,
+            "online": False,
+            "state": "offline",
+        }
         late.append(Subscriber(broker.port, "fdi/lab/e2e/status", client_id="late-2"))
-        will = late[1].wait(lambda s: [m for m in s.on("/status") if m["retain"]], 30,
-                            "the retained last will", explain)[0]
+        will = late[1].wait(
+            lambda s: [m for m in s.on("/status") if m["retain"]],
+            30,
+            "the retained last will",
+            explain,
+        )[0]
         assert will["payload"]["online"] is False
     finally:
         if daemon.proc.poll() is None:

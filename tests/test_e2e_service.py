@@ -79,13 +79,19 @@ class DaemonProcess:
         self.lines: list[str] = []
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "fdi_daemon", "run", "--config", str(config_path)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=state_dir,
-            env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})})
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=state_dir,
+            env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})},
+        )
         self.stderr: list[str] = []
-        threading.Thread(target=self._collect, args=(self.proc.stdout, self.lines),
-                         daemon=True).start()
-        threading.Thread(target=self._collect, args=(self.proc.stderr, self.stderr),
-                         daemon=True).start()
+        threading.Thread(
+            target=self._collect, args=(self.proc.stdout, self.lines), daemon=True
+        ).start()
+        threading.Thread(
+            target=self._collect, args=(self.proc.stderr, self.stderr), daemon=True
+        ).start()
 
     @staticmethod
     def _collect(stream, sink: list[str]) -> None:
@@ -113,8 +119,9 @@ class DaemonProcess:
         """Poll ``predicate(snapshot)`` until truthy; fail with the daemon's output."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            assert self.proc.poll() is None, f"daemon exited while waiting for {what}\n" \
-                                             f"{self.output()}"
+            assert self.proc.poll() is None, (
+                f"daemon exited while waiting for {what}\n{self.output()}"
+            )
             snap = self.snapshot()
             if snap is not None:
                 value = predicate(snap)
@@ -126,13 +133,14 @@ class DaemonProcess:
     def events(self) -> list[dict]:
         if not self.events_path.exists():
             return []
-        return [json.loads(line) for line in self.events_path.read_text().splitlines()
-                if line.strip()]
+        return [
+            json.loads(line) for line in self.events_path.read_text().splitlines() if line.strip()
+        ]
 
-    def wait_event(self, kind: str, timeout_s: float = EVENT_TIMEOUT_S,
-                   after: int = 0) -> dict:
+    def wait_event(self, kind: str, timeout_s: float = EVENT_TIMEOUT_S, after: int = 0) -> dict:
         def found(_snap):
             return next((e for e in self.events()[after:] if e["kind"] == kind), None)
+
         return self.wait_for(found, timeout_s, f"a {kind} event")
 
     def modbus_port(self) -> int:
@@ -149,16 +157,25 @@ class DaemonProcess:
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.wait(10)
-            raise AssertionError(f"daemon did not stop on {sig!r}\n{self.output()}")
+            raise AssertionError(f"daemon did not stop on {sig!r}\n{self.output()}") from None
 
 
 def write_config(path: Path, link: dict, stall_timeout_s: float = 1.0) -> Path:
     config = {
-        "link": {**link, "reconnect": {"backoff_initial_s": 0.1, "backoff_max_s": 1.0,
-                                       "stall_timeout_s": stall_timeout_s}},
+        "link": {
+            **link,
+            "reconnect": {
+                "backoff_initial_s": 0.1,
+                "backoff_max_s": 1.0,
+                "stall_timeout_s": stall_timeout_s,
+            },
+        },
         "model": {"path": str(MODEL)},
-        "sinks": {"event_log": "events.jsonl", "status_socket": "status.sock",
-                  "modbus_status": {"enabled": True, "host": "127.0.0.1", "port": 0}},
+        "sinks": {
+            "event_log": "events.jsonl",
+            "status_socket": "status.sock",
+            "modbus_status": {"enabled": True, "host": "127.0.0.1", "port": 0},
+        },
         "recorder": {"dir": "recordings", "rotate_seconds": 600},
         "service": {"state_dir": str(path.parent)},
     }
@@ -202,16 +219,21 @@ def inject_friction_and_check(daemon: DaemonProcess, device) -> dict:
     device.set_fault("bearing_supply", 0.35)
     detected = daemon.wait_event("fault_detected", after=before)
     latency_s = detected["t"] - t_fault
-    print(f"detection latency {latency_s * 1e3:.1f} ms of sample time "
-          f"(fault at t={t_fault:.4f} s, event t={detected['t']:.4f} s)")
+    print(
+        f"detection latency {latency_s * 1e3:.1f} ms of sample time "
+        f"(fault at t={t_fault:.4f} s, event t={detected['t']:.4f} s)"
+    )
     assert -1.0 / 256 <= latency_s <= DETECTION_BUDGET_S, (latency_s, daemon.output())
     isolated = daemon.wait_event("friction_isolated", after=before)
     assert isolated["t"] >= detected["t"]
     # the daemon's Modbus status registers, read by an independent client
     regs = daemon.wait_for(
-        lambda s: (lambda r: r if r["fault_detected_count"] >= 1 and r["state"] in (3, 4)
-                   else None)(read_status_registers(daemon.modbus_port())),
-        30.0, "the alarm in the Modbus status registers")
+        lambda s: (
+            lambda r: r if r["fault_detected_count"] >= 1 and r["state"] in (3, 4) else None
+        )(read_status_registers(daemon.modbus_port())),
+        30.0,
+        "the alarm in the Modbus status registers",
+    )
     assert regs["alarm_active"] == 1 and regs["samples"] > 0 and regs["t"] >= detected["t"]
     assert math.isfinite(regs["theta1"]) and math.isfinite(regs["theta2"])
     assert any("FAULT DETECTED" in line for line in daemon.lines)
@@ -225,8 +247,9 @@ def test_modbus_tcp_friction_fault_link_loss_and_sigkill(tmp_path):
         daemon = DaemonProcess(write_config(tmp_path / "rig.yaml", link), tmp_path)
         daemon.wait_for(monitoring, CALIBRATION_TIMEOUT_S, "calibration (state monitoring)")
         result = inject_friction_and_check(daemon, device)
-        assert not [e for e in daemon.events() if e["kind"] in ALARMS
-                    and e["t"] < result["detected"]["t"]], "alarm before the fault"
+        assert not [
+            e for e in daemon.events() if e["kind"] in ALARMS and e["t"] < result["detected"]["t"]
+        ], "alarm before the fault"
 
         # kill the device's link, bring up a new device on the same port
         n_events = len(daemon.events())
@@ -237,8 +260,11 @@ def test_modbus_tcp_friction_fault_link_loss_and_sigkill(tmp_path):
         gap = daemon.wait_event("data_gap", after=n_events)
         assert gap["reason"] == "counter_restart"  # the new device counts from 0 again
         samples_then = daemon.snapshot()["link"]["samples"]
-        daemon.wait_for(lambda s: s["link"]["samples"] > samples_then + 256, 60.0,
-                        "samples flowing after the restore")
+        daemon.wait_for(
+            lambda s: s["link"]["samples"] > samples_then + 256,
+            60.0,
+            "samples flowing after the restore",
+        )
 
         # SIGKILL: the recorder loses at most 1 s of samples
         last_t = daemon.snapshot()["t"]
@@ -261,9 +287,11 @@ def test_serial_corruption_stall_friction_reload_and_sigterm(tmp_path):
     notify = NotifyListener(tmp_path / "notify.sock")
     daemon = None
     try:
-        daemon = DaemonProcess(write_config(tmp_path / "rig.yaml", link), tmp_path,
-                               env={"NOTIFY_SOCKET": str(notify.path),
-                                    "WATCHDOG_USEC": "1000000"})
+        daemon = DaemonProcess(
+            write_config(tmp_path / "rig.yaml", link),
+            tmp_path,
+            env={"NOTIFY_SOCKET": str(notify.path), "WATCHDOG_USEC": "1000000"},
+        )
         daemon.wait_for(monitoring, CALIBRATION_TIMEOUT_S, "calibration (state monitoring)")
         assert notify.times("READY=1") and len(notify.times("WATCHDOG=1")) >= 2
 
@@ -272,8 +300,9 @@ def test_serial_corruption_stall_friction_reload_and_sigterm(tmp_path):
         device.inject("corrupt", count=20)
         device.inject("garbage", count=300)
         device.inject("truncate", count=5)
-        daemon.wait_for(lambda s: s["link"]["crc_errors"] >= crc_before + 25, 60.0,
-                        "25 more CRC errors counted")
+        daemon.wait_for(
+            lambda s: s["link"]["crc_errors"] >= crc_before + 25, 60.0, "25 more CRC errors counted"
+        )
         time.sleep(3.0)
         snap = daemon.snapshot()
         assert snap["state"] == "monitoring", snap["state"]
@@ -296,8 +325,11 @@ def test_serial_corruption_stall_friction_reload_and_sigterm(tmp_path):
         # the monitor holds its decisions until its windows are full again after a gap:
         # inject the fault once that is over (a fault starting within ~1 s after a gap is
         # not detected at all; reported to the monitor's owner)
-        daemon.wait_for(lambda s: monitoring(s) and (s["t"] or 0) >= gap["t"] + 3.0,
-                        CALIBRATION_TIMEOUT_S, "3 s of monitoring after the gap")
+        daemon.wait_for(
+            lambda s: monitoring(s) and (s["t"] or 0) >= gap["t"] + 3.0,
+            CALIBRATION_TIMEOUT_S,
+            "3 s of monitoring after the gap",
+        )
 
         inject_friction_and_check(daemon, device)
 
@@ -306,29 +338,39 @@ def test_serial_corruption_stall_friction_reload_and_sigterm(tmp_path):
         good = config_path.read_text()
         config_path.write_text(good + "bogus_section: 1\n")
         os.kill(daemon.proc.pid, signal.SIGHUP)
-        daemon.wait_for(lambda s: any("reload failed" in line and "bogus_section" in line
-                                      for line in daemon.stderr), 60.0,
-                        "the failed reload in the log")
+        daemon.wait_for(
+            lambda s: any(
+                "reload failed" in line and "bogus_section" in line for line in daemon.stderr
+            ),
+            60.0,
+            "the failed reload in the log",
+        )
         config_path.write_text(good)
 
         # SIGHUP reloads (the model and config are read again), samples keep flowing
         announced = sum(line.startswith("fdi run: config") for line in daemon.lines)
         os.kill(daemon.proc.pid, signal.SIGHUP)
-        daemon.wait_for(lambda s: sum(line.startswith("fdi run: config")
-                                      for line in daemon.lines) > announced, 60.0,
-                        "the reload announcement")
+        daemon.wait_for(
+            lambda s: sum(line.startswith("fdi run: config") for line in daemon.lines) > announced,
+            60.0,
+            "the reload announcement",
+        )
         samples_then = daemon.snapshot()["link"]["samples"]
-        daemon.wait_for(lambda s: s["link"]["samples"] > samples_then + 256, 60.0,
-                        "samples after the reload")
+        daemon.wait_for(
+            lambda s: s["link"]["samples"] > samples_then + 256, 60.0, "samples after the reload"
+        )
 
         assert daemon.stop(signal.SIGTERM) == 0, daemon.output()
         assert not daemon.socket.exists()
         assert notify.messages[-1][1].startswith("STOPPING=1")
         assert any(m.startswith("RELOADING=1") for _, m in notify.messages)
-        assert any("STATUS=fault_detected" in m or "STATUS=friction_isolated" in m
-                   for _, m in notify.messages)
-        assert any(line.startswith("fdi run:") and "deadline misses" in line
-                   for line in daemon.lines)
+        assert any(
+            "STATUS=fault_detected" in m or "STATUS=friction_isolated" in m
+            for _, m in notify.messages
+        )
+        assert any(
+            line.startswith("fdi run:") and "deadline misses" in line for line in daemon.lines
+        )
         (rec_file,) = sorted((tmp_path / "recordings").glob("rec-*.csv"))[:1]
         rec = read_recording(rec_file, strict=False)
         assert rec.sampling.issues  # the corrupted frames and the stall are visible gaps

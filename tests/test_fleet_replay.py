@@ -15,9 +15,9 @@ import numpy as np
 import psutil
 import pytest
 import yaml
-
 from conftest_detect import MODEL, scenario_recording
 from process_support import start_fdi, survivors, wait_for_children
+
 from fdi_daemon.cli import main
 from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.fleet.inputs import ModelMap, find_recordings
@@ -47,14 +47,17 @@ def _write_fleet(root: Path) -> tuple[list[str], Path]:
     (root / "models" / "rig_a.yaml").write_text(yaml.safe_dump(base))
     # rig B: the same plant with a shorter window, so the map's routing shows in the rows
     (root / "models" / "rig_b.yaml").write_text(
-        yaml.safe_dump({**base, "detector": {**(base.get("detector") or {}),
-                                             "window_s": 0.5}}))
+        yaml.safe_dump({**base, "detector": {**(base.get("detector") or {}), "window_s": 0.5}})
+    )
     model_map = root / "map.yaml"
-    model_map.write_text('rig-b-03.csv: models/rig_a.yaml\n"rig-a-*": models/rig_a.yaml\n'
-                         '"rig-b-*": models/rig_b.yaml\n')
+    model_map.write_text(
+        'rig-b-03.csv: models/rig_a.yaml\n"rig-a-*": models/rig_a.yaml\n'
+        '"rig-b-*": models/rig_b.yaml\n'
+    )
     files = []
-    plans = ([("test_case_2", kind) for kind in ("full", "gap", "short")] * 6
-             + [("test_case_1", kind) for kind in ("full", "short")] * 4)  # 26 per rig
+    plans = [("test_case_2", kind) for kind in ("full", "gap", "short")] * 6 + [
+        ("test_case_1", kind) for kind in ("full", "short")
+    ] * 4  # 26 per rig
     for rig in ("a", "b"):
         for i, (scenario, kind) in enumerate(plans[:23]):
             rec = _variant(scenario_recording(scenario, seed=i % 5), kind)
@@ -64,11 +67,16 @@ def _write_fleet(root: Path) -> tuple[list[str], Path]:
     (recs / "rig-a-90.csv").write_text("# fs: 256\nt,v_in\n0,1\n0.00390625,1\n")
     (recs / "rig-b-91.npz").write_bytes(b"PK\x03\x04 this is no zip archive")
     fast = scenario_recording("test_case_2", seed=0)
-    write_recording(recs / "rig-a-92.csv", Recording(
-        {k: np.asarray(v)[:600] for k, v in fast.columns.items()}, dict(fast.meta, fs="512")))
+    write_recording(
+        recs / "rig-a-92.csv",
+        Recording(
+            {k: np.asarray(v)[:600] for k, v in fast.columns.items()}, dict(fast.meta, fs="512")
+        ),
+    )
     write_recording(recs / "other-93.csv", _variant(fast, "short"))
-    files += [str(recs / n) for n in ("rig-a-90.csv", "rig-b-91.npz", "rig-a-92.csv",
-                                      "other-93.csv")]
+    files += [
+        str(recs / n) for n in ("rig-a-90.csv", "rig-b-91.npz", "rig-a-92.csv", "other-93.csv")
+    ]
     assert len(files) == 50
     return sorted(files), model_map
 
@@ -83,21 +91,27 @@ def fleet(tmp_path_factory):
 def _single_replay_row(file: str, model: str | None, tmp: Path, capsys) -> dict:
     """What one `fdi replay --summary` run says about a file, as a row."""
     if model is None:
-        return summary_row(file, None, error="no model: the model map has no pattern for "
-                                             "this file")
+        return summary_row(file, None, error="no model: the model map has no pattern for this file")
     out = tmp / (Path(file).name + ".summary.json")
     code = main(["replay", file, "--model", model, "--summary", str(out)])
     captured = capsys.readouterr()
     if code != 0:
         assert code == 2 and captured.err.startswith("fdi replay: error: ")
-        return summary_row(file, model, error=captured.err.strip()[len("fdi replay: error: "):])
+        return summary_row(file, model, error=captured.err.strip()[len("fdi replay: error: ") :])
     return summary_row(file, model, json.loads(out.read_text()))
 
 
 def _read_csv_rows(path: Path) -> list[dict]:
     """The CSV table with its values typed back (empty cell = None)."""
-    ints = {"samples", "alarm_episodes", "alarms", "alarm_peak_priority", "gaps",
-            "missing_samples", "bad_samples"}
+    ints = {
+        "samples",
+        "alarm_episodes",
+        "alarms",
+        "alarm_peak_priority",
+        "gaps",
+        "missing_samples",
+        "bad_samples",
+    }
     floats = {"fs", "first_detection_t", "isolated_t", "friction_level_final"}
     rows = []
     with open(path, newline="") as fh:
@@ -120,8 +134,21 @@ def _read_csv_rows(path: Path) -> list[dict]:
 def test_fifty_recordings_on_two_workers_equal_fifty_single_replays(fleet, tmp_path, capsys):
     root, files, model_map = fleet
     out = tmp_path / "results.csv"
-    assert main(["fleet-replay", str(root / "recs"), "--model-map", str(model_map),
-                 "--workers", "2", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "fleet-replay",
+                str(root / "recs"),
+                "--model-map",
+                str(model_map),
+                "--workers",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "50 recording(s)" in capsys.readouterr().out
     rows = _read_csv_rows(out)
     assert [r["file"] for r in rows] == files
@@ -145,8 +172,10 @@ def test_fifty_recordings_on_two_workers_equal_fifty_single_replays(fleet, tmp_p
     assert b["model"].endswith("rig_b.yaml") and a["model"].endswith("rig_a.yaml")
     assert b["friction_level_final"] != a["friction_level_final"]
     assert by_name["rig-b-03.csv"]["model"].endswith("rig_a.yaml")
-    assert by_name["rig-b-03.csv"]["friction_level_final"] == by_name["rig-a-03.csv"][
-        "friction_level_final"]
+    assert (
+        by_name["rig-b-03.csv"]["friction_level_final"]
+        == by_name["rig-a-03.csv"]["friction_level_final"]
+    )
 
 
 @pytest.mark.slow
@@ -166,8 +195,12 @@ def test_local_cluster_listens_on_loopback_only_and_parquet_holds_the_rows(fleet
         # every listening socket of this process and the worker processes (the scheduler's
         # HTTP endpoint too, which Dask starts even without a dashboard) is on loopback
         me = psutil.Process()
-        listening = [c.laddr for p in (me, *me.children(recursive=True))
-                     for c in p.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN]
+        listening = [
+            c.laddr
+            for p in (me, *me.children(recursive=True))
+            for c in p.net_connections(kind="inet")
+            if c.status == psutil.CONN_LISTEN
+        ]
         assert len(listening) >= 3 and {a.ip for a in listening} == {"127.0.0.1"}, listening
         rows = replay_fleet(jobs, client, on_row=seen.append)
     assert len(seen) == 4 and rows == [replay_row(f, m) for f, m in jobs]
@@ -192,8 +225,10 @@ def test_model_map_exact_names_first_then_patterns_in_order(tmp_path):
     for name in ("a.yaml", "b.yaml", "c.yaml"):
         (tmp_path / "m" / name).write_text("fs: 256\n")
     path = tmp_path / "map.yaml"
-    path.write_text('"rig-1*": m/a.yaml\nrig-12-x.csv: m/b.yaml\n"line/*/rig-2?.csv": m/c.yaml\n'
-                    '"rig-*": m/c.yaml\n')
+    path.write_text(
+        '"rig-1*": m/a.yaml\nrig-12-x.csv: m/b.yaml\n"line/*/rig-2?.csv": m/c.yaml\n'
+        '"rig-*": m/c.yaml\n'
+    )
     mm = ModelMap.load(path)
     m = tmp_path / "m"
     assert mm.model_for("/data/rig-12-x.csv") == str(m / "b.yaml")  # exact name wins
@@ -203,12 +238,15 @@ def test_model_map_exact_names_first_then_patterns_in_order(tmp_path):
     assert mm.model_for("/d/other.csv") is None
 
 
-@pytest.mark.parametrize("text, message", [
-    ("- a\n- b\n", "mapping"),
-    ('"*": missing.yaml\n', "does not exist"),
-    ('"*": 3\n', "expected a pattern and a model file"),
-    ("", "mapping"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("- a\n- b\n", "mapping"),
+        ('"*": missing.yaml\n', "does not exist"),
+        ('"*": 3\n', "expected a pattern and a model file"),
+        ("", "mapping"),
+    ],
+)
 def test_bad_model_maps_are_config_errors(tmp_path, text, message):
     path = tmp_path / "map.yaml"
     path.write_text(text)
@@ -230,12 +268,15 @@ def test_finding_recordings(tmp_path):
         find_recordings(str(tmp_path / "absent"))
 
 
-@pytest.mark.parametrize("extra, message", [
-    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes the local"),
-    (["--workers", "0"], "at least 1"),
-    (["--out", "r.xlsx"], ".csv or .parquet"),
-    (["--out", "RECS/rig-a-00.csv"], "is also an input"),  # the table replaced a recording
-])
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes the local"),
+        (["--workers", "0"], "at least 1"),
+        (["--out", "r.xlsx"], ".csv or .parquet"),
+        (["--out", "RECS/rig-a-00.csv"], "is also an input"),  # the table replaced a recording
+    ],
+)
 def test_user_mistakes_exit_2_with_one_line(fleet, capsys, extra, message):
     root, _, model_map = fleet
     extra = [arg.replace("RECS", str(root / "recs")) for arg in extra]
@@ -249,8 +290,16 @@ def test_an_unreachable_scheduler_is_one_line(fleet, capsys):
     with socket.socket() as s:  # a port where nothing listens
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    code = main(["fleet-replay", str(root / "recs" / "rig-a-00.csv"), "--model", str(MODEL),
-                 "--scheduler", f"tcp://127.0.0.1:{port}"])
+    code = main(
+        [
+            "fleet-replay",
+            str(root / "recs" / "rig-a-00.csv"),
+            "--model",
+            str(MODEL),
+            "--scheduler",
+            f"tcp://127.0.0.1:{port}",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "cannot reach the Dask scheduler" in err and err.count("\n") == 1, err
 
@@ -272,11 +321,24 @@ def test_a_scheduler_address_runs_on_that_cluster(fleet, tmp_path):
 
     root, files, model_map = fleet
     out = tmp_path / "r.csv"
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster:
-        assert main(["fleet-replay", f"{root}/recs/rig-a-0*.csv", "--model-map",
-                     str(model_map), "--scheduler", cluster.scheduler_address,
-                     "--out", str(out)]) == 0
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        assert (
+            main(
+                [
+                    "fleet-replay",
+                    f"{root}/recs/rig-a-0*.csv",
+                    "--model-map",
+                    str(model_map),
+                    "--scheduler",
+                    cluster.scheduler_address,
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
         assert "replay_row" in cluster.scheduler.task_prefixes  # the tasks ran there
     rows = _read_csv_rows(out)
     models = ModelMap.load(model_map)
@@ -323,10 +385,14 @@ def test_a_worker_that_dies_on_a_file_is_that_files_row(fleet, tmp_path):
     tests = Path(__file__).resolve().parent
     script = tmp_path / "dies.py"
     script.write_text(_DIES)
-    done = subprocess.run([sys.executable, str(script), json.dumps(jobs)], cwd=tests,
-                          env={**__import__("os").environ,
-                               "PYTHONPATH": f"{tests}:{tests.parent}"},
-                          capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [sys.executable, str(script), json.dumps(jobs)],
+        cwd=tests,
+        env={**__import__("os").environ, "PYTHONPATH": f"{tests}:{tests.parent}"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     rows = json.loads(done.stdout.strip().splitlines()[-1])
     assert rows[0] == replay_row(files[1], str(MODEL))
@@ -375,5 +441,13 @@ def test_sigterm_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_pat
 
 def _start_fleet(fleet, tmp_path):
     root, _, model_map = fleet
-    return start_fdi("fleet-replay", str(root / "recs"), "--model-map", str(model_map),
-                     "--workers", "2", "--out", str(tmp_path / "rows.csv"))
+    return start_fdi(
+        "fleet-replay",
+        str(root / "recs"),
+        "--model-map",
+        str(model_map),
+        "--workers",
+        "2",
+        "--out",
+        str(tmp_path / "rows.csv"),
+    )

@@ -19,16 +19,28 @@ PNG = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def chirps(tmp_path_factory):
     out = tmp_path_factory.mktemp("ident_cli")
-    return (plant_recording(out / "est.csv", 1024, seed=1),
-            plant_recording(out / "val.csv", 2048, seed=2))
+    return (
+        plant_recording(out / "est.csv", 1024, seed=1),
+        plant_recording(out / "val.csv", 2048, seed=2),
+    )
 
 
 @pytest.fixture(scope="module")
 def identified(chirps, tmp_path_factory):
     out = tmp_path_factory.mktemp("ident_model")
     model, plot = out / "model.yaml", out / "bode.png"
-    code = main(["identify", str(chirps[0]), "-o", str(model), "--validate", str(chirps[1]),
-                 "--plot", str(plot)])
+    code = main(
+        [
+            "identify",
+            str(chirps[0]),
+            "-o",
+            str(model),
+            "--validate",
+            str(chirps[1]),
+            "--plot",
+            str(plot),
+        ]
+    )
     assert code == 0
     return model, plot
 
@@ -51,8 +63,23 @@ def test_identify_writes_model_with_provenance(identified, chirps):
 
 def test_identify_order_option(chirps, tmp_path):
     out = tmp_path / "m2.yaml"
-    assert main(["identify", str(chirps[0]), "-o", str(out), "--order", "2",
-                 "--band", "1:15", "--method", "welch"]) == 0
+    assert (
+        main(
+            [
+                "identify",
+                str(chirps[0]),
+                "-o",
+                str(out),
+                "--order",
+                "2",
+                "--band",
+                "1:15",
+                "--method",
+                "welch",
+            ]
+        )
+        == 0
+    )
     model = load_model(out)
     assert len(model.plant_a) == 3 and len(model.plant_b) == 3
     assert model.provenance["identify"]["choices"]["band_rule"] == "given"
@@ -61,12 +88,38 @@ def test_identify_order_option(chirps, tmp_path):
 def test_signature_end_to_end_on_the_papers_model(msd_recordings, tmp_path):  # noqa: F811
     """§V model (mass-spring-damper, Coulomb 0.5 N + viscous 1 N·s/m): γ_f = 2 within ±0.3."""
     model = tmp_path / "msd.yaml"
-    assert main(["identify", str(msd_recordings["chirp"]), "-o", str(model),
-                 "--validate", str(msd_recordings["chirp_val"])]) == 0
+    assert (
+        main(
+            [
+                "identify",
+                str(msd_recordings["chirp"]),
+                "-o",
+                str(model),
+                "--validate",
+                str(msd_recordings["chirp_val"]),
+            ]
+        )
+        == 0
+    )
     assert load_model(model).provenance["identify"]["metrics"]["fit_percent"] >= 90
     out, plot = tmp_path / "msd_sig.yaml", tmp_path / "sig.png"
-    assert main(["signature", str(msd_recordings["amp_steps"]), "--model", str(model),
-                 "--fault-window", "1.5:6", "-o", str(out), "--plot", str(plot)]) == 0
+    assert (
+        main(
+            [
+                "signature",
+                str(msd_recordings["amp_steps"]),
+                "--model",
+                str(model),
+                "--fault-window",
+                "1.5:6",
+                "-o",
+                str(out),
+                "--plot",
+                str(plot),
+            ]
+        )
+        == 0
+    )
     result = load_model(out)
     ff = result.fault_filter
     assert abs(ff.gamma_f - msd_recordings["gamma_true"]) <= 0.3
@@ -100,8 +153,23 @@ def test_signature_flags_a_single_sine(identified, tmp_path, capsys):
     rec = tmp_path / "sine.csv"
     write_recording(rec, Recording({"t": t, "v_in": v_in, "accel": accel}, {"fs": "256"}))
     out = tmp_path / "sig.yaml"
-    assert main(["signature", str(rec), "--model", str(model_path), "--fault-window", "2.5:6",
-                 "-o", str(out), "--gamma-grid", "0:10:0.5"]) == 0
+    assert (
+        main(
+            [
+                "signature",
+                str(rec),
+                "--model",
+                str(model_path),
+                "--fault-window",
+                "2.5:6",
+                "-o",
+                str(out),
+                "--gamma-grid",
+                "0:10:0.5",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "not identifiable" in err
     assert load_model(out).provenance["signature"]["cost_profile"]["flat"] is True
@@ -115,8 +183,10 @@ def exact_model(tmp_path_factory):
     from fdi_daemon.io.model_file import FdiModel, save_model
 
     b, a = plant()
-    return save_model(tmp_path_factory.mktemp("exact") / "exact.yaml",
-                      FdiModel(fs=FS, plant_b=np.asarray(b), plant_a=np.asarray(a)))
+    return save_model(
+        tmp_path_factory.mktemp("exact") / "exact.yaml",
+        FdiModel(fs=FS, plant_b=np.asarray(b), plant_a=np.asarray(a)),
+    )
 
 
 def _stepped_fault_recording(model, path, gamma, noise_ratio):
@@ -146,8 +216,23 @@ def test_signature_at_the_grid_edge_is_not_stored_as_a_value(exact_model, tmp_pa
     model_path = exact_model
     rec = _stepped_fault_recording(load_model(model_path), tmp_path / "edge.csv", 40.0, 0.05)
     out = tmp_path / "sig.yaml"
-    assert main(["signature", str(rec), "--model", str(model_path), "--fault-window", "2.5:10",
-                 "-o", str(out), "--gamma-grid", "0:4:0.5"]) == 0
+    assert (
+        main(
+            [
+                "signature",
+                str(rec),
+                "--model",
+                str(model_path),
+                "--fault-window",
+                "2.5:10",
+                "-o",
+                str(out),
+                "--gamma-grid",
+                "0:4:0.5",
+            ]
+        )
+        == 0
+    )
     captured = capsys.readouterr()
     assert "not identified (edge)" in captured.out
     result = load_model(out)
@@ -166,19 +251,33 @@ def test_signature_at_the_grid_edge_is_not_stored_as_a_value(exact_model, tmp_pa
         Monitor(result)
 
 
-def test_signature_reports_the_variance_explained_and_warns_when_low(exact_model, tmp_path,
-                                                                     capsys):
+def test_signature_reports_the_variance_explained_and_warns_when_low(exact_model, tmp_path, capsys):
     model_path = exact_model
     model = load_model(model_path)
     for noise, low in ((0.1, False), (1.5, True)):
         rec = _stepped_fault_recording(model, tmp_path / f"n{noise}.csv", 1.5, noise)
         out = tmp_path / f"sig{noise}.yaml"
-        assert main(["signature", str(rec), "--model", str(model_path), "--fault-window",
-                     "2.5:10", "-o", str(out), "--gamma-grid", "0:4:0.5"]) == 0
+        assert (
+            main(
+                [
+                    "signature",
+                    str(rec),
+                    "--model",
+                    str(model_path),
+                    "--fault-window",
+                    "2.5:10",
+                    "-o",
+                    str(out),
+                    "--gamma-grid",
+                    "0:4:0.5",
+                ]
+            )
+            == 0
+        )
         captured = capsys.readouterr()
         vaf = load_model(out).provenance["signature"]["fault_filter_vaf_percent_full_band"]
         # the noise sets the share: 1/(1 + noise²) of the variance is the friction's
-        assert vaf == pytest.approx(100 / (1 + noise ** 2), abs=5)
+        assert vaf == pytest.approx(100 / (1 + noise**2), abs=5)
         assert "of the unfiltered fault residual's variance" in captured.out
         assert ("explains only" in captured.err) is low
 
@@ -187,9 +286,25 @@ def test_signature_with_the_model_observer_stores_its_settings(exact_model, tmp_
     model_path = exact_model
     rec = _stepped_fault_recording(load_model(model_path), tmp_path / "obs.csv", 1.5, 0.1)
     out = tmp_path / "sig.yaml"
-    assert main(["signature", str(rec), "--model", str(model_path), "--fault-window", "2.5:10",
-                 "-o", str(out), "--gamma-grid", "0:4:0.5",
-                 "--velocity-method", "model_observer"]) == 0
+    assert (
+        main(
+            [
+                "signature",
+                str(rec),
+                "--model",
+                str(model_path),
+                "--fault-window",
+                "2.5:10",
+                "-o",
+                str(out),
+                "--gamma-grid",
+                "0:4:0.5",
+                "--velocity-method",
+                "model_observer",
+            ]
+        )
+        == 0
+    )
     velocity = load_model(out).velocity
     assert velocity["method"] == "model_observer" and velocity["leak_hz"] == 0.02
 
@@ -213,40 +328,68 @@ def test_bad_inputs_exit_2_with_one_line(identified, chirps, tmp_path, capsys):
     write_recording(no_accel, Recording({"t": data.t, "v_in": data.v_in}, {"fs": "256"}))
     assert "accel" in _bad(["identify", str(no_accel), "-o", out], capsys)
     huge = tmp_path / "huge.csv"  # an accelerometer in the wrong unit, say: squares overflow
-    write_recording(huge, Recording({"t": data.t, "v_in": data.v_in, "accel": data.accel * 1e300},
-                                    {"fs": "256"}))
-    for command in (["identify", str(huge), "-o", out],
-                    ["signature", str(huge), "--model", str(model), "--fault-window", "1:3",
-                     "-o", out],
-                    ["diagnose", str(huge), "--model", str(model)]):
+    write_recording(
+        huge,
+        Recording({"t": data.t, "v_in": data.v_in, "accel": data.accel * 1e300}, {"fs": "256"}),
+    )
+    for command in (
+        ["identify", str(huge), "-o", out],
+        ["signature", str(huge), "--model", str(model), "--fault-window", "1:3", "-o", out],
+        ["diagnose", str(huge), "--model", str(model)],
+    ):
         assert "column accel holds" in _bad(command, capsys)
     assert "--band" in _bad(["identify", rec, "-o", out, "--band", "x:y"], capsys)
     for window in ("abc", "5:3", "1:2:3"):
-        assert "--fault-window" in _bad(["signature", rec, "--model", str(model),
-                                         "--fault-window", window, "-o", out], capsys)
-    assert "outside" in _bad(["signature", rec, "--model", str(model),
-                              "--fault-window", "2:50", "-o", out], capsys)
+        assert "--fault-window" in _bad(
+            ["signature", rec, "--model", str(model), "--fault-window", window, "-o", out], capsys
+        )
+    assert "outside" in _bad(
+        ["signature", rec, "--model", str(model), "--fault-window", "2:50", "-o", out], capsys
+    )
     # a range that starts with a minus sign is a value, not an option
-    assert "-5:10 lies outside" in _bad(["signature", rec, "--model", str(model),
-                                         "--fault-window", "-5:10", "-o", out], capsys)
+    assert "-5:10 lies outside" in _bad(
+        ["signature", rec, "--model", str(model), "--fault-window", "-5:10", "-o", out], capsys
+    )
     no_plant = tmp_path / "no_plant.yaml"
     no_plant.write_text(yaml.safe_dump({"fs": 256.0}))
-    assert "plant" in _bad(["signature", rec, "--model", str(no_plant),
-                            "--fault-window", "1:3", "-o", out], capsys)
-    assert "no such model" in _bad(["signature", rec, "--model", str(tmp_path / "x.yaml"),
-                                    "--fault-window", "1:3", "-o", out], capsys)
+    assert "plant" in _bad(
+        ["signature", rec, "--model", str(no_plant), "--fault-window", "1:3", "-o", out], capsys
+    )
+    assert "no such model" in _bad(
+        ["signature", rec, "--model", str(tmp_path / "x.yaml"), "--fault-window", "1:3", "-o", out],
+        capsys,
+    )
     assert not (tmp_path / "o.yaml").exists()
 
 
 def test_subprocess_runs_and_bad_input(chirps, tmp_path):
     out = tmp_path / "m.yaml"
-    ok = subprocess.run([sys.executable, "-m", "fdi_daemon", "identify", str(chirps[0]),
-                         "-o", str(out)], capture_output=True, text=True, timeout=120)
+    ok = subprocess.run(
+        [sys.executable, "-m", "fdi_daemon", "identify", str(chirps[0]), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert ok.returncode == 0, ok.stderr
     assert "simulation fit" in ok.stdout and out.exists()
-    bad = subprocess.run([sys.executable, "-m", "fdi_daemon", "signature", str(chirps[0]),
-                          "--model", str(out), "--fault-window", "9:1", "-o", str(out)],
-                         capture_output=True, text=True, timeout=120)
+    bad = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fdi_daemon",
+            "signature",
+            str(chirps[0]),
+            "--model",
+            str(out),
+            "--fault-window",
+            "9:1",
+            "-o",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert bad.returncode == 2
     assert bad.stderr.count("\n") == 1 and "Traceback" not in bad.stderr
 
@@ -257,12 +400,15 @@ def test_identify_on_another_rig_with_a_multisine(tmp_path):
     must still give a model that simulates unseen data."""
     from hil_sim import msd
 
-    params = msd.MsdParams(stiffness_n_per_m=3000.0, damping_n_s_per_m=30.0,
-                           input_filter_hz=12.0, accel_noise_width=0.05)
+    params = msd.MsdParams(
+        stiffness_n_per_m=3000.0,
+        damping_n_s_per_m=30.0,
+        input_filter_hz=12.0,
+        accel_noise_width=0.05,
+    )
     paths = []
     for seed, name in ((1, "est.mat"), (2, "val.npz")):
-        rec = msd.simulate_recording(params, msd.multisine(8.0, 256.0, 0.5, 30.0, 0.5, seed),
-                                     seed)
+        rec = msd.simulate_recording(params, msd.multisine(8.0, 256.0, 0.5, 30.0, 0.5, seed), seed)
         path = tmp_path / name
         write_recording(path, Recording({k: rec.columns[k] for k in ("t", "v_in", "accel")}))
         paths.append(path)
@@ -274,8 +420,21 @@ def test_identify_on_another_rig_with_a_multisine(tmp_path):
 def test_out_of_band_residual_input_correlation_gets_a_verdict(chirps, tmp_path, capsys):
     from fdi_daemon.commands.identify import xcorr_verdict
 
-    assert main(["identify", str(chirps[0]), "-o", str(tmp_path / "m2.yaml"), "--order", "2",
-                 "--validate", str(chirps[1])]) == 0  # a 2nd-order model of a 4th-order plant
+    assert (
+        main(
+            [
+                "identify",
+                str(chirps[0]),
+                "-o",
+                str(tmp_path / "m2.yaml"),
+                "--order",
+                "2",
+                "--validate",
+                str(chirps[1]),
+            ]
+        )
+        == 0
+    )  # a 2nd-order model of a 4th-order plant
     out = capsys.readouterr().out
     line = out.splitlines().index(next(s for s in out.splitlines() if "xcorr" in s))
     verdict = out.splitlines()[line + 1]
@@ -285,8 +444,9 @@ def test_out_of_band_residual_input_correlation_gets_a_verdict(chirps, tmp_path,
     assert len(xcorr_verdict({"max_abs": 0.06, "bound": 0.057}, 4, "r.csv", "m.yaml")) == 1
 
 
-def test_outputs_that_would_destroy_an_input_and_out_of_range_options(identified, chirps,
-                                                                      tmp_path, capsys):
+def test_outputs_that_would_destroy_an_input_and_out_of_range_options(
+    identified, chirps, tmp_path, capsys
+):
     """`-o` naming the recording replaced it with the model; a plot's unknown ending was a
     matplotlib traceback after the fit; an unstable plant, a huge γ grid or G_e order were
     a LinAlgError / MemoryError: one line each, before any work, the inputs untouched."""
@@ -295,13 +455,16 @@ def test_outputs_that_would_destroy_an_input_and_out_of_range_options(identified
     before = {p: p.read_bytes() for p in (chirps[0], chirps[1], model)}
     out = str(tmp_path / "o.yaml")
     assert "is also an input" in _bad(["identify", rec, "-o", rec], capsys)
-    assert "is also an input" in _bad(["identify", rec, "-o", out, "--validate",
-                                       str(chirps[1]), "--plot", str(chirps[1])], capsys)
-    assert "cannot write a plot as .txt" in _bad(["identify", rec, "-o", out, "--plot",
-                                                  str(tmp_path / "bode.txt")], capsys)
+    assert "is also an input" in _bad(
+        ["identify", rec, "-o", out, "--validate", str(chirps[1]), "--plot", str(chirps[1])], capsys
+    )
+    assert "cannot write a plot as .txt" in _bad(
+        ["identify", rec, "-o", out, "--plot", str(tmp_path / "bode.txt")], capsys
+    )
     for value in ("nan", "2", "-1"):
-        assert "--min-coherence" in _bad(["identify", rec, "-o", out, "--min-coherence",
-                                          value], capsys)
+        assert "--min-coherence" in _bad(
+            ["identify", rec, "-o", out, "--min-coherence", value], capsys
+        )
     sig = ["signature", rec, "--model", str(model), "--fault-window", "1:3"]
     assert "is also an input" in _bad([*sig, "-o", rec], capsys)
     assert "is also an input" in _bad([*sig, "-o", out, "--plot", str(model)], capsys)
@@ -311,7 +474,18 @@ def test_outputs_that_would_destroy_an_input_and_out_of_range_options(identified
     unstable = yaml.safe_load(model.read_text())
     unstable["plant"]["a"] = [1.0, -3.0, 3.0]
     (tmp_path / "unstable.yaml").write_text(yaml.safe_dump(unstable))
-    assert "not stable" in _bad(["signature", rec, "--model", str(tmp_path / "unstable.yaml"),
-                                 "--fault-window", "1:3", "-o", out], capsys)
+    assert "not stable" in _bad(
+        [
+            "signature",
+            rec,
+            "--model",
+            str(tmp_path / "unstable.yaml"),
+            "--fault-window",
+            "1:3",
+            "-o",
+            out,
+        ],
+        capsys,
+    )
     assert {p: p.read_bytes() for p in before} == before
     assert not (tmp_path / "o.yaml").exists()

@@ -7,11 +7,15 @@ import argparse
 from types import SimpleNamespace
 
 import numpy as np
+from conftest_ident import FS, plant
 from scipy import signal
 
-from conftest_ident import FS, plant
-from fdi_daemon.ident.plots import identification_figure, phase_on_model_branch, \
-    signature_figure, zoom_window
+from fdi_daemon.ident.plots import (
+    identification_figure,
+    phase_on_model_branch,
+    signature_figure,
+    zoom_window,
+)
 
 
 def legends_off_the_data(fig) -> None:
@@ -40,8 +44,9 @@ def test_phase_of_noisy_data_stays_on_the_models_branch():
     t = np.arange(60 * 256) / 256
     y = np.sin(2 * np.pi * 8 * t)
     y_sim = y + np.where((t > 30) & (t < 30.5), 0.3, 0.0)
-    fig = identification_figure(fr, model, (1.5, 20.0),
-                                {"t": t, "y": y, "y_sim": y_sim, "fit_percent": 90.0})
+    fig = identification_figure(
+        fr, model, (1.5, 20.0), {"t": t, "y": y, "y_sim": y_sim, "fit_percent": 90.0}
+    )
     ax_mag, ax_ph, _, ax_all, ax_zoom = fig.axes
     low, high = ax_ph.get_ylim()
     assert high - low < np.ptp(model_deg) + 400  # the band's phase is not flattened
@@ -63,15 +68,24 @@ def test_signature_figure_labels_what_was_fitted_and_gives_gamma_a_unit():
     args = argparse.Namespace(reference_window="1:21", prefilter_hz=None, lowpass_hz=10.0)
     label = _fitted_residual_label(args)
     assert label == "residual r − fault-free reference, low-passed 10 Hz"
-    assert _fitted_residual_label(argparse.Namespace(
-        reference_window=None, prefilter_hz=None, lowpass_hz=None)) == "residual r"
+    assert (
+        _fitted_residual_label(
+            argparse.Namespace(reference_window=None, prefilter_hz=None, lowpass_hz=None)
+        )
+        == "residual r"
+    )
 
     t = 10 + np.arange(20 * 256) / 256
     residual = np.sin(2 * np.pi * 6 * t)
     result = SimpleNamespace(
-        fit=SimpleNamespace(y_sim=0.9 * residual), gamma_f=3.14, info={"fit_percent": 90.0},
-        grid=np.linspace(0, 10, 11), interval=(2.4, 4.0), flat=False,
-        relative_cost=lambda: 1 + (np.linspace(0, 10, 11) - 3.14) ** 2 / 10)
+        fit=SimpleNamespace(y_sim=0.9 * residual),
+        gamma_f=3.14,
+        info={"fit_percent": 90.0},
+        grid=np.linspace(0, 10, 11),
+        interval=(2.4, 4.0),
+        flat=False,
+        relative_cost=lambda: 1 + (np.linspace(0, 10, 11) - 3.14) ** 2 / 10,
+    )
     fig = signature_figure(t, residual, result, residual_label=label)
     ax_t, ax_z, ax_g = fig.axes
     texts = [x.get_text() for ax in (ax_t, ax_z) for x in ax.get_legend().get_texts()]

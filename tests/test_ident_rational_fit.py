@@ -48,8 +48,9 @@ def test_unstable_data_give_a_stable_model():
 def test_pole_radius_bound_is_respected():
     b, a = plant()
     f = np.linspace(0.5, 100, 200)
-    fit = rational_fit.fit_rational(f, rational_fit.frequency_response(b, a, f, FS), FS, 4,
-                                    max_pole_radius=0.88)
+    fit = rational_fit.fit_rational(
+        f, rational_fit.frequency_response(b, a, f, FS), FS, 4, max_pole_radius=0.88
+    )
     assert np.max(np.abs(fit.poles)) < 0.88
 
 
@@ -60,8 +61,9 @@ def test_too_few_points_is_an_error():
 
 def test_reflection_parameterisation_round_trip():
     a = np.real(np.poly(PLANT_POLES))
-    np.testing.assert_allclose(stable_poly.poly_from_eta(stable_poly.eta_from_poly(a)), a,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        stable_poly.poly_from_eta(stable_poly.eta_from_poly(a)), a, atol=1e-12
+    )
     rng = np.random.default_rng(3)
     for _ in range(20):
         poly = stable_poly.poly_from_eta(rng.normal(scale=1, size=5), radius=0.95)
@@ -73,5 +75,8 @@ def test_reflect_unstable_keeps_the_magnitude():
     b2, a2, count = stable_poly.reflect_unstable(np.array(b), a)
     assert count == 1 and stable_poly.is_stable(a2)
     f = np.linspace(1, 120, 50)
-    np.testing.assert_allclose(np.abs(rational_fit.frequency_response(b2, a2, f, FS)),
-                               np.abs(rational_fit.frequency_response(b, a, f, FS)), rtol=1e-7)
+    np.testing.assert_allclose(
+        np.abs(rational_fit.frequency_response(b2, a2, f, FS)),
+        np.abs(rational_fit.frequency_response(b, a, f, FS)),
+        rtol=1e-7,
+    )

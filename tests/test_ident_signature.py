@@ -22,8 +22,9 @@ def test_friction_signal_and_residual():
     np.testing.assert_allclose(sig.friction_signal(v, 2.0), [-5.0, 0.0, 2.0])
     b, a = [0.0, 0.5], [1.0, -0.5]
     u = np.arange(5.0)
-    np.testing.assert_allclose(sig.plant_residual(IIRFilter(b, a), u, np.ones(5)),
-                               1.0 - signal.lfilter(b, a, u))
+    np.testing.assert_allclose(
+        sig.plant_residual(IIRFilter(b, a), u, np.ones(5)), 1.0 - signal.lfilter(b, a, u)
+    )
 
 
 @pytest.mark.parametrize("gamma", [0.0, 3.0, 6.0])
@@ -74,9 +75,13 @@ def test_window_after_a_lead_in_and_prefilter_keep_gamma():
     from scipy.signal import butter
 
     residual, velocity = signature_data(3.0, "sweep", noise_fraction=0.02, n_samples=1400)
-    result = sig.estimate_signature(residual, velocity, sig.gamma_grid(0, 10, 0.5),
-                                    prefilter=butter(3, 1.0, btype="high", fs=256.0),
-                                    fit_from=376)
+    result = sig.estimate_signature(
+        residual,
+        velocity,
+        sig.gamma_grid(0, 10, 0.5),
+        prefilter=butter(3, 1.0, btype="high", fs=256.0),
+        fit_from=376,
+    )
     assert abs(result.gamma_f - 3.0) <= 0.3
     assert len(result.residual) == 1024 and len(result.fit.y_sim) == 1024
 
@@ -95,8 +100,7 @@ def test_reference_difference_cancels_an_input_driven_model_error():
     grid = sig.gamma_grid(0, 6, 0.2)
     biased = sig.estimate_signature(both, v_both, grid, fit_from=n)
     assert abs(biased.gamma_f - (gamma + error_gain)) <= 0.3
-    cancelled = sig.estimate_signature(sig.reference_difference(both, n), v_both, grid,
-                                       fit_from=n)
+    cancelled = sig.estimate_signature(sig.reference_difference(both, n), v_both, grid, fit_from=n)
     assert abs(cancelled.gamma_f - gamma) <= 0.3 and not cancelled.flat
     with pytest.raises(ValueError):
         sig.reference_difference(both, 0)
@@ -106,8 +110,9 @@ def test_lowpass_prefilter_and_pole_bound_keep_gamma():
     residual, velocity = signature_data(3.0, "sweep", noise_fraction=0.02)
     sos = sig.lowpass_prefilter(12.0, 256.0)
     assert sos.shape == (4, 6)
-    result = sig.estimate_signature(residual, velocity, sig.gamma_grid(0, 6, 0.2),
-                                    prefilter=sos, max_pole_radius=0.95)
+    result = sig.estimate_signature(
+        residual, velocity, sig.gamma_grid(0, 6, 0.2), prefilter=sos, max_pole_radius=0.95
+    )
     assert abs(result.gamma_f - 3.0) <= 0.3 and not result.flat
     assert np.max(np.abs(np.roots(result.fit.f))) <= 0.95 + 1e-9
     with pytest.raises(ValueError):
@@ -117,8 +122,9 @@ def test_lowpass_prefilter_and_pole_bound_keep_gamma():
 def test_pole_bound_is_respected_and_derived_from_the_plant():
     assert sig.plant_pole_bound(np.real(np.poly([0.81, 0.5]))) == pytest.approx(0.9)
     residual, velocity = signature_data(2.0, "sweep", noise_fraction=0.02, n_samples=600)
-    result = sig.estimate_signature(residual, velocity, sig.gamma_grid(0, 4, 0.5),
-                                    max_pole_radius=0.8)
+    result = sig.estimate_signature(
+        residual, velocity, sig.gamma_grid(0, 4, 0.5), max_pole_radius=0.8
+    )
     assert np.max(np.abs(np.roots(result.fit.f))) <= 0.8 + 1e-9  # OE_F has a pole at 0.9
 
 

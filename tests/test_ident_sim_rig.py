@@ -6,8 +6,8 @@ import pytest
 from conftest_ident import true_gamma
 
 from fdi_daemon.cli import main
-from fdi_daemon.core.velocity import VelocityEstimator
 from fdi_daemon.core.iir import IIRFilter
+from fdi_daemon.core.velocity import VelocityEstimator
 from fdi_daemon.ident import signature, validation
 from fdi_daemon.io.model_file import load_model
 from fdi_daemon.io.recordings import read_recording
@@ -20,8 +20,11 @@ FAULT_WINDOW, REFERENCE_WINDOW, LOWPASS_HZ = "22:42", "1:21", 10.0
 
 
 @pytest.mark.parametrize("validation_name", ["ident_chirp_long", "ident_chirp_seed1"])
-def test_plant_fits_friction_free_validation_data(sim_model, sim_recordings,  # noqa: F811
-                                                  validation_name):
+def test_plant_fits_friction_free_validation_data(
+    sim_model,
+    sim_recordings,  # noqa: F811
+    validation_name,
+):
     model = load_model(sim_model)
     rec = read_recording(sim_recordings[validation_name])
     y_sim = validation.simulate(model.plant_b, model.plant_a, rec.v_in, rec.accel)
@@ -41,10 +44,27 @@ def calibrated(sim_model, sim_recordings, tmp_path_factory):  # noqa: F811
     """`fdi signature` on the calibration run, as docs/identification.md gives it."""
     out = tmp_path_factory.mktemp("signature") / "rig.yaml"
     plot = out.with_suffix(".png")
-    assert main(["signature", str(sim_recordings["signature_calibration_paired"]), "--model",
-                 str(sim_model), "--fault-window", FAULT_WINDOW, "--reference-window",
-                 REFERENCE_WINDOW, "--lowpass-hz", str(LOWPASS_HZ), "-o", str(out),
-                 "--plot", str(plot)]) == 0
+    assert (
+        main(
+            [
+                "signature",
+                str(sim_recordings["signature_calibration_paired"]),
+                "--model",
+                str(sim_model),
+                "--fault-window",
+                FAULT_WINDOW,
+                "--reference-window",
+                REFERENCE_WINDOW,
+                "--lowpass-hz",
+                str(LOWPASS_HZ),
+                "-o",
+                str(out),
+                "--plot",
+                str(plot),
+            ]
+        )
+        == 0
+    )
     return load_model(out), plot
 
 
@@ -62,8 +82,7 @@ def test_signature_calibration_recovers_gamma(calibrated, sim_recordings):  # no
     assert profile["interval_99"][0] <= model.fault_filter.gamma_f <= profile["interval_99"][1]
 
 
-def test_signature_command_writes_a_stable_filter_and_its_choices(
-        calibrated, sim_model):  # noqa: F811
+def test_signature_command_writes_a_stable_filter_and_its_choices(calibrated, sim_model):  # noqa: F811
     model, plot = calibrated
     assert np.all(np.abs(np.roots(model.fault_filter.f)) < 1)
     prov = model.provenance["signature"]
@@ -78,35 +97,52 @@ def test_signature_command_writes_a_stable_filter_and_its_choices(
 def _signature(model_path, rec_path, t0, t1, **options):
     model = load_model(model_path)
     rec = read_recording(rec_path)
-    residual = signature.plant_residual(IIRFilter(model.plant_b, model.plant_a), rec.v_in, rec.accel)
+    residual = signature.plant_residual(
+        IIRFilter(model.plant_b, model.plant_a), rec.v_in, rec.accel
+    )
     velocity = VelocityEstimator(model.fs).run(rec.accel)
     first, end = int(np.searchsorted(rec.t, t0)), int(np.searchsorted(rec.t, t1))
-    return rec, signature.estimate_signature(residual[:end], velocity[:end], fit_from=first,
-                                             **options)
+    return rec, signature.estimate_signature(
+        residual[:end], velocity[:end], fit_from=first, **options
+    )
 
 
 @pytest.mark.parametrize("name, t0", [("test_case_2", 3.2), ("test_case_1", 3.3)])
 @pytest.mark.parametrize("calibration_options", [False, True])
 def test_single_sine_fault_window_is_flagged_flat(
-        sim_model, sim_recordings, name, t0, calibration_options):  # noqa: F811
+    sim_model, sim_recordings, name, t0, calibration_options
+):  # noqa: F811
     """The paper's single 8 Hz sine does not identify γ: flagged with the paper's settings
     and with the calibration's (low-pass on the fundamentals, G_e pole bound)."""
     options = {}
     if calibration_options:
-        options = {"prefilter": signature.lowpass_prefilter(LOWPASS_HZ, 256.0),
-                   "max_pole_radius": signature.plant_pole_bound(load_model(sim_model).plant_a)}
+        options = {
+            "prefilter": signature.lowpass_prefilter(LOWPASS_HZ, 256.0),
+            "max_pole_radius": signature.plant_pole_bound(load_model(sim_model).plant_a),
+        }
     _, result = _signature(sim_model, sim_recordings[name], t0, 6.0, **options)
     assert result.flat
     assert result.recommendation and "signature_calibration" in result.recommendation
 
 
 def test_reference_window_with_another_excitation_is_refused(
-        sim_model, sim_recordings, tmp_path, capsys):  # noqa: F811
+    sim_model, sim_recordings, tmp_path, capsys
+):  # noqa: F811
     # 0.05 s off: a third of a 6 Hz period, so the valve voltages disagree
-    code = main(["signature", str(sim_recordings["signature_calibration_paired"]), "--model",
-                 str(sim_model), "--fault-window", FAULT_WINDOW, "--reference-window",
-                 "1.05:21.05", "-o", str(tmp_path / "m.yaml")])
+    code = main(
+        [
+            "signature",
+            str(sim_recordings["signature_calibration_paired"]),
+            "--model",
+            str(sim_model),
+            "--fault-window",
+            FAULT_WINDOW,
+            "--reference-window",
+            "1.05:21.05",
+            "-o",
+            str(tmp_path / "m.yaml"),
+        ]
+    )
     assert code == 2
     assert "same excitation" in capsys.readouterr().err
     assert not (tmp_path / "m.yaml").exists()
-

@@ -16,7 +16,9 @@ def _direct_bt(u, y, lag, freq_hz):
     w = 0.5 * (1 + np.cos(np.pi * taus / lag))
 
     def cov(a, b, tau):
-        return np.sum(a[tau:] * b[:n - tau]) / n if tau >= 0 else np.sum(a[:n + tau] * b[-tau:]) / n
+        return (
+            np.sum(a[tau:] * b[: n - tau]) / n if tau >= 0 else np.sum(a[: n + tau] * b[-tau:]) / n
+        )
 
     r_yu = np.array([cov(y, u, t) for t in taus])
     r_uu = np.array([cov(u, u, t) for t in taus])
@@ -50,8 +52,10 @@ def test_blackman_tukey_and_welch_find_the_known_response():
 
 def test_lag_window_grows_when_noise_falls():
     u = chirp(1024)
-    chosen = [spectral.select_lag_window(u, plant_output(u, noise, seed=4), FS)[0]
-              for noise in (1.0, 0.01)]
+    chosen = [
+        spectral.select_lag_window(u, plant_output(u, noise, seed=4), FS)[0]
+        for noise in (1.0, 0.01)
+    ]
     assert chosen[0] < chosen[1]
 
 

@@ -24,8 +24,9 @@ def test_simulate_estimates_the_initial_state_and_offset():
     y = signal.lfilter(b, a, np.concatenate([u_before, u]))[300:] + 0.25  # sensor offset
     at_rest = validation.simulate(b, a, u)
     assert validation.fit_percent(y, at_rest) < 99.0
-    assert validation.fit_percent(y, validation.simulate(b, a, u, y)) == pytest.approx(100.0,
-                                                                                        abs=1e-6)
+    assert validation.fit_percent(y, validation.simulate(b, a, u, y)) == pytest.approx(
+        100.0, abs=1e-6
+    )
 
 
 def test_residual_input_correlation_band():

@@ -14,8 +14,9 @@ from fdi_daemon.io.recordings import read_recording
 def other_tool_csv(tmp_path):
     t = np.arange(300) / 256.0
     path = tmp_path / "other.csv"
-    rows = "".join(f"{a:.6f},{b:.6f},{c:.6f},{d}\n"
-                   for a, b, c, d in zip(t, np.sin(t), np.cos(t), range(300)))
+    rows = "".join(
+        f"{a:.6f},{b:.6f},{c:.6f},{d}\n" for a, b, c, d in zip(t, np.sin(t), np.cos(t), range(300))
+    )
     path.write_text("time,u,y,extra\n" + rows)
     return path, t
 
@@ -41,12 +42,15 @@ def test_a_mapping_to_an_absent_column_is_one_clear_error(other_tool_csv):
         read_recording(path, columns={"t": "time", "v_in": "volts", "accel": "y"})
 
 
-@pytest.mark.parametrize("spec, message", [
-    ("t", "is not NAME=COLUMN"),
-    ("t=", "is not NAME=COLUMN"),
-    ("t=a,t=b", "t is mapped twice"),
-    ("t=a,v_in=a", "'a' is mapped to more than one name"),
-])
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("t", "is not NAME=COLUMN"),
+        ("t=", "is not NAME=COLUMN"),
+        ("t=a,t=b", "t is mapped twice"),
+        ("t=a,v_in=a", "'a' is mapped to more than one name"),
+    ],
+)
 def test_malformed_specs_are_refused(spec, message):
     with pytest.raises(UserError, match=message):
         parse_columns(spec)
@@ -106,15 +110,34 @@ def test_identify_signature_and_replay_read_another_tools_columns(tmp_path, caps
     summaries = []
     for rec, extra, tag in ((fault, [], "own"), (other_fault, mapping, "other")):
         model = tmp_path / f"{tag}_sig.yaml"
-        assert main(["signature", str(rec), "--model", str(tmp_path / f"{tag}.yaml"),
-                     "--fault-window", "2.5:6", "-o", str(model), "--gamma-grid", "0:10:0.5",
-                     *extra]) == 0
+        assert (
+            main(
+                [
+                    "signature",
+                    str(rec),
+                    "--model",
+                    str(tmp_path / f"{tag}.yaml"),
+                    "--fault-window",
+                    "2.5:6",
+                    "-o",
+                    str(model),
+                    "--gamma-grid",
+                    "0:10:0.5",
+                    *extra,
+                ]
+            )
+            == 0
+        )
         summary = tmp_path / f"{tag}.json"
-        assert main(["replay", str(rec), "--model", str(model), "--summary", str(summary),
-                     *extra]) == 0
+        assert (
+            main(["replay", str(rec), "--model", str(model), "--summary", str(summary), *extra])
+            == 0
+        )
         summaries.append(json.loads(summary.read_text()))
-    assert load_model(tmp_path / "own_sig.yaml").fault_filter.gamma_f == \
-        load_model(tmp_path / "other_sig.yaml").fault_filter.gamma_f
+    assert (
+        load_model(tmp_path / "own_sig.yaml").fault_filter.gamma_f
+        == load_model(tmp_path / "other_sig.yaml").fault_filter.gamma_f
+    )
     assert summaries[0] == summaries[1] and summaries[0]["samples"] == 1536
     capsys.readouterr()
     assert main(["replay", str(other_fault), "--model", str(tmp_path / "own_sig.yaml")]) == 2

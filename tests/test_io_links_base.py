@@ -7,7 +7,12 @@ import pytest
 
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.links.base import (
-    Link, LinkError, ReconnectingLink, SeqUnwrapper, link_settings, make_link,
+    Link,
+    LinkError,
+    ReconnectingLink,
+    SeqUnwrapper,
+    link_settings,
+    make_link,
     make_reconnecting_link,
 )
 from fdi_daemon.io.sample import Sample
@@ -61,8 +66,7 @@ def test_seq_unwrapper_follows_wraps_and_keeps_backward_jumps():
 def test_backoff_doubles_to_the_cap_and_never_spins():
     clock = FakeClock()
     device = {"up": False, "seq": 0, "talking": True}
-    link = ReconnectingLink(lambda: ScriptedLink(device), 0.1, 1.0, clock=clock,
-                            sleep=clock.sleep)
+    link = ReconnectingLink(lambda: ScriptedLink(device), 0.1, 1.0, clock=clock, sleep=clock.sleep)
     link.open()
     while clock.now < 10.0:
         assert link.read(0.05) == []
@@ -84,8 +88,9 @@ def test_a_device_that_accepts_connections_but_stays_silent_is_one_outage():
     """Restored means samples flow again, not that the port reopened (a stalled device)."""
     clock = FakeClock()
     device = {"up": True, "seq": 0, "talking": True}
-    link = ReconnectingLink(lambda: ScriptedLink(device), 0.1, 0.4, stall_timeout_s=1.0,
-                            clock=clock, sleep=clock.sleep)
+    link = ReconnectingLink(
+        lambda: ScriptedLink(device), 0.1, 0.4, stall_timeout_s=1.0, clock=clock, sleep=clock.sleep
+    )
     link.open()
     assert link.read(0.1)
     device["talking"] = False
@@ -105,8 +110,7 @@ def test_a_device_that_accepts_connections_but_stays_silent_is_one_outage():
 def test_lost_and_restored_events_carry_the_last_sample_time():
     clock = FakeClock()
     device = {"up": True, "seq": 100, "talking": True}
-    link = ReconnectingLink(lambda: ScriptedLink(device), 0.1, 5.0, clock=clock,
-                            sleep=clock.sleep)
+    link = ReconnectingLink(lambda: ScriptedLink(device), 0.1, 5.0, clock=clock, sleep=clock.sleep)
     link.open()
     got = link.read(0.1) + link.read(0.1)
     assert [s.seq for s in got] == [100, 101]
@@ -127,8 +131,9 @@ def test_lost_and_restored_events_carry_the_last_sample_time():
 def test_a_silent_link_counts_as_stalled_and_is_reopened():
     clock = FakeClock()
     device = {"up": True, "seq": 0, "talking": False}
-    link = ReconnectingLink(lambda: ScriptedLink(device), 0.1, 5.0, stall_timeout_s=2.0,
-                            clock=clock, sleep=clock.sleep)
+    link = ReconnectingLink(
+        lambda: ScriptedLink(device), 0.1, 5.0, stall_timeout_s=2.0, clock=clock, sleep=clock.sleep
+    )
     link.open()
     for _ in range(30):
         link.read(0.1)
@@ -141,9 +146,14 @@ def test_backoff_against_a_real_closed_port_is_bounded():
     with socket.socket() as s:  # find a port nobody listens on
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    link = make_reconnecting_link({"kind": "modbus-tcp", "port": port, "timeout_s": 0.5,
-                                   "reconnect": {"backoff_initial_s": 0.05,
-                                                 "backoff_max_s": 0.4}})
+    link = make_reconnecting_link(
+        {
+            "kind": "modbus-tcp",
+            "port": port,
+            "timeout_s": 0.5,
+            "reconnect": {"backoff_initial_s": 0.05, "backoff_max_s": 0.4},
+        }
+    )
     link.open()
     end = time.monotonic() + 2.0
     reads = 0
@@ -177,9 +187,11 @@ def test_make_link_validates_and_names_the_key():
     kind, settings, reconnect = link_settings({"kind": "modbus-rtu", "port": "/dev/ttyUSB0"})
     assert kind == "modbus-rtu" and settings["device_id"] == 1 and settings["word_order"] == "big"
     assert reconnect == {"backoff_initial_s": 0.1, "backoff_max_s": 5.0, "stall_timeout_s": 3.0}
-    for config in ({"kind": "serial", "port": "/dev/null"},
-                   {"kind": "modbus-tcp", "port": 1502},
-                   {"kind": "modbus-rtu", "port": "/dev/null", "word_order": "little"},
-                   {"kind": "replay", "path": "x.csv", "realtime": False},
-                   {"kind": "sim", "seed": 3}):
+    for config in (
+        {"kind": "serial", "port": "/dev/null"},
+        {"kind": "modbus-tcp", "port": 1502},
+        {"kind": "modbus-rtu", "port": "/dev/null", "word_order": "little"},
+        {"kind": "replay", "path": "x.csv", "realtime": False},
+        {"kind": "sim", "seed": 3},
+    ):
         assert make_link(config).kind == config["kind"]

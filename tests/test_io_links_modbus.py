@@ -83,8 +83,12 @@ class _FifoThatGrowsBetweenRequests:
         self.image, self.per_request, self.seq = image, per_request, 0
 
     def publish(self, n):
-        self.image.publish([DeviceSample(self.seq + i, 0.0, float(self.seq + i), 0.0, 0.0,
-                                         False, False) for i in range(n)])
+        self.image.publish(
+            [
+                DeviceSample(self.seq + i, 0.0, float(self.seq + i), 0.0, 0.0, False, False)
+                for i in range(n)
+            ]
+        )
         self.seq += n
 
     def connect(self):
@@ -97,13 +101,12 @@ class _FifoThatGrowsBetweenRequests:
         regs = [0] * self.image.input_size
         self.image.fill_inputs(regs, address, count)
         self.publish(self.per_request)
-        return SimpleNamespace(registers=regs[address:address + count], isError=lambda: False)
+        return SimpleNamespace(registers=regs[address : address + count], isError=lambda: False)
 
 
 @pytest.mark.parametrize("fifo_depth", [64, 256])
 @pytest.mark.parametrize("per_request", [0, 1, 2, 3])
-def test_a_poll_loses_nothing_while_the_fifo_fills_between_its_requests(per_request,
-                                                                      fifo_depth):
+def test_a_poll_loses_nothing_while_the_fifo_fills_between_its_requests(per_request, fifo_depth):
     """The deeper reads of a poll follow the FIFO as it moves on, also before it is full."""
     rig = SimpleNamespace(fs_hz=256.0, fault_injected=False)
     client = _FifoThatGrowsBetweenRequests(RegisterImage(rig, fifo_depth=fifo_depth), 0)
@@ -150,8 +153,15 @@ def test_little_word_order_and_scaled_units(reference):
     dev = ModbusDevice(rt, device_id=17, word_order="little", scales=scales)
     host, port = dev.start_tcp()
     try:
-        link = make_link({"kind": "modbus-tcp", "host": host, "port": port, "device_id": 17,
-                          "word_order": "little"})
+        link = make_link(
+            {
+                "kind": "modbus-tcp",
+                "host": host,
+                "port": port,
+                "device_id": 17,
+                "word_order": "little",
+            }
+        )
         link.open()
         samples = read_for(link, 0.8)
         raw = ModbusTcpClient(host, port=port)
@@ -164,10 +174,12 @@ def test_little_word_order_and_scaled_units(reference):
     assert_consecutive(samples)
     assert_equals_reference(samples, reference, scales)
     # independent decoding of the newest slot: low word first, accel in g
-    accel_g = ModbusTcpClient.convert_from_registers(regs[4:6], ModbusTcpClient.DATATYPE.FLOAT32,
-                                                     word_order="little")
-    seq = ModbusTcpClient.convert_from_registers(regs[0:2], ModbusTcpClient.DATATYPE.UINT32,
-                                                 word_order="little")
+    accel_g = ModbusTcpClient.convert_from_registers(
+        regs[4:6], ModbusTcpClient.DATATYPE.FLOAT32, word_order="little"
+    )
+    seq = ModbusTcpClient.convert_from_registers(
+        regs[0:2], ModbusTcpClient.DATATYPE.UINT32, word_order="little"
+    )
     assert accel_g == pytest.approx(reference.accel[seq] / 9.80665, rel=1e-6, abs=1e-6)
 
 
@@ -176,11 +188,13 @@ def test_wrong_word_order_or_device_id_is_refused_at_open():
     host, port = dev.start_tcp()
     try:
         with pytest.raises(LinkError):
-            make_link({"kind": "modbus-tcp", "host": host, "port": port, "device_id": 4,
-                       "timeout_s": 0.5}).open()
+            make_link(
+                {"kind": "modbus-tcp", "host": host, "port": port, "device_id": 4, "timeout_s": 0.5}
+            ).open()
         with pytest.raises(LinkError, match="register map version"):
-            make_link({"kind": "modbus-tcp", "host": host, "port": port, "device_id": 3,
-                       "input_base": 2}).open()
+            make_link(
+                {"kind": "modbus-tcp", "host": host, "port": port, "device_id": 3, "input_base": 2}
+            ).open()
     finally:
         dev.stop()
 
@@ -191,8 +205,9 @@ def test_faults_injected_over_modbus_reach_the_running_rig():
         client = ModbusTcpClient(dev.link_config["host"], port=dev.link_config["port"])
         client.connect()
         try:
-            head = mm.decode_header(client.read_input_registers(0, count=16, device_id=1).registers,
-                                    "big")
+            head = mm.decode_header(
+                client.read_input_registers(0, count=16, device_id=1).registers, "big"
+            )
             assert not head.status & mm.STATUS_FAULT_INJECTED
             off = mm.FAULT_REGISTERS["bearing_supply"][0]
             rr = client.write_registers(off, mm.encode_f32(0.3, "big"), device_id=1)
@@ -203,12 +218,15 @@ def test_faults_injected_over_modbus_reach_the_running_rig():
                 time.sleep(0.01)  # applied at the next tick
             assert math.isclose(rt.rig.bearing_supply, 0.3, rel_tol=1e-7)
             assert {k: v for k, v in rt.faults().items() if k != "bearing_supply"} == {
-                k: v for k, v in mm.nominal_faults().items() if k != "bearing_supply"}
+                k: v for k, v in mm.nominal_faults().items() if k != "bearing_supply"
+            }
             back = mm.decode_faults(
-                client.read_holding_registers(0, count=mm.FAULT_REGS, device_id=1).registers, "big")
+                client.read_holding_registers(0, count=mm.FAULT_REGS, device_id=1).registers, "big"
+            )
             assert back["bearing_supply"] == pytest.approx(0.3, rel=1e-7)
-            head = mm.decode_header(client.read_input_registers(0, count=16, device_id=1).registers,
-                                    "big")
+            head = mm.decode_header(
+                client.read_input_registers(0, count=16, device_id=1).registers, "big"
+            )
             assert head.status & mm.STATUS_FAULT_INJECTED
             off = mm.FAULT_REGISTERS["valve_gain"][0]
             rr = client.write_registers(off, mm.encode_f32(-1.0, "big"), device_id=1)
@@ -221,8 +239,9 @@ def test_faults_injected_over_modbus_reach_the_running_rig():
 def test_a_killed_and_restarted_device_is_reconnected_and_the_seq_jump_shows():
     first = ModbusDevice(realtime_rig(seed=2))
     host, port = first.start_tcp()
-    link = ReconnectingLink(lambda: ModbusLink.tcp(host, port, timeout_s=0.5),
-                            backoff_initial_s=0.05, backoff_max_s=0.4)
+    link = ReconnectingLink(
+        lambda: ModbusLink.tcp(host, port, timeout_s=0.5), backoff_initial_s=0.05, backoff_max_s=0.4
+    )
     link.open()
     before = read_for(link, 1.2)
     first.stop()
@@ -253,8 +272,9 @@ def test_repeated_device_restarts_are_each_one_lost_and_one_restored(transport, 
     cycles = 4
     first = SimulatedDevice(transport, realtime_rig(seed=2), link_path=str(tmp_path / "rtu"))
     config = first.start()
-    link = ReconnectingLink(lambda: make_link({**config, "timeout_s": 0.3}),
-                            backoff_initial_s=0.02, backoff_max_s=0.2)
+    link = ReconnectingLink(
+        lambda: make_link({**config, "timeout_s": 0.3}), backoff_initial_s=0.02, backoff_max_s=0.2
+    )
     link.open()
     device = first
     for cycle in range(cycles):
@@ -267,9 +287,12 @@ def test_repeated_device_restarts_are_each_one_lost_and_one_restored(transport, 
         end = time.monotonic() + 10.0
         while link.connected and time.monotonic() < end:
             link.read(0.05)
-        device = SimulatedDevice(transport, realtime_rig(seed=cycle),
-                                 port=config.get("port", 0) if transport == "modbus-tcp" else 0,
-                                 link_path=str(tmp_path / "rtu"))
+        device = SimulatedDevice(
+            transport,
+            realtime_rig(seed=cycle),
+            port=config.get("port", 0) if transport == "modbus-tcp" else 0,
+            link_path=str(tmp_path / "rtu"),
+        )
         device.start()
     while not link.connected and time.monotonic() < end:
         link.read(0.05)

@@ -59,11 +59,12 @@ def test_injected_corruption_is_rejected_and_counted_exactly():
             dev.inject("truncate", count=3)
             dev.inject("garbage", count=20_000)  # a flood: spread over 20 gaps
             injected = dev.serial.injected
-            done = lambda got: (injected()["corrupted_frames"] == 5  # noqa: E731
-                                and injected()["truncated_frames"] == 3
-                                and injected()["garbage_bytes"]
-                                + injected()["garbage_dropped_bytes"] == 20_000
-                                and len(got) > 60)
+            done = lambda got: (  # noqa: E731
+                injected()["corrupted_frames"] == 5
+                and injected()["truncated_frames"] == 3
+                and injected()["garbage_bytes"] + injected()["garbage_dropped_bytes"] == 20_000
+                and len(got) > 60
+            )
             during = read_until(link, done)
             during += read_for(link, 0.2)
         finally:
@@ -137,8 +138,12 @@ def test_a_killed_and_restarted_device_is_found_again_through_its_symlink(tmp_pa
 
 def test_stall_longer_than_the_stall_timeout_reconnects():
     with SimulatedDevice("serial", realtime_rig(seed=2)) as dev:
-        link = ReconnectingLink(lambda: SerialLink(dev.link_config["port"]),
-                                backoff_initial_s=0.05, backoff_max_s=0.2, stall_timeout_s=0.3)
+        link = ReconnectingLink(
+            lambda: SerialLink(dev.link_config["port"]),
+            backoff_initial_s=0.05,
+            backoff_max_s=0.2,
+            stall_timeout_s=0.3,
+        )
         link.open()
         try:
             before = read_until(link, lambda got: len(got) >= 20)

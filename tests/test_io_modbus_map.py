@@ -37,15 +37,26 @@ def test_word_order_is_what_the_map_says():
 
 @pytest.mark.parametrize("word_order", ["big", "little"])
 def test_header_slots_and_faults_round_trip(word_order):
-    h = mm.Header(123456789, 256, mm.STATUS_RUNNING | mm.STATUS_SATURATED, 64, 64,
-                  mm.MAP_VERSION, mm.WORDS_PER_SAMPLE, 1.0, 9.80665, 0.001)
+    h = mm.Header(
+        123456789,
+        256,
+        mm.STATUS_RUNNING | mm.STATUS_SATURATED,
+        64,
+        64,
+        mm.MAP_VERSION,
+        mm.WORDS_PER_SAMPLE,
+        1.0,
+        9.80665,
+        0.001,
+    )
     regs = mm.encode_header(h, word_order)
     assert len(regs) == mm.HEADER_REGS
     back = mm.decode_header(regs, word_order)
     assert back.sample_counter == h.sample_counter and back.fifo_depth == 64
     assert math.isclose(back.accel_scale, 9.80665, rel_tol=1e-7)
     slots = mm.encode_slot(7, 1.25, -0.5, math.nan, word_order) + mm.encode_slot(
-        6, 2.0, 4.0, 0.01, word_order)
+        6, 2.0, 4.0, 0.01, word_order
+    )
     decoded = mm.decode_slots(slots, word_order, scales=(1.0, 2.0, 1000.0))
     assert [s.seq for s in decoded] == [7, 6]
     assert decoded[0].accel == -1.0 and math.isnan(decoded[0].position)
@@ -73,10 +84,13 @@ def test_fault_registers_match_the_rig():
     assert offsets == list(range(0, mm.FAULT_REGS, 2))
 
 
-@pytest.mark.parametrize("word_order, expected", [
-    ("big", [0x0000, 0x03E8, 0x3FA0, 0x0000, 0xC060, 0x0000, 0x3B03, 0x126F]),
-    ("little", [0x03E8, 0x0000, 0x0000, 0x3FA0, 0x0000, 0xC060, 0x126F, 0x3B03]),
-])
+@pytest.mark.parametrize(
+    "word_order, expected",
+    [
+        ("big", [0x0000, 0x03E8, 0x3FA0, 0x0000, 0xC060, 0x0000, 0x3B03, 0x126F]),
+        ("little", [0x03E8, 0x0000, 0x0000, 0x3FA0, 0x0000, 0xC060, 0x126F, 0x3B03]),
+    ],
+)
 def test_slot_words_are_the_documented_example(word_order, expected):
     # docs/protocols.md: slot of seq 1000, v_in 1.25 V, accel -3.5 m/s², position 0.002 m
     assert mm.encode_slot(1000, 1.25, -3.5, 0.002, word_order) == expected
@@ -86,11 +100,27 @@ def test_slot_words_are_the_documented_example(word_order, expected):
 
 
 def test_header_words_are_the_documented_example():
-    h = mm.Header(1001, 256, mm.STATUS_RUNNING, 256, 256, mm.MAP_VERSION,
-                  mm.WORDS_PER_SAMPLE, 1.0, 1.0, 1.0)
-    assert mm.encode_header(h, "big") == [0x0000, 0x03E9, 0x0100, 0x0001, 0x0100, 0x0100,
-                                          0x0001, 0x0008, 0x3F80, 0x0000, 0x3F80, 0x0000,
-                                          0x3F80, 0x0000, 0x0000, 0x0000]
+    h = mm.Header(
+        1001, 256, mm.STATUS_RUNNING, 256, 256, mm.MAP_VERSION, mm.WORDS_PER_SAMPLE, 1.0, 1.0, 1.0
+    )
+    assert mm.encode_header(h, "big") == [
+        0x0000,
+        0x03E9,
+        0x0100,
+        0x0001,
+        0x0100,
+        0x0100,
+        0x0001,
+        0x0008,
+        0x3F80,
+        0x0000,
+        0x3F80,
+        0x0000,
+        0x3F80,
+        0x0000,
+        0x0000,
+        0x0000,
+    ]
 
 
 def test_a_value_needs_exactly_two_registers():

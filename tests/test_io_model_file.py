@@ -12,8 +12,12 @@ def sample_model():
         fs=256.0,
         plant_b=np.array([0.0, 0.01, -0.02, 0.015, -0.004]),
         plant_a=np.array([1.0, -2.9, 3.2, -1.6, 0.31]),
-        fault_filter=FaultFilter(b=np.array([0.1, -0.2, 0.05, 0.02, 0.0]),
-                                 f=np.array([1.0, -1.2, 0.5, -0.1]), nk=0, gamma_f=2.4),
+        fault_filter=FaultFilter(
+            b=np.array([0.1, -0.2, 0.05, 0.02, 0.0]),
+            f=np.array([1.0, -1.2, 0.5, -0.1]),
+            nk=0,
+            gamma_f=2.4,
+        ),
         velocity={"highpass_hz": 1.0, "highpass_order": 3},
         provenance={"source_sha256": "ab" * 32, "fit_percent": np.float64(93.5)},
         extra={"effects": [{"name": "coulomb_friction", "params": {"level": 0.3}}]},
@@ -43,10 +47,14 @@ def test_round_trip_keeps_every_key(tmp_path):
         ("fs: 256\nplant: {b: [0, 1], a: [2, 0.5]}\n", r"plant.a must start with 1"),
         ("fs: 256\nplant: {b: [], a: [1]}\n", r"plant.b must be a non-empty list"),
         ("fs: 256\nplant: {b: [0, x], a: [1]}\n", r"plant.b must be a non-empty list"),
-        ("fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], f: [1], nk: -1}\n",
-         r"fault_filter.nk must be a whole number"),
-        ("fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], f: [1], gamma_f: .nan}\n",
-         r"gamma_f must be a finite number"),
+        (
+            "fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], f: [1], nk: -1}\n",
+            r"fault_filter.nk must be a whole number",
+        ),
+        (
+            "fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], f: [1], gamma_f: .nan}\n",
+            r"gamma_f must be a finite number",
+        ),
         ("fs: 256\nplant: {b: [0, 1], a: [1]}\nvelocity: 3\n", r"velocity must be a mapping"),
         ("- just a list\n", r"must be a mapping"),
         ("fs: [unclosed\n", r"not valid YAML at line"),
@@ -71,18 +79,26 @@ GOOD = "fs: 256\nplant: {b: [0, 1], a: [1, 0.5]}\n"
     "text, message",
     [
         # a typo anywhere in the file is refused with the suggestion, never taken silently
-        (GOOD + "fault_filter: {b: [1], f: [1], gama_f: 2.9}\n",
-         r"m.yaml: fault_filter: unknown key 'gama_f' \(did you mean 'gamma_f'\?\)"),
-        (GOOD + "detectr: {threshold: 40}\n",
-         r"m.yaml: unknown key 'detectr' \(did you mean 'detector'\?\)"),
-        ("fs: 256\nplnat: {b: [0, 1], a: [1, 0.5]}\n",
-         r"m.yaml: unknown key 'plnat' \(did you mean 'plant'\?\)"),
+        (
+            GOOD + "fault_filter: {b: [1], f: [1], gama_f: 2.9}\n",
+            r"m.yaml: fault_filter: unknown key 'gama_f' \(did you mean 'gamma_f'\?\)",
+        ),
+        (
+            GOOD + "detectr: {threshold: 40}\n",
+            r"m.yaml: unknown key 'detectr' \(did you mean 'detector'\?\)",
+        ),
+        (
+            "fs: 256\nplnat: {b: [0, 1], a: [1, 0.5]}\n",
+            r"m.yaml: unknown key 'plnat' \(did you mean 'plant'\?\)",
+        ),
         (GOOD + "provenanse: {}\n", r"did you mean 'provenance'"),
         (GOOD + "efects: []\n", r"did you mean 'effects'"),
         (GOOD + "baselin: {}\n", r"did you mean 'baseline'"),
         ("fs: 256\nplant: {b: [0, 1], aa: [1, 0.5]}\n", r"plant: missing required key a$"),
-        ("fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], nk: 0}\n",
-         r"fault_filter: missing required key f$"),
+        (
+            "fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], nk: 0}\n",
+            r"fault_filter: missing required key f$",
+        ),
     ],
 )
 def test_typos_in_a_model_file_are_refused_with_a_suggestion(tmp_path, text, message):
@@ -97,10 +113,10 @@ def test_unknown_keys_of_other_tools_are_kept_with_a_warning(tmp_path, caplog):
     path.write_text(GOOD + "our_lab_notes: {operator: kim}\nbaseline: {theta: [0.1, 0.2]}\n")
     with caplog.at_level("WARNING", logger="fdi.model"):
         model = load_model(path)
-    assert model.extra == {"our_lab_notes": {"operator": "kim"},
-                           "baseline": {"theta": [0.1, 0.2]}}
+    assert model.extra == {"our_lab_notes": {"operator": "kim"}, "baseline": {"theta": [0.1, 0.2]}}
     assert [r.getMessage() for r in caplog.records] == [
-        f"{path}: keeping key 'our_lab_notes', which this version does not know"]
+        f"{path}: keeping key 'our_lab_notes', which this version does not know"
+    ]
     back = load_model(save_model(tmp_path / "again.yaml", model))
     assert back.extra == model.extra
 

@@ -68,7 +68,7 @@ def test_gz_is_really_gzip(tmp_path):
         assert fh.readline().startswith("# fs:")
     header = path.read_bytes()
     assert header[3] & 0x08  # FNAME: a zero-terminated name follows the 10-byte header
-    assert header[10:header.index(b"\0", 10)] == b"rec.csv"
+    assert header[10 : header.index(b"\0", 10)] == b"rec.csv"
 
 
 def test_nan_samples_are_kept_not_refused(tmp_path):
@@ -124,8 +124,15 @@ def test_times_printed_with_few_decimals_give_the_rate_and_no_issue(decimals, st
     assert report.fs_hz == pytest.approx(256.0, rel=1e-4)
 
 
-@pytest.mark.parametrize("header,sep", [('"t","v_in","accel"', ","), ("t, v_in, accel", ", "),
-                                        ("t;v_in;accel", ";"), ("t\tv_in\taccel", "\t")])
+@pytest.mark.parametrize(
+    "header,sep",
+    [
+        ('"t","v_in","accel"', ","),
+        ("t, v_in, accel", ", "),
+        ("t;v_in;accel", ";"),
+        ("t\tv_in\taccel", "\t"),
+    ],
+)
 def test_csv_dialects_of_other_tools_are_read(tmp_path, header, sep):
     """Quoted names (R's write.csv), spaces after commas, semicolons, tabs."""
     t = np.arange(8) / FS
@@ -195,8 +202,9 @@ def test_reading_a_large_csv_is_not_pathological(tmp_path):
 
 
 def test_cli_never_shows_a_traceback_for_a_bad_subcommand():
-    proc = subprocess.run([sys.executable, "-m", "fdi_daemon", "no-such-command"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "fdi_daemon", "no-such-command"], capture_output=True, text=True
+    )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
 
@@ -208,8 +216,9 @@ def _npz_bytes() -> bytes:
 
 
 def _npz_with_meta(path, meta_text):
-    np.savez(path, t=np.arange(5) / FS, v_in=np.zeros(5), accel=np.zeros(5),
-             __meta__=np.array(meta_text))
+    np.savez(
+        path, t=np.arange(5) / FS, v_in=np.zeros(5), accel=np.zeros(5), __meta__=np.array(meta_text)
+    )
 
 
 @pytest.mark.parametrize(
@@ -223,12 +232,14 @@ def _npz_with_meta(path, meta_text):
         ("zeros.mat", lambda p: p.write_bytes(bytes(200)), "not a MATLAB v5 file"),
         ("list.npz", lambda p: _npz_with_meta(p, "[1, 2]"), "must be a JSON object"),
         ("null.npz", lambda p: _npz_with_meta(p, "null"), "must be a JSON object"),
-        ("seq.csv", lambda p: p.write_text("t,v_in,accel,seq\n0,0,0,0\n0.00390625,0,0,1e300\n"),
-         "whole numbers below 2"),
+        (
+            "seq.csv",
+            lambda p: p.write_text("t,v_in,accel,seq\n0,0,0,0\n0.00390625,0,0,1e300\n"),
+            "whole numbers below 2",
+        ),
     ],
 )
-def test_corrupt_binary_files_and_absurd_counters_are_clear_errors(tmp_path, name, write,
-                                                                   message):
+def test_corrupt_binary_files_and_absurd_counters_are_clear_errors(tmp_path, name, write, message):
     path = tmp_path / name
     write(path)
     with pytest.raises(RecordingError, match=message):
@@ -242,11 +253,16 @@ def test_a_spreadsheet_csv_with_a_byte_order_mark_is_read(tmp_path):
     assert list(read_recording(path).columns) == ["t", "v_in", "accel"]
 
 
-@pytest.mark.parametrize("write, message", [
-    (lambda p: np.savez(p, t=np.arange(5) / FS, v_in=np.zeros(4), accel=np.zeros(5)),
-     "columns differ in length"),
-    (lambda p: p.write_text("t,v_in,accel\n0,0,0\n0,0,0\n0,0,0\n"), "never increases"),
-])
+@pytest.mark.parametrize(
+    "write, message",
+    [
+        (
+            lambda p: np.savez(p, t=np.arange(5) / FS, v_in=np.zeros(4), accel=np.zeros(5)),
+            "columns differ in length",
+        ),
+        (lambda p: p.write_text("t,v_in,accel\n0,0,0\n0,0,0\n0,0,0\n"), "never increases"),
+    ],
+)
 def test_errors_found_after_reading_name_the_file(tmp_path, write, message):
     path = tmp_path / ("r.npz" if "length" in message else "r.csv")
     write(path)
@@ -262,8 +278,7 @@ def test_writing_onto_a_directory_is_a_recording_error(tmp_path):
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".csv.gz", ".npz", ".mat"])
-def test_an_interrupted_write_leaves_the_old_file_and_no_partial_one(tmp_path, monkeypatch,
-                                                                      suffix):
+def test_an_interrupted_write_leaves_the_old_file_and_no_partial_one(tmp_path, monkeypatch, suffix):
     """Ctrl-C while a long recording was written left a truncated file under its name."""
     import fdi_daemon.io.recordings as recordings
 

@@ -9,8 +9,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fdi_daemon.io.serial_frames import (
-    FLAG_ACCEL_INVALID, FLAG_SATURATED, FRAME_SIZE, SYNC, Frame, FrameDecoder, crc16_ccitt,
-    decode_frame, encode_frame,
+    FLAG_ACCEL_INVALID,
+    FLAG_SATURATED,
+    FRAME_SIZE,
+    SYNC,
+    Frame,
+    FrameDecoder,
+    crc16_ccitt,
+    decode_frame,
+    encode_frame,
 )
 
 
@@ -27,8 +34,15 @@ def crc16_ccitt_bitwise(data: bytes) -> int:
 
 def make_frames(n, seq0=0, seed=0):
     rng = np.random.default_rng(seed)
-    frames = [Frame(seq0 + i, float(np.float32(rng.normal())), float(np.float32(rng.normal() * 3)),
-                    float(np.float32(rng.normal() * 1e-3))) for i in range(n)]
+    frames = [
+        Frame(
+            seq0 + i,
+            float(np.float32(rng.normal())),
+            float(np.float32(rng.normal() * 3)),
+            float(np.float32(rng.normal() * 1e-3)),
+        )
+        for i in range(n)
+    ]
     return frames, b"".join(encode_frame(f) for f in frames)
 
 
@@ -38,7 +52,7 @@ def feed_in_cuts(decoder, wire, cuts):
     out, pos, k = [], 0, 0
     while pos < len(wire):
         step = cuts[k % len(cuts)]
-        out += decoder.feed(wire[pos:pos + step])
+        out += decoder.feed(wire[pos : pos + step])
         pos += step
         k += 1
     return out
@@ -79,15 +93,20 @@ def test_whole_halves_and_byte_by_byte_give_the_same_samples():
     dec = FrameDecoder(256.0)
     halves = []
     for i in range(0, len(wire), FRAME_SIZE // 2):
-        halves += dec.feed(wire[i:i + FRAME_SIZE // 2])
+        halves += dec.feed(wire[i : i + FRAME_SIZE // 2])
     dec = FrameDecoder(256.0)
     bytewise = [s for b in wire for s in dec.feed(bytes([b]))]
     assert whole == halves == bytewise
     assert [s.seq for s in whole] == list(range(40))
     assert [s.accel for s in whole] == [f.accel for f in frames]
     assert [s.t for s in whole] == [i / 256.0 for i in range(40)]
-    assert dec.counters() == {"frames": 40, "crc_errors": 0, "resyncs": 0, "bytes_dropped": 0,
-                              "saturated_frames": 0}
+    assert dec.counters() == {
+        "frames": 40,
+        "crc_errors": 0,
+        "resyncs": 0,
+        "bytes_dropped": 0,
+        "saturated_frames": 0,
+    }
 
 
 @given(st.lists(st.integers(1, 60), min_size=1, max_size=40))
@@ -110,7 +129,7 @@ def test_corrupted_frames_are_rejected_and_counted_exactly():
     dec = FrameDecoder()
     out = []
     for i in range(0, len(bad), 7):
-        out += dec.feed(bytes(bad[i:i + 7]))
+        out += dec.feed(bytes(bad[i : i + 7]))
     assert [s.seq for s in out] == [i for i in range(200) if i not in corrupted]
     c = dec.counters()
     assert c["crc_errors"] == len(corrupted)
@@ -131,7 +150,7 @@ def test_a_corrupted_sync_byte_drops_that_frame_without_a_crc_error():
 
 def test_truncated_frames_count_one_crc_error_each():
     _, wire = make_frames(10)
-    parts = [wire[i * FRAME_SIZE:(i + 1) * FRAME_SIZE] for i in range(10)]
+    parts = [wire[i * FRAME_SIZE : (i + 1) * FRAME_SIZE] for i in range(10)]
     parts[2] = parts[2][:11]
     parts[6] = parts[6][:5]
     dec = FrameDecoder()
@@ -150,7 +169,7 @@ def test_garbage_flood_is_dropped_byte_for_byte():
     dec = FrameDecoder()
     out = dec.feed(before)
     for i in range(0, len(garbage), 4096):
-        out += dec.feed(garbage[i:i + 4096].tobytes())
+        out += dec.feed(garbage[i : i + 4096].tobytes())
         assert dec.pending_bytes <= FRAME_SIZE
     out += dec.feed(after)
     assert [s.seq for s in out] == list(range(10))

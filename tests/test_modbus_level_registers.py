@@ -21,8 +21,14 @@ def snapshot(level: float, baseline: float | None) -> dict:
     keeper = AlarmKeeper(AlarmSettings(), "model", clock=lambda: 1_790_000_000.0)
     monitor = {"state": "monitoring", "friction_level": level, "baseline_level": baseline}
     keeper.status({"t": 5.0, "monitor": monitor})
-    return {"state": "monitoring", "t": 5.0, "time": 1_790_000_000.0, "monitor": monitor,
-            "link": {"connected": True, "samples": 1280}, "alarm": keeper.summary()}
+    return {
+        "state": "monitoring",
+        "t": 5.0,
+        "time": 1_790_000_000.0,
+        "monitor": monitor,
+        "link": {"connected": True, "samples": 1280},
+        "alarm": keeper.summary(),
+    }
 
 
 def read_floats(board: StatusBoard) -> tuple[float, float]:
@@ -34,8 +40,7 @@ def read_floats(board: StatusBoard) -> tuple[float, float]:
         for address in (LEVEL_REGISTER, BASELINE_REGISTER):
             rr = client.read_input_registers(address, count=2, device_id=1)
             assert not rr.isError(), rr
-            values.append(client.convert_from_registers(rr.registers,
-                                                        client.DATATYPE.FLOAT32))
+            values.append(client.convert_from_registers(rr.registers, client.DATATYPE.FLOAT32))
         return values[0], values[1]
     finally:
         client.close()

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import signal, stats
 
-from hil_sim.msd import MsdParams, MsdSimulator, multisine, nominal_tf, simulate_recording
 from fdi_daemon.io.recordings import read_recording, write_recording
+from hil_sim.msd import MsdParams, MsdSimulator, multisine, nominal_tf, simulate_recording
 
 FS = 256.0
 
@@ -28,8 +28,11 @@ def _reference_accel(p: MsdParams, u: np.ndarray) -> np.ndarray:
         b = [[0], [w * w], [0], [0]]
         cc = [[g / m, 0, -k / m, -c / m]]
         d = [[0]]
-    sysd = signal.cont2discrete((np.array(a, float), np.array(b, float), np.array(cc, float),
-                                 np.array(d, float)), 1 / FS, method="zoh")
+    sysd = signal.cont2discrete(
+        (np.array(a, float), np.array(b, float), np.array(cc, float), np.array(d, float)),
+        1 / FS,
+        method="zoh",
+    )
     _, y, _ = signal.dlsim(sysd[:4] + (1 / FS,), u)
     return y[:, 0]
 
@@ -49,14 +52,22 @@ def test_viscous_fault_is_the_linear_model_with_more_damping():
     p = MsdParams(viscous_n_s_per_m=3.0, fault_time_s=0.0)
     u = multisine(3.0, FS, 0.5, 15.0, 0.5, seed=4)
     ref = _reference_accel(MsdParams(damping_n_s_per_m=p.damping_n_s_per_m + 3.0), u)
-    np.testing.assert_allclose(MsdSimulator(p).run(u)["accel"], ref,
-                               atol=1e-9 * np.max(np.abs(ref)))
+    np.testing.assert_allclose(
+        MsdSimulator(p).run(u)["accel"], ref, atol=1e-9 * np.max(np.abs(ref))
+    )
 
 
 def test_coulomb_friction_sign_and_size():
     # free mass (no spring, no filter, no damping), constant push
-    base = dict(stiffness_n_per_m=0.0, damping_n_s_per_m=0.0, input_filter_hz=None,
-                gain_n_per_v=1.0, mass_kg=2.0, fault_time_s=0.0, coulomb_n=1.0)
+    base = dict(
+        stiffness_n_per_m=0.0,
+        damping_n_s_per_m=0.0,
+        input_filter_hz=None,
+        gain_n_per_v=1.0,
+        mass_kg=2.0,
+        fault_time_s=0.0,
+        coulomb_n=1.0,
+    )
     out = MsdSimulator(MsdParams(**base)).run(np.full(64, 3.0))  # 3 N > 1 N: slides
     np.testing.assert_allclose(out["accel"][1:], (3.0 - 1.0) / 2.0, rtol=1e-9)
     assert np.all(out["friction_force"][1:] == pytest.approx(1.0))  # opposes +motion
@@ -70,17 +81,26 @@ def test_coulomb_friction_sign_and_size():
 
 
 def test_coulomb_and_viscous_faults_together():
-    base = dict(stiffness_n_per_m=0.0, damping_n_s_per_m=0.0, input_filter_hz=None,
-                gain_n_per_v=1.0, mass_kg=1.0, fault_time_s=0.0, coulomb_n=1.0,
-                viscous_n_s_per_m=2.0)
+    base = dict(
+        stiffness_n_per_m=0.0,
+        damping_n_s_per_m=0.0,
+        input_filter_hz=None,
+        gain_n_per_v=1.0,
+        mass_kg=1.0,
+        fault_time_s=0.0,
+        coulomb_n=1.0,
+        viscous_n_s_per_m=2.0,
+    )
     out = MsdSimulator(MsdParams(**base)).run(np.full(512, 3.0))
     v = out["velocity"]
     # m v' = F − F_c − c_v v from rest: v = (F − F_c)/c_v (1 − exp(−c_v t/m))
-    np.testing.assert_allclose(v, (3.0 - 1.0) / 2.0 * (1 - np.exp(-2.0 * out["t"])),
-                               rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(
+        v, (3.0 - 1.0) / 2.0 * (1 - np.exp(-2.0 * out["t"])), rtol=1e-6, atol=1e-9
+    )
     np.testing.assert_allclose(out["friction_force"][1:], 1.0 + 2.0 * v[1:], rtol=1e-9)
-    np.testing.assert_allclose(out["accel"][1:], 3.0 - out["friction_force"][1:], rtol=1e-9,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        out["accel"][1:], 3.0 - out["friction_force"][1:], rtol=1e-9, atol=1e-12
+    )
 
 
 def test_fault_switches_on_at_its_time_and_stick_slip_stays_bounded():
@@ -124,18 +144,21 @@ def test_input_effects_equal_the_linear_model_on_the_transformed_input():
     sat = MsdSimulator(MsdParams(effects={"input_saturation": {"level_v": 0.4}})).run(u)
     np.testing.assert_allclose(sat["accel"], lin(np.clip(u, -0.4, 0.4)), atol=tol)
     dz = MsdSimulator(MsdParams(effects={"dead_zone": {"half_width_v": 0.1}})).run(u)
-    np.testing.assert_allclose(dz["accel"], lin(np.sign(u) * np.maximum(np.abs(u) - 0.1, 0)),
-                               atol=tol)
+    np.testing.assert_allclose(
+        dz["accel"], lin(np.sign(u) * np.maximum(np.abs(u) - 0.1, 0)), atol=tol
+    )
     dt = MsdSimulator(MsdParams(effects={"dead_time": {"delay_s": 3 / FS}})).run(u)
-    np.testing.assert_allclose(dt["accel"], lin(np.concatenate([np.full(3, u[0]), u[:-3]])),
-                               atol=tol)
+    np.testing.assert_allclose(
+        dt["accel"], lin(np.concatenate([np.full(3, u[0]), u[:-3]])), atol=tol
+    )
 
 
 def test_output_effects_and_recording_round_trip(tmp_path):
     u = multisine(2.0, FS, 0.5, 15.0, 0.5, seed=6)
     clean = MsdSimulator(MsdParams()).run(u)["accel"]
-    p = MsdParams(effects={"output_saturation": {"level_m_s2": 3.0},
-                           "sensor_offset": {"offset_m_s2": 0.5}})
+    p = MsdParams(
+        effects={"output_saturation": {"level_m_s2": 3.0}, "sensor_offset": {"offset_m_s2": 0.5}}
+    )
     rec = simulate_recording(p, u, seed=1)
     np.testing.assert_allclose(rec.accel, np.clip(clean + 0.5, -3.0, 3.0), atol=1e-9)
     path = write_recording(tmp_path / "msd.csv", rec)

@@ -42,8 +42,9 @@ def drive(hours: float, rest: tuple[float, float] = (2.0, 2.5), seed: int = 3):
         hour = k * READING_S / 3600
         moving = not rest[0] <= hour < rest[1]
         level = BASELINE + 0.1 * hour + 0.02 * rng.standard_normal() if moving else None
-        keeper.status({"t": hour * 3600, "monitor": {"friction_level": level,
-                                                     "baseline_level": BASELINE}})
+        keeper.status(
+            {"t": hour * 3600, "monitor": {"friction_level": level, "baseline_level": BASELINE}}
+        )
         if level is not None:
             given.append((clock.now, level))
     return keeper, clock, np.array(given)
@@ -76,7 +77,8 @@ def test_snapshot_carries_the_last_six_hours_in_ten_minute_buckets():
     for got, want in ((trend["mean"], means), (trend["max"], maxima)):
         assert [g is None for g in got] == [w is None for w in want]
         assert [g for g in got if g is not None] == pytest.approx(
-            [w for w in want if w is not None], abs=5e-4)  # 3 decimals, like the store
+            [w for w in want if w is not None], abs=5e-4
+        )  # 3 decimals, like the store
     # the rest (hours 2-2.5 after START) is 3 empty buckets; the first hour is past 6 h
     assert sum(v is None for v in trend["mean"]) == 3
     assert trend["mean"][-1] == pytest.approx(BASELINE + 0.1 * 6.95, abs=0.02)
@@ -99,13 +101,12 @@ def test_a_full_trend_is_under_one_kilobyte_of_json():
 
 def test_minutes_without_readings_are_skipped():
     recent = RecentTrend()
-    recent.add({"minute": int(START // 60) - 1, "level_mean": None, "level_max": None,
-                "readings": 0})
+    recent.add(
+        {"minute": int(START // 60) - 1, "level_mean": None, "level_max": None, "readings": 0}
+    )
     assert recent.summary(START + 60) is None
-    recent.add({"minute": int(START // 60), "level_mean": 0.5, "level_max": 0.7,
-                "readings": 2})
-    recent.add({"minute": int(START // 60) + 1, "level_mean": 0.2, "level_max": 0.3,
-                "readings": 6})
+    recent.add({"minute": int(START // 60), "level_mean": 0.5, "level_max": 0.7, "readings": 2})
+    recent.add({"minute": int(START // 60) + 1, "level_mean": 0.2, "level_max": 0.3, "readings": 6})
     trend = recent.summary(START + 120)
     assert trend["mean"][-1] == pytest.approx((0.5 * 2 + 0.2 * 6) / 8)
     assert trend["max"][-1] == 0.7
@@ -124,8 +125,7 @@ def test_a_restart_recalls_the_last_hours_from_the_trend_store(tmp_path):
     for k in range(int(5 * 3600 / READING_S)):
         clock.now = START + k * READING_S
         level = BASELINE + 0.05 * k * READING_S / 3600 + 0.02 * rng.standard_normal()
-        _, row = keeper.status({"monitor": {"friction_level": level,
-                                            "baseline_level": BASELINE}})
+        _, row = keeper.status({"monitor": {"friction_level": level, "baseline_level": BASELINE}})
         if row is not None:
             store.append(row)
     store.close()
@@ -138,10 +138,12 @@ def test_a_restart_recalls_the_last_hours_from_the_trend_store(tmp_path):
     assert [v is None for v in after["mean"]] == [v is None for v in before["mean"]]
     for key in ("mean", "max"):  # the store keeps 1/1000 of the signature
         assert [v for v in after[key] if v is not None] == pytest.approx(
-            [v for v in before[key] if v is not None], abs=1.5e-3)
+            [v for v in before[key] if v is not None], abs=1.5e-3
+        )
     # the minute in progress at the restart, finished again by the new keeper, counts once
-    restarted.recent.add({"minute": int(clock.now // 60) - 1, "level_mean": 9.0,
-                          "level_max": 9.0, "readings": 6})
+    restarted.recent.add(
+        {"minute": int(clock.now // 60) - 1, "level_mean": 9.0, "level_max": 9.0, "readings": 6}
+    )
     assert restarted.summary()["trend"] == after
     assert restarted.recall_trend(tmp_path / "missing.sqlite") == 0
 
@@ -151,24 +153,42 @@ def test_the_restarted_daemon_shows_the_hours_before_its_restart(tmp_path):
     from ``trend.sqlite``; another model's rows (no state file of its own) are not shown."""
     import time
 
+    from reliability_support import load_test_model, model_path
+
     from fdi_daemon.service.config import config_from_dict
     from fdi_daemon.service.daemon import Daemon
     from fdi_daemon.service.state_file import write_state
     from fdi_daemon.service.trend import TrendStore
-    from reliability_support import load_test_model, model_path
 
-    config = config_from_dict({"link": {"kind": "replay", "path": "rec.csv"},
-                               "model": {"path": str(model_path())},
-                               "service": {"state_dir": str(tmp_path)}}, "rig.yaml", tmp_path)
+    config = config_from_dict(
+        {
+            "link": {"kind": "replay", "path": "rec.csv"},
+            "model": {"path": str(model_path())},
+            "service": {"state_dir": str(tmp_path)},
+        },
+        "rig.yaml",
+        tmp_path,
+    )
     model = load_test_model()
     first = Daemon().alarm_keeper(config, model)
     assert first.summary()["trend"] is None
     store = TrendStore(config.output_path(config.alarms["trend"]))
     now_minute = int(time.time() // 60)
     for minute in range(now_minute - 90, now_minute):
-        store.append({"minute": minute, "level_mean": 0.3, "level_min": 0.2, "level_max": 0.4,
-                      "baseline": BASELINE, "command_rms_v": 1.0, "readings": 600,
-                      "samples": 15360, "priority": 1, "alarm_state": 1})
+        store.append(
+            {
+                "minute": minute,
+                "level_mean": 0.3,
+                "level_min": 0.2,
+                "level_max": 0.4,
+                "baseline": BASELINE,
+                "command_rms_v": 1.0,
+                "readings": 600,
+                "samples": 15360,
+                "priority": 1,
+                "alarm_state": 1,
+            }
+        )
     store.close()
     other = load_test_model()
     other.fault_filter.gamma_f += 1.0  # another unit of the level, no state file of its own

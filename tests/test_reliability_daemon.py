@@ -17,10 +17,10 @@ import time
 
 import numpy as np
 import pytest
-
-from fdi_daemon.io.recordings import read_recording
 from reliability_support import ALARMS, write_config
 from test_e2e_service import DaemonProcess, device_time_s, monitoring, start_device
+
+from fdi_daemon.io.recordings import read_recording
 
 STARTUP_TIMEOUT_S = 180.0
 
@@ -48,7 +48,7 @@ def crash_cycles(tmp_path, kills: int, seed: int) -> None:
             assert daemon.stop(signal.SIGKILL) == -signal.SIGKILL
 
             lines = event_lines(events_path)
-            assert lines[:len(previous_lines)] == previous_lines, "the event log was rewritten"
+            assert lines[: len(previous_lines)] == previous_lines, "the event log was rewritten"
             events = [json.loads(line) for line in lines]  # every line is whole JSON
             assert sum(e["kind"] == "calibrated" for e in events) == run + 1
             previous_lines = lines
@@ -84,8 +84,9 @@ def realtime_run(tmp_path, seconds: float, judge_deadlines: bool) -> None:
     config = write_config(tmp_path / "rig.yaml", link, tmp_path, recorder=True)
     daemon = DaemonProcess(config, tmp_path)
     try:
-        before = daemon.wait_for(lambda s: s if monitoring(s) else None, STARTUP_TIMEOUT_S,
-                                 "monitoring")
+        before = daemon.wait_for(
+            lambda s: s if monitoring(s) else None, STARTUP_TIMEOUT_S, "monitoring"
+        )
         # count from a clean point: ticks before this (process start-up) are not judged
         time.sleep(seconds)
         after = daemon.snapshot()
@@ -121,21 +122,29 @@ def test_realtime_modbus_tcp_10_min_without_deadline_miss(tmp_path):
 def test_the_daemons_signal_handlers_hold_until_its_shutdown_is_done(tmp_path, monkeypatch):
     """A second SIGTERM while the outputs close (a slow disk, a broker far away) is the
     daemon's, not Python's default that ends the process half-way through its shutdown."""
+    from conftest_detect import SCENARIOS
+
     from fdi_daemon.io.recordings import write_recording
     from fdi_daemon.service.daemon import Daemon
     from hil_sim.scenarios import load_scenario, simulate
-    from conftest_detect import SCENARIOS
 
-    rec = write_recording(tmp_path / "rec.csv", simulate(
-        load_scenario(SCENARIOS / "test_case_2.yaml"), duration_s=1.0))
-    config = write_config(tmp_path / "rig.yaml", {"kind": "replay", "path": str(rec),
-                                                  "realtime": False}, tmp_path / "state",
-                          recorder=False, status_socket=False)
+    rec = write_recording(
+        tmp_path / "rec.csv",
+        simulate(load_scenario(SCENARIOS / "test_case_2.yaml"), duration_s=1.0),
+    )
+    config = write_config(
+        tmp_path / "rig.yaml",
+        {"kind": "replay", "path": str(rec), "realtime": False},
+        tmp_path / "state",
+        recorder=False,
+        status_socket=False,
+    )
     daemon = Daemon(config, echo=lambda line: None)
     during = []
     shutdown = daemon.shutdown
-    monkeypatch.setattr(daemon, "shutdown",
-                        lambda: (during.append(signal.getsignal(signal.SIGTERM)), shutdown()))
+    monkeypatch.setattr(
+        daemon, "shutdown", lambda: (during.append(signal.getsignal(signal.SIGTERM)), shutdown())
+    )
     before = signal.getsignal(signal.SIGTERM)
     assert daemon.run(duration_s=5.0) == 0
     assert during == [daemon._on_stop]

@@ -24,18 +24,25 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from reliability_support import fault_free, model_path
+from test_io_serial_frames import feed_in_cuts
 
 from fdi_daemon.cli import main
 from fdi_daemon.io.recordings import write_recording
 from fdi_daemon.io.serial_frames import Frame, FrameDecoder, encode_frame
-from reliability_support import fault_free, model_path
-from test_io_serial_frames import feed_in_cuts
 
 CALL_TIMEOUT_S = 60
 
-FUZZ = settings(deadline=None, derandomize=True, database=None,
-                suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                       HealthCheck.too_slow, HealthCheck.data_too_large])
+FUZZ = settings(
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[
+        HealthCheck.function_scoped_fixture,
+        HealthCheck.too_slow,
+        HealthCheck.data_too_large,
+    ],
+)
 
 
 def fuzz(examples: int) -> settings:
@@ -88,11 +95,30 @@ def check_clear(code: int, err: str, command: str) -> None:
 
 NUMBER_TOKENS = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True, width=64).map(repr),
-    st.integers(-10**30, 10**30).map(str),
-    st.sampled_from(["", " ", "nan", "inf", "-inf", "1e999", "abc", "0x10", "1,2", "--1",
-                     "\t", "1.5.2", "NaN", "+3", "١٢"]))
-COLUMN_NAMES = st.sampled_from(["t", "v_in", "accel", "position", "seq", "x", "", "t ",
-                                "T", "accel", "ünïcode"])
+    st.integers(-(10**30), 10**30).map(str),
+    st.sampled_from(
+        [
+            "",
+            " ",
+            "nan",
+            "inf",
+            "-inf",
+            "1e999",
+            "abc",
+            "0x10",
+            "1,2",
+            "--1",
+            "\t",
+            "1.5.2",
+            "NaN",
+            "+3",
+            "١٢",
+        ]
+    ),
+)
+COLUMN_NAMES = st.sampled_from(
+    ["t", "v_in", "accel", "position", "seq", "x", "", "t ", "T", "accel", "ünïcode"]
+)
 
 
 @st.composite
@@ -110,8 +136,9 @@ def csv_texts(draw) -> str:
     regular = draw(st.booleans())
     for i in range(draw(st.integers(0, 40))):
         if regular and draw(st.integers(0, 9)) > 0:
-            row = [repr(i / 256.0)] + [repr(float(draw(st.integers(-5, 5))))
-                                       for _ in range(ncol - 1)]
+            row = [repr(i / 256.0)] + [
+                repr(float(draw(st.integers(-5, 5)))) for _ in range(ncol - 1)
+            ]
             if "seq" in header:
                 row[header.index("seq")] = str(i)
         else:
@@ -137,8 +164,10 @@ def test_fuzzed_csv_recordings(tmp_path, model_file, text):
 
 
 @fuzz(40)
-@given(data=st.binary(max_size=400), suffix=st.sampled_from([".csv", ".csv.gz", ".npz",
-                                                              ".mat", ".txt"]))
+@given(
+    data=st.binary(max_size=400),
+    suffix=st.sampled_from([".csv", ".csv.gz", ".npz", ".mat", ".txt"]),
+)
 def test_random_bytes_as_a_recording(tmp_path, model_file, data, suffix):
     path = tmp_path / f"rec{suffix}"
     path.write_bytes(data)
@@ -159,20 +188,30 @@ def _write_npz(path: Path, meta: str | None = None, **columns) -> None:
 #: fdi_daemon/io/recordings.py): kept as regression cases
 KNOWN_BAD_RECORDINGS = {
     # name: (writer, what used to escape)
-    "npz-not-a-zip": (lambda p: p.write_bytes(b"PK\x03\x04 not really a zip"),
-                      "zipfile.BadZipFile from np.load (_read_npz)"),
-    "mat-empty": (lambda p: p.write_bytes(b""),
-                  "scipy MatReadError from loadmat (_read_mat)"),
-    "mat-zeros": (lambda p: p.write_bytes(bytes(200)),
-                  "scipy MatReadError from loadmat (_read_mat)"),
-    "npz-meta-list": (lambda p: _write_npz(p, "[1, 2]"),
-                      "AttributeError: meta.items() on a JSON list (_read_npz)"),
-    "npz-meta-null": (lambda p: _write_npz(p, "null"),
-                      "AttributeError: meta.items() on JSON null (_read_npz)"),
-    "csv-seq-1e300": (lambda p: p.write_text("t,v_in,accel,seq\n0,0,0,0\n"
-                                             "0.00390625,0,0,1e300\n0.0078125,0,0,2\n"),
-                      "RuntimeWarning 'invalid value encountered in cast' in _as_counter: "
-                      "the file is accepted with a garbage seq"),
+    "npz-not-a-zip": (
+        lambda p: p.write_bytes(b"PK\x03\x04 not really a zip"),
+        "zipfile.BadZipFile from np.load (_read_npz)",
+    ),
+    "mat-empty": (lambda p: p.write_bytes(b""), "scipy MatReadError from loadmat (_read_mat)"),
+    "mat-zeros": (
+        lambda p: p.write_bytes(bytes(200)),
+        "scipy MatReadError from loadmat (_read_mat)",
+    ),
+    "npz-meta-list": (
+        lambda p: _write_npz(p, "[1, 2]"),
+        "AttributeError: meta.items() on a JSON list (_read_npz)",
+    ),
+    "npz-meta-null": (
+        lambda p: _write_npz(p, "null"),
+        "AttributeError: meta.items() on JSON null (_read_npz)",
+    ),
+    "csv-seq-1e300": (
+        lambda p: p.write_text(
+            "t,v_in,accel,seq\n0,0,0,0\n0.00390625,0,0,1e300\n0.0078125,0,0,2\n"
+        ),
+        "RuntimeWarning 'invalid value encountered in cast' in _as_counter: "
+        "the file is accepted with a garbage seq",
+    ),
 }
 
 
@@ -189,7 +228,7 @@ def test_known_bad_recordings_are_clear_errors(tmp_path, model_file, name):
 
 ARRAYS = st.one_of(
     st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=30).map(np.array),
-    st.lists(st.integers(-2**62, 2**62), max_size=30).map(lambda v: np.array(v, np.int64)),
+    st.lists(st.integers(-(2**62), 2**62), max_size=30).map(lambda v: np.array(v, np.int64)),
     st.lists(st.booleans(), max_size=5).map(np.array),
     st.text(max_size=10).map(np.array),
     st.floats(allow_nan=True).map(np.array),
@@ -198,18 +237,34 @@ ARRAYS = st.one_of(
     st.just(np.arange(40)),
 )
 META = st.one_of(
-    st.dictionaries(st.sampled_from(["fs", "seed", "x"]),
-                    st.one_of(st.text(max_size=6), st.floats(allow_nan=False),
-                              st.integers())).map(json.dumps),
-    st.sampled_from(["[1, 2]", "null", "3", '"fs"', "{", "", '{"fs": "abc"}',
-                     '{"fs": -256}', '{"fs": 256}', '{"fs": 0}']),
+    st.dictionaries(
+        st.sampled_from(["fs", "seed", "x"]),
+        st.one_of(st.text(max_size=6), st.floats(allow_nan=False), st.integers()),
+    ).map(json.dumps),
+    st.sampled_from(
+        [
+            "[1, 2]",
+            "null",
+            "3",
+            '"fs"',
+            "{",
+            "",
+            '{"fs": "abc"}',
+            '{"fs": -256}',
+            '{"fs": 256}',
+            '{"fs": 0}',
+        ]
+    ),
 )
 
 
 @fuzz(60)
-@given(arrays=st.dictionaries(st.sampled_from(["t", "v_in", "accel", "seq", "position",
-                                               "other"]), ARRAYS, max_size=6),
-       meta=st.none() | META)
+@given(
+    arrays=st.dictionaries(
+        st.sampled_from(["t", "v_in", "accel", "seq", "position", "other"]), ARRAYS, max_size=6
+    ),
+    meta=st.none() | META,
+)
 def test_fuzzed_npz_recordings(tmp_path, model_file, arrays, meta):
     path = tmp_path / "rec.npz"
     payload = dict(arrays)
@@ -223,11 +278,15 @@ def test_fuzzed_npz_recordings(tmp_path, model_file, arrays, meta):
 # ----------------------------------------------------------------------------- model files
 
 VALUES = st.one_of(
-    st.none(), st.booleans(), st.integers(-10, 10**6),
-    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=6),
+    st.none(),
+    st.booleans(),
+    st.integers(-10, 10**6),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=6),
     st.lists(st.floats(-3, 3), max_size=6),
     st.lists(st.one_of(st.floats(), st.text(max_size=2)), max_size=4),
-    st.dictionaries(st.text(max_size=4), st.integers(), max_size=2))
+    st.dictionaries(st.text(max_size=4), st.integers(), max_size=2),
+)
 
 
 def _paths(node, prefix=()):
@@ -287,8 +346,23 @@ UNSTABLE = {"plant": {"a": [1.0, -2.5, 1.6]}, "fault_filter": {"f": [1.0, -1.0]}
 def test_fuzzed_model_files(tmp_path, short_recording, data):
     base = _model_dict()
     base.setdefault("detector", {"window_s": 1.0, "threshold": 20.0})
-    doc = data.draw(mutated(base, ["fs", "plant", "b", "a", "nk", "window_s", "method",
-                                   "accel_limit_mps2", "bogus", "highpass_hz"]))
+    doc = data.draw(
+        mutated(
+            base,
+            [
+                "fs",
+                "plant",
+                "b",
+                "a",
+                "nk",
+                "window_s",
+                "method",
+                "accel_limit_mps2",
+                "bogus",
+                "highpass_hz",
+            ],
+        )
+    )
     if data.draw(st.booleans()):  # also try unstable filters now and then
         section = data.draw(st.sampled_from(sorted(UNSTABLE)))
         if isinstance(doc.get(section), dict):
@@ -322,13 +396,22 @@ def test_fuzzed_rig_configs(tmp_path, short_recording, data):
     base = {
         "link": {"kind": "replay", "path": short_recording, "realtime": False},
         "model": {"path": str(model_path())},
-        "sinks": {"event_log": "events.jsonl", "stdout": False, "status_socket": None,
-                  "modbus_status": {"enabled": False, "port": 0}},
+        "sinks": {
+            "event_log": "events.jsonl",
+            "stdout": False,
+            "status_socket": None,
+            "modbus_status": {"enabled": False, "port": 0},
+        },
         "recorder": {"enabled": False, "dir": "rec", "rotate_seconds": 600},
         "service": {"state_dir": str(tmp_path / "state"), "deadline_s": 0.05},
     }
-    doc = data.draw(mutated(base, ["kind", "bogus", "port", "enabled", "fs", "realtime"],
-                            st.one_of(VALUES, SAFE_TEXT)))
+    doc = data.draw(
+        mutated(
+            base,
+            ["kind", "bogus", "port", "enabled", "fs", "realtime"],
+            st.one_of(VALUES, SAFE_TEXT),
+        )
+    )
     for section in ("service",):  # outputs never leave tmp_path
         if isinstance(doc.get(section), dict) and "state_dir" in doc[section]:
             doc[section]["state_dir"] = str(tmp_path / "state")
@@ -343,18 +426,21 @@ def test_fuzzed_rig_configs(tmp_path, short_recording, data):
 
 
 @fuzz(80)
-@given(garbage=st.lists(st.binary(max_size=60), min_size=1, max_size=12),
-       cuts=st.lists(st.integers(1, 50), min_size=1, max_size=20))
+@given(
+    garbage=st.lists(st.binary(max_size=60), min_size=1, max_size=12),
+    cuts=st.lists(st.integers(1, 50), min_size=1, max_size=20),
+)
 def test_frames_survive_random_bytes_between_them(garbage, cuts):
     """Every frame sent whole is decoded, in order, whatever bytes lie between frames and
     however the stream is cut; no frame is invented."""
-    frames = [encode_frame(Frame(1000 + i, 0.25 * i, -0.5 * i, 0.001 * i))
-              for i in range(len(garbage))]
+    frames = [
+        encode_frame(Frame(1000 + i, 0.25 * i, -0.5 * i, 0.001 * i)) for i in range(len(garbage))
+    ]
     wire = b"".join(g + f for g, f in zip(garbage, frames)) + encode_frame(Frame(9999, 0, 0))
     decoder = FrameDecoder()
     got = feed_in_cuts(decoder, wire, cuts)
     seqs = [s.seq for s in got]
-    assert seqs[:len(frames)] == list(range(1000, 1000 + len(frames)))
+    assert seqs[: len(frames)] == list(range(1000, 1000 + len(frames)))
     assert len(seqs) == len(frames) + 1 and got[-1].seq == 9999
     counters = decoder.counters()
     assert counters["frames"] == len(frames) + 1
@@ -376,17 +462,24 @@ def _bad_inputs(tmp_path: Path) -> list[tuple[list[str], str]]:
     write_recording(good, fault_free(4.0))
     config = tmp_path / "rig.yaml"
     config.write_text(f"link: {{kind: serial}}\nmodel: {{path: {model}}}\n")
-    return [(["replay", str(csv), "--model", model], "replay"),
-            (["replay", str(npz), "--model", model], "replay"),
-            (["replay", str(good), "--model", str(bad_model)], "replay"),
-            (["run", "--config", str(config)], "run"),
-            (["identify", str(csv), "-o", str(tmp_path / "m.yaml")], "identify")]
+    return [
+        (["replay", str(csv), "--model", model], "replay"),
+        (["replay", str(npz), "--model", model], "replay"),
+        (["replay", str(good), "--model", str(bad_model)], "replay"),
+        (["run", "--config", str(config)], "run"),
+        (["identify", str(csv), "-o", str(tmp_path / "m.yaml")], "identify"),
+    ]
 
 
 def test_bad_inputs_as_a_subprocess_are_one_line_and_exit_2(tmp_path):
     for argv, command in _bad_inputs(tmp_path):
-        proc = subprocess.run([sys.executable, "-m", "fdi_daemon", *argv], capture_output=True,
-                              text=True, timeout=120, cwd=tmp_path)
+        proc = subprocess.run(
+            [sys.executable, "-m", "fdi_daemon", *argv],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            cwd=tmp_path,
+        )
         assert proc.returncode == 2, (argv, proc.stderr)
         assert "Traceback" not in proc.stderr
         lines = [line for line in proc.stderr.splitlines() if line.strip()]

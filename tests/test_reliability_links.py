@@ -17,12 +17,11 @@ import time
 
 import numpy as np
 import pytest
+from reliability_support import PtyDevice, corrupt_bytes, fault_free, frames_of, service_loop
 
 from fdi_daemon.io.links.base import ReconnectingLink, make_link
 from fdi_daemon.io.links.serial_link import SerialLink
 from fdi_daemon.io.serial_frames import FRAME_SIZE, SYNC, VERSION
-from reliability_support import (PtyDevice, corrupt_bytes, fault_free, frames_of,
-                                 service_loop)
 
 CI_CYCLES = 10
 SOAK_CYCLES = 100
@@ -51,7 +50,7 @@ def writer(dev: PtyDevice, data: bytes, seed: int) -> threading.Thread:
         pos = 0
         while pos < len(data):
             n = int(rng.integers(1, 98))
-            dev.write(data[pos:pos + n])
+            dev.write(data[pos : pos + n])
             pos += n
             if rng.random() < 0.02:
                 time.sleep(0.001)  # let the reader see a partial frame now and then
@@ -62,8 +61,12 @@ def writer(dev: PtyDevice, data: bytes, seed: int) -> threading.Thread:
 
 
 def serial_link(path: str, stall_timeout_s: float | None = None) -> ReconnectingLink:
-    return ReconnectingLink(lambda: SerialLink(path), backoff_initial_s=0.02,
-                            backoff_max_s=0.2, stall_timeout_s=stall_timeout_s)
+    return ReconnectingLink(
+        lambda: SerialLink(path),
+        backoff_initial_s=0.02,
+        backoff_max_s=0.2,
+        stall_timeout_s=stall_timeout_s,
+    )
 
 
 def stream_through_pty(tmp_path, data: bytes, delivered: int, seed: int):
@@ -86,8 +89,9 @@ def stream_through_pty(tmp_path, data: bytes, delivered: int, seed: int):
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """(start, length) of each run of True."""
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-                    - np.flatnonzero(edges == 1)))
+    return list(
+        zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1))
+    )
 
 
 @pytest.mark.parametrize("rate", [1e-4, 1e-3, 1e-2])
@@ -131,9 +135,9 @@ def test_truncated_frames_and_a_garbage_flood_lose_only_those_frames(tmp_path):
     pieces, flooded = [], 0
     for k, frame in enumerate(frames):
         if k % 512 == 300:  # a 30 kB burst between two frames, ten times
-            pieces.append(garbage[flooded:flooded + 30_000])
+            pieces.append(garbage[flooded : flooded + 30_000])
             flooded += 30_000
-        pieces.append(frame[:FRAME_SIZE // 2] if cut[k] else frame)
+        pieces.append(frame[: FRAME_SIZE // 2] if cut[k] else frame)
     delivered = len(frames) - int(cut.sum())
     link, loop, out = stream_through_pty(tmp_path, b"".join(pieces), delivered, seed=2)
 
@@ -178,7 +182,7 @@ def test_a_stalling_device_short_and_long(tmp_path):
 
     def send(first: int, count: int) -> None:
         nonlocal sent
-        thread = writer(dev, b"".join(frames[first:first + count]), seed=first)
+        thread = writer(dev, b"".join(frames[first : first + count]), seed=first)
         sent += count
         pump(loop, lambda: loop.samples >= sent, 30.0, "the frames sent")
         thread.join(10)
@@ -189,14 +193,20 @@ def test_a_stalling_device_short_and_long(tmp_path):
     drain(loop, 0.1)
     assert out.of("link_lost") == []
     time.sleep(0.8)  # long stall (> 0.5 s): the link is declared lost and reopened ...
-    pump(loop, lambda: len(out.of("link_lost")) == 1 and link.connected, 10.0,
-         "link_lost and the port reopened")  # (opening a port flushes its input)
+    pump(
+        loop,
+        lambda: len(out.of("link_lost")) == 1 and link.connected,
+        10.0,
+        "link_lost and the port reopened",
+    )  # (opening a port flushes its input)
     send(4577, 2000)  # ... and restored when samples flow again
     drain(loop)
     link.close()
     dev.close()
-    assert [e["kind"] for e in out.events if e["kind"] in ("link_lost", "link_restored")] \
-        == ["link_lost", "link_restored"]
+    assert [e["kind"] for e in out.events if e["kind"] in ("link_lost", "link_restored")] == [
+        "link_lost",
+        "link_restored",
+    ]
     assert [g["missing_samples"] for g in out.of("data_gap")] == [77, 500]
     assert loop.samples == 6000 and out.alarms() == []
 
@@ -211,7 +221,7 @@ def serial_disconnect_cycles(tmp_path, cycles: int) -> None:
     pos = sent = 0
     per_cycle, skipped = 200, 56
     for cycle in range(cycles):
-        thread = writer(dev, b"".join(frames[pos:pos + per_cycle]), seed=cycle)
+        thread = writer(dev, b"".join(frames[pos : pos + per_cycle]), seed=cycle)
         pos += per_cycle
         sent += per_cycle
         pump(loop, lambda: loop.samples >= sent, 30.0, f"cycle {cycle}: samples")
@@ -222,7 +232,7 @@ def serial_disconnect_cycles(tmp_path, cycles: int) -> None:
         dev.connect()
         pos += skipped  # the device kept sampling while disconnected
         pump(loop, lambda: link.connected, 30.0, f"cycle {cycle}: port reopened")
-    thread = writer(dev, b"".join(frames[pos:pos + per_cycle]), seed=cycles)
+    thread = writer(dev, b"".join(frames[pos : pos + per_cycle]), seed=cycles)
     sent += per_cycle
     pump(loop, lambda: loop.samples >= sent, 30.0, "the last samples")
     thread.join(10)
@@ -242,13 +252,21 @@ def modbus_disconnect_cycles(tmp_path, transport: str, cycles: int) -> None:
     rtu_path = str(tmp_path / "rtu")
 
     def device(seed: int, port: int = 0):
-        dev = SimulatedDevice(transport, realtime_rig(seed=seed), port=port,
-                              link_path=rtu_path if transport == "modbus-rtu" else None)
+        dev = SimulatedDevice(
+            transport,
+            realtime_rig(seed=seed),
+            port=port,
+            link_path=rtu_path if transport == "modbus-rtu" else None,
+        )
         return dev, dev.start()
 
     dev, config = device(0)
-    link = ReconnectingLink(lambda: make_link({**config, "timeout_s": 0.3}),
-                            backoff_initial_s=0.02, backoff_max_s=0.2, stall_timeout_s=1.0)
+    link = ReconnectingLink(
+        lambda: make_link({**config, "timeout_s": 0.3}),
+        backoff_initial_s=0.02,
+        backoff_max_s=0.2,
+        stall_timeout_s=1.0,
+    )
     link.open()
     loop, out = service_loop(link)
     try:
@@ -257,11 +275,14 @@ def modbus_disconnect_cycles(tmp_path, transport: str, cycles: int) -> None:
             target = loop.samples + 300
             pump(loop, lambda: loop.samples >= target, 30.0, f"cycle {cycle}: samples")
             dev.stop()
-            pump(loop, lambda: len(out.of("link_lost")) == cycle + 1, 30.0,
-                 f"cycle {cycle}: lost")
+            pump(loop, lambda: len(out.of("link_lost")) == cycle + 1, 30.0, f"cycle {cycle}: lost")
             dev, _ = device(cycle + 1, config.get("port", 0) if transport == "modbus-tcp" else 0)
-            pump(loop, lambda: len(out.of("link_restored")) == cycle + 1, 30.0,
-                 f"cycle {cycle}: restored")
+            pump(
+                loop,
+                lambda: len(out.of("link_restored")) == cycle + 1,
+                30.0,
+                f"cycle {cycle}: restored",
+            )
         target = loop.samples + 300
         pump(loop, lambda: loop.samples >= target, 30.0, "samples after the last restore")
     finally:

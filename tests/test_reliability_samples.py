@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from reliability_support import ALARMS, fault_free, load_test_model
 
 from fdi_daemon.cli import main
 from fdi_daemon.detect.monitor import Monitor
 from fdi_daemon.io.model_file import save_model
 from fdi_daemon.io.recordings import Recording, write_recording
 from fdi_daemon.io.sample import Sample
-from reliability_support import ALARMS, fault_free, load_test_model
 
 FS = 256
 
@@ -42,22 +42,33 @@ def defective(rec):
     limit = _limit(rec)
     cols = {k: np.array(rec.columns[k], dtype=float) for k in ("t", "v_in", "accel")}
     cols["seq"] = np.array(rec.columns["seq"], dtype=np.int64)
-    at = {name: int(s * FS) for name, s in (("nan", 5), ("inf", 8), ("vin", 11), ("both", 14),
-                                             ("sat", 17), ("gap", 20), ("back", 23),
-                                             ("dup", 26), ("neg_sat", 29))}
-    cols["accel"][at["nan"]:at["nan"] + 5] = np.nan
+    at = {
+        name: int(s * FS)
+        for name, s in (
+            ("nan", 5),
+            ("inf", 8),
+            ("vin", 11),
+            ("both", 14),
+            ("sat", 17),
+            ("gap", 20),
+            ("back", 23),
+            ("dup", 26),
+            ("neg_sat", 29),
+        )
+    }
+    cols["accel"][at["nan"] : at["nan"] + 5] = np.nan
     cols["accel"][at["inf"]] = np.inf
     cols["v_in"][at["vin"]] = -np.inf
     cols["v_in"][at["both"]] = np.nan
     cols["accel"][at["both"]] = np.nan
-    cols["accel"][at["sat"]:at["sat"] + 3] = limit
+    cols["accel"][at["sat"] : at["sat"] + 3] = limit
     cols["accel"][at["neg_sat"]] = -2 * limit
     order = list(range(len(rec)))
-    del order[at["gap"]:at["gap"] + 20]                       # 20 samples missing
+    del order[at["gap"] : at["gap"] + 20]  # 20 samples missing
     b = order.index(at["back"])
-    order[b:b] = list(range(at["back"] - 10, at["back"]))     # 10 samples again (seq and t back)
+    order[b:b] = list(range(at["back"] - 10, at["back"]))  # 10 samples again (seq and t back)
     d = order.index(at["dup"])
-    order.insert(d, at["dup"] - 1)                            # one duplicate
+    order.insert(d, at["dup"] - 1)  # one duplicate
     cols = {k: v[order] for k, v in cols.items()}
     t = rec.t
     expected = [
@@ -90,8 +101,7 @@ def _stepped(model, rec):
     events = []
     for k in range(len(rec)):
         s = int(seq[k]) if seq is not None else k
-        events.extend(mon.step(Sample(s, float(rec.t[k]), float(rec.v_in[k]),
-                                      float(rec.accel[k]))))
+        events.extend(mon.step(Sample(s, float(rec.t[k]), float(rec.v_in[k]), float(rec.accel[k]))))
     return events + mon.finish()
 
 
@@ -125,8 +135,18 @@ def test_fdi_replay_gives_the_same_events(tmp_path, case, fmt):
     else:
         cols = {k: v for k, v in rec.columns.items() if k != "seq"}
         path = write_recording(tmp_path / "bad.npz", Recording(cols, dict(rec.meta)))
-    code = main(["replay", str(path), "--model", str(model_file),
-                 "--events", str(tmp_path / "ev.jsonl"), "--summary", str(tmp_path / "s.json")])
+    code = main(
+        [
+            "replay",
+            str(path),
+            "--model",
+            str(model_file),
+            "--events",
+            str(tmp_path / "ev.jsonl"),
+            "--summary",
+            str(tmp_path / "s.json"),
+        ]
+    )
     assert code == 0
     events = [json.loads(line) for line in (tmp_path / "ev.jsonl").read_text().splitlines()]
     assert _summary(events) == [(k, pytest.approx(t), n, r) for k, t, n, r in expected]
@@ -136,12 +156,23 @@ def test_fdi_replay_gives_the_same_events(tmp_path, case, fmt):
     assert summary["missing_samples"] == 20
 
 
-@settings(max_examples=12, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.lists(st.tuples(st.integers(512, 5000), st.integers(1, 40),
-                          st.sampled_from(["nan", "inf", "-inf", "sat", "vnan", "gap",
-                                           "back"])),
-                min_size=1, max_size=8))
+@settings(
+    max_examples=12,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
+@given(
+    st.lists(
+        st.tuples(
+            st.integers(512, 5000),
+            st.integers(1, 40),
+            st.sampled_from(["nan", "inf", "-inf", "sat", "vnan", "gap", "back"]),
+        ),
+        min_size=1,
+        max_size=8,
+    )
+)
 def test_random_defects_are_all_accounted_for(defects):
     """Random runs of defects: step == batch, every bad sample and every missing sample
     counted, nothing raised, no alarm."""
@@ -163,8 +194,7 @@ def test_random_defects_are_all_accounted_for(defects):
             cols["v_in"][sl] = np.nan
             value_bad[sl] = True
         else:
-            cols["accel"][sl] = {"nan": np.nan, "inf": np.inf, "-inf": -np.inf,
-                                 "sat": -limit}[kind]
+            cols["accel"][sl] = {"nan": np.nan, "inf": np.inf, "-inf": -np.inf, "sat": -limit}[kind]
             value_bad[sl] = True
     order = [k for k in range(n) if not drop[k]]
     repeated = 0
@@ -186,8 +216,9 @@ def test_random_defects_are_all_accounted_for(defects):
     # missing samples: the dropped rows, less a dropped run at the very end (no sample
     # after it, so nothing can be reported)
     last_kept = int(np.flatnonzero(kept)[-1])
-    assert sum(e["missing_samples"] for e in batch if e["kind"] == "data_gap") \
-        == int(np.count_nonzero(drop[:last_kept]))
+    assert sum(e["missing_samples"] for e in batch if e["kind"] == "data_gap") == int(
+        np.count_nonzero(drop[:last_kept])
+    )
     assert [e for e in batch if e["kind"] in ALARMS] == []
     for e in batch:
         assert e["t"] is None or math.isfinite(e["t"])
@@ -203,7 +234,7 @@ def test_a_short_accel_glitch_is_not_isolated_as_friction():
     for width in (1, 2, 3, 5, 10, 20, 32, 64):
         for accel in (2.0, 4.0, 6.0):
             cols = {k: np.array(rec.columns[k]) for k in ("t", "v_in", "accel", "seq")}
-            cols["accel"][17 * FS:17 * FS + width] = accel
+            cols["accel"][17 * FS : 17 * FS + width] = accel
             events, _ = Monitor(model).run(Recording(cols, {"fs": str(FS)}))
             if "friction_isolated" in [e["kind"] for e in events]:
                 isolated.append((width, accel))

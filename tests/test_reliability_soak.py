@@ -13,26 +13,37 @@ from __future__ import annotations
 import json
 
 import pytest
+from reliability_support import REPO, continuous_fault_free_hours, load_test_model, model_path
 
 from fdi_daemon.cli import main
 from fdi_daemon.detect.monitor import Monitor
 from fdi_daemon.io.recordings import Recording, write_recording
-from reliability_support import (REPO, continuous_fault_free_hours, load_test_model,
-                                 model_path)
 
 
 @pytest.mark.slow
 def test_fdi_replay_of_another_fault_free_hour_has_no_alarm_episode(tmp_path):
     from hil_sim.scenarios import load_scenario, simulate
 
-    rec = simulate(load_scenario(REPO / "configs" / "scenarios" / "fault_free_hour.yaml"),
-                   seed=7)
+    rec = simulate(load_scenario(REPO / "configs" / "scenarios" / "fault_free_hour.yaml"), seed=7)
     cols = {k: rec.columns[k] for k in ("t", "v_in", "accel", "seq")}
     path = write_recording(tmp_path / "hour.npz", Recording(cols, dict(rec.meta)))
     del rec, cols
     summary = tmp_path / "summary.json"
-    assert main(["replay", str(path), "--model", str(model_path()),
-                 "--summary", str(summary), "--events", str(tmp_path / "ev.jsonl")]) == 0
+    assert (
+        main(
+            [
+                "replay",
+                str(path),
+                "--model",
+                str(model_path()),
+                "--summary",
+                str(summary),
+                "--events",
+                str(tmp_path / "ev.jsonl"),
+            ]
+        )
+        == 0
+    )
     result = json.loads(summary.read_text())
     assert result["samples"] == 3600 * 256
     assert result["alarm_episodes"] == 0 and result["classification"] is None

@@ -6,11 +6,10 @@ import time
 
 import numpy as np
 import pytest
-
 from conftest_detect import sim_rig_model
+
 from fdi_daemon.alarms.lifecycle import AlarmLifecycle, AlarmSettings
-from fdi_daemon.alarms.replay import (level_readings, merge_events, replay_alarms,
-                                      status_stride)
+from fdi_daemon.alarms.replay import level_readings, merge_events, replay_alarms, status_stride
 from fdi_daemon.cli import main
 from fdi_daemon.detect.events import read_events
 from fdi_daemon.io.model_file import save_model
@@ -52,8 +51,9 @@ def test_a_chattering_detector_is_one_alarm_and_ties_go_event_first():
 
 
 def test_levels_are_above_the_baseline_or_the_level_itself_without_one():
-    t, level = level_readings(np.array([0.0, 0.1, 0.2]), np.array([0.5, np.nan, 0.4]),
-                              np.array([0.2, 0.2, np.nan]))
+    t, level = level_readings(
+        np.array([0.0, 0.1, 0.2]), np.array([0.5, np.nan, 0.4]), np.array([0.2, 0.2, np.nan])
+    )
     np.testing.assert_array_equal(t, [0.0, 0.1, 0.2])
     np.testing.assert_allclose(level, [0.3, np.nan, 0.4])
     assert status_stride(256.0) == 26 and status_stride(1000.0) == 100
@@ -86,14 +86,32 @@ def rig(tmp_path_factory):
     root = tmp_path_factory.mktemp("replay_alarms")
     model = save_model(root / "model.yaml", sim_rig_model())
     quiet, creeping = creeping_fault_scenarios(DURATION_S, seed=0)
-    return (root, model, write_recording(root / "quiet.npz", simulate(quiet)),
-            write_recording(root / "creeping.npz", simulate(creeping)))
+    return (
+        root,
+        model,
+        write_recording(root / "quiet.npz", simulate(quiet)),
+        write_recording(root / "creeping.npz", simulate(creeping)),
+    )
 
 
 def _replay(root, model, rec, name, *extra):
     summary, events = root / f"{name}.json", root / f"{name}.jsonl"
-    assert main(["replay", str(rec), "--model", str(model), "--summary", str(summary),
-                 "--events", str(events), *extra]) == 0
+    assert (
+        main(
+            [
+                "replay",
+                str(rec),
+                "--model",
+                str(model),
+                "--summary",
+                str(summary),
+                "--events",
+                str(events),
+                *extra,
+            ]
+        )
+        == 0
+    )
     return json.loads(summary.read_text()), read_events(events)
 
 
@@ -106,8 +124,9 @@ def test_a_creeping_fault_is_one_alarm_raised_during_the_ramp(rig, capsys):
     assert summary["alarms"] == 1
     raised = [e for e in events if e["kind"] == "alarm_raised"]
     assert DURATION_S / 3 < raised[0]["t"] < 2 * DURATION_S / 3
-    assert summary["alarm_peak_priority"] == max(e["priority"] for e in events
-                                                 if e["kind"].startswith("alarm_"))
+    assert summary["alarm_peak_priority"] == max(
+        e["priority"] for e in events if e["kind"].startswith("alarm_")
+    )
     assert summary["alarm_peak_priority"] >= 1
     assert [e["t"] for e in events] == sorted(e["t"] for e in events)
     assert not any(e["kind"] == "alarm_returned" for e in events)  # the fault stays
@@ -128,8 +147,9 @@ def test_batch_traced_or_not_and_realtime_give_the_same_lifecycle_events(rig, mo
     --trace-every 7 (gcd), and the paced path every sample: the same alarm events."""
     root, model, _, creeping = rig
     _, batch = _replay(root, model, creeping, "batch")
-    _, traced = _replay(root, model, creeping, "traced", "--trace", str(root / "tr.csv"),
-                        "--trace-every", "7")
+    _, traced = _replay(
+        root, model, creeping, "traced", "--trace", str(root / "tr.csv"), "--trace-every", "7"
+    )
     monkeypatch.setattr(time, "sleep", lambda _s: None)  # pace without waiting
     _, paced = _replay(root, model, creeping, "paced", "--realtime")
 
@@ -149,8 +169,10 @@ def test_alarm_settings_come_from_a_daemon_config(rig, tmp_path):
     root, model, _, creeping = rig
     config = tmp_path / "fdi.yaml"
     head = f"simulated_device: {{}}\nmodel: {{path: {model}}}\n"
-    config.write_text(head + "alarms:\n  steps: [0.2, 0.3, 0.4]\n  raise_delay_s: 0\n"
-                      "  deadband: 0.05\n  return_level: 0.1\n")
+    config.write_text(
+        head + "alarms:\n  steps: [0.2, 0.3, 0.4]\n  raise_delay_s: 0\n"
+        "  deadband: 0.05\n  return_level: 0.1\n"
+    )
     summary, _ = _replay(root, model, creeping, "configured", "--alarms", str(config))
     default, _ = _replay(root, model, creeping, "default")
     assert summary["alarms"] == default["alarms"] == 1
@@ -165,12 +187,12 @@ def test_replay_decides_as_the_daemons_alarm_keeper_against_a_baseline(rig):
     does: per-tick Monitor.step, each detector event, and a status snapshot (friction level,
     baseline level of the operating condition) every status period. `fdi replay` with a
     model that has a baseline gives the same lifecycle events."""
+    from fdi_daemon.alarms.lifecycle import DETECTOR_INPUTS
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.io.model_file import load_model
     from fdi_daemon.io.recordings import read_recording
     from fdi_daemon.io.sample import Sample
     from fdi_daemon.service.alarm_keeper import AlarmKeeper
-    from fdi_daemon.alarms.lifecycle import DETECTOR_INPUTS
 
     root, model, quiet, creeping = rig
     based = root / "model_baseline.yaml"
@@ -186,8 +208,15 @@ def test_replay_decides_as_the_daemons_alarm_keeper_against_a_baseline(rig):
     daemon, baselines = [], set()
     for k in range(len(rec)):
         clock[0] = float(rec.t[k])
-        for event in monitor.step(Sample(k, float(rec.t[k]), float(rec.columns["v_in"][k]),
-                                         float(rec.columns["accel"][k]), float("nan"))):
+        for event in monitor.step(
+            Sample(
+                k,
+                float(rec.t[k]),
+                float(rec.columns["v_in"][k]),
+                float(rec.columns["accel"][k]),
+                float("nan"),
+            )
+        ):
             if event["kind"] in DETECTOR_INPUTS:
                 daemon += keeper.detector_event(event)
         if k % stride == 0:
@@ -218,18 +247,19 @@ def test_a_duplicated_sample_leaves_the_trace_and_the_alarms_alike(rig, monkeypa
     cols.setdefault("seq", np.arange(len(rec)))
     again = 150 * 256  # before the first detection (about 160 s)
     rows = np.concatenate([np.arange(again), [again - 1], np.arange(again, len(rec))])
-    dup = write_recording(root / "dup.npz",
-                          Recording({k: v[rows] for k, v in cols.items()}, dict(rec.meta)))
+    dup = write_recording(
+        root / "dup.npz", Recording({k: v[rows] for k, v in cols.items()}, dict(rec.meta))
+    )
     full = Monitor(load_model(model)).run(read_recording(dup, strict=False), trace_every=1)[1]
-    thinned = Monitor(load_model(model)).run(read_recording(dup, strict=False),
-                                                trace_every=26)[1]
+    thinned = Monitor(load_model(model)).run(read_recording(dup, strict=False), trace_every=26)[1]
     assert full.t.size == len(rec)
     np.testing.assert_array_equal(thinned.t, full.t[::26])
     np.testing.assert_array_equal(thinned.theta1, full.theta1[::26])
     _, batch = _replay(root, model, dup, "dup_batch")
     monkeypatch.setattr(time, "sleep", lambda _s: None)
     _, paced = _replay(root, model, dup, "dup_paced", "--realtime")
-    batch, paced = ([e for e in events if e["kind"].startswith("alarm_")]
-                    for events in (batch, paced))
+    batch, paced = (
+        [e for e in events if e["kind"].startswith("alarm_")] for events in (batch, paced)
+    )
     assert batch and [(e["kind"], e["t"]) for e in batch] == [(e["kind"], e["t"]) for e in paced]
     assert [e["level"] for e in batch] == pytest.approx([e["level"] for e in paced], rel=1e-9)

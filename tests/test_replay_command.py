@@ -4,8 +4,8 @@ import json
 
 import numpy as np
 import pytest
-
 from conftest_detect import scenario_recording, sim_rig_model
+
 from fdi_daemon.cli import main
 from fdi_daemon.detect.events import read_events
 from fdi_daemon.detect.pipeline import Pipeline
@@ -27,34 +27,65 @@ def test_a_csv_of_another_tool_with_rounded_times_replays(files, tmp_path):
     original file."""
     root, model, rec = files
     src = scenario_recording("test_case_2")
-    lines = ["t,v_in,accel,truth"] + [f"{t:.4f},{v:.6f},{a:.6f},0" for t, v, a in
-                                      zip(src.t, src.v_in, src.accel)]
+    lines = ["t,v_in,accel,truth"] + [
+        f"{t:.4f},{v:.6f},{a:.6f},0" for t, v, a in zip(src.t, src.v_in, src.accel)
+    ]
     other = tmp_path / "other.csv"
     other.write_bytes("\r\n".join(lines).encode() + b"\r\n")
     for path, name in ((rec, "ev_own.jsonl"), (other, "ev_other.jsonl")):
-        assert main(["replay", str(path), "--model", str(model),
-                     "--events", str(tmp_path / name)]) == 0
-    kinds = [[e["kind"] for e in read_events(tmp_path / name)]
-             for name in ("ev_own.jsonl", "ev_other.jsonl")]
-    assert kinds[0] == kinds[1] == ["calibrated", "fault_detected", "alarm_raised",
-                                    "friction_isolated"]
+        assert (
+            main(["replay", str(path), "--model", str(model), "--events", str(tmp_path / name)])
+            == 0
+        )
+    kinds = [
+        [e["kind"] for e in read_events(tmp_path / name)]
+        for name in ("ev_own.jsonl", "ev_other.jsonl")
+    ]
+    assert (
+        kinds[0]
+        == kinds[1]
+        == ["calibrated", "fault_detected", "alarm_raised", "friction_isolated"]
+    )
 
 
 def test_replay_writes_events_summary_and_plot(files, capsys):
     root, model, rec = files
-    code = main(["replay", str(rec), "--model", str(model), "--events", str(root / "ev.jsonl"),
-                 "--summary", str(root / "sum.json"), "--plot", str(root / "fig.png")])
+    code = main(
+        [
+            "replay",
+            str(rec),
+            "--model",
+            str(model),
+            "--events",
+            str(root / "ev.jsonl"),
+            "--summary",
+            str(root / "sum.json"),
+            "--plot",
+            str(root / "fig.png"),
+        ]
+    )
     assert code == 0
     summary = json.loads((root / "sum.json").read_text())
-    for key in ("samples", "fs", "first_detection_t", "isolated_t", "classification",
-                "theta_final", "alarm_episodes"):
+    for key in (
+        "samples",
+        "fs",
+        "first_detection_t",
+        "isolated_t",
+        "classification",
+        "theta_final",
+        "alarm_episodes",
+    ):
         assert key in summary
     assert summary["samples"] == 1536 and summary["fs"] == 256.0
     assert summary["classification"] == "friction" and summary["alarm_episodes"] == 1
     assert 2.9 <= summary["first_detection_t"] <= summary["isolated_t"]
     events = read_events(root / "ev.jsonl")
-    assert [e["kind"] for e in events] == ["calibrated", "fault_detected", "alarm_raised",
-                                           "friction_isolated"]
+    assert [e["kind"] for e in events] == [
+        "calibrated",
+        "fault_detected",
+        "alarm_raised",
+        "friction_isolated",
+    ]
     assert summary["alarms"] == 1 and summary["alarm_peak_priority"] >= 1
     assert (root / "fig.png").stat().st_size > 10_000
     assert "classification friction" in capsys.readouterr().out
@@ -65,11 +96,13 @@ def test_replay_of_a_recording_with_a_gap(files):
     rec = scenario_recording("test_case_2")
     keep = np.ones(len(rec), dtype=bool)
     keep[1000:1003] = False
-    gappy = write_recording(root / "gap.csv",
-                            Recording({k: v[keep] for k, v in rec.columns.items()},
-                                      dict(rec.meta)))
-    assert main(["replay", str(gappy), "--model", str(model), "--events",
-                 str(root / "gap.jsonl")]) == 0
+    gappy = write_recording(
+        root / "gap.csv", Recording({k: v[keep] for k, v in rec.columns.items()}, dict(rec.meta))
+    )
+    assert (
+        main(["replay", str(gappy), "--model", str(model), "--events", str(root / "gap.jsonl")])
+        == 0
+    )
     gaps = [e for e in read_events(root / "gap.jsonl") if e["kind"] == "data_gap"]
     assert [g["missing_samples"] for g in gaps] == [3]
 
@@ -77,11 +110,23 @@ def test_replay_of_a_recording_with_a_gap(files):
 def test_realtime_replay_uses_the_per_tick_path(files):
     root, model, _ = files
     rec = scenario_recording("test_case_2")
-    short = write_recording(root / "short.csv",
-                            Recording({k: v[:300] for k, v in rec.columns.items()},
-                                      dict(rec.meta)))
-    assert main(["replay", str(short), "--model", str(model), "--realtime",
-                 "--summary", str(root / "rt.json")]) == 0
+    short = write_recording(
+        root / "short.csv", Recording({k: v[:300] for k, v in rec.columns.items()}, dict(rec.meta))
+    )
+    assert (
+        main(
+            [
+                "replay",
+                str(short),
+                "--model",
+                str(model),
+                "--realtime",
+                "--summary",
+                str(root / "rt.json"),
+            ]
+        )
+        == 0
+    )
     assert json.loads((root / "rt.json").read_text())["samples"] == 300
 
 
@@ -113,14 +158,21 @@ def test_summary_line_is_one_line_in_an_80_column_terminal(files, tmp_path, monk
 
     root, model, rec = files
     env = {**__import__("os").environ, "COLUMNS": "80", "TERM": "xterm"}
-    result = subprocess.run([sys.executable, "-m", "fdi_daemon", "replay", str(rec), "--model",
-                             str(model)], capture_output=True, text=True, env=env, timeout=120)
+    result = subprocess.run(
+        [sys.executable, "-m", "fdi_daemon", "replay", str(rec), "--model", str(model)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert all(line == line.rstrip() for line in lines), lines
     summary = [line for line in lines if " samples at " in line]
     assert len(summary) == 1 and summary[0].endswith("classification friction"), lines
     assert "first detection 2.9" in summary[0] and len(summary[0]) > 80
+
+
 def _trace_rows(path):
     import csv
 
@@ -137,8 +189,16 @@ def test_trace_csv_and_npz_hold_every_nth_sample_with_the_events_states(files, t
     csv_path, npz_path = tmp_path / "trace.csv", tmp_path / "trace.npz"
     events_path = tmp_path / "ev.jsonl"
     for path in (csv_path, npz_path):
-        argv = ["replay", str(rec), "--model", str(model), "--trace", str(path),
-                "--events", str(events_path)]
+        argv = [
+            "replay",
+            str(rec),
+            "--model",
+            str(model),
+            "--trace",
+            str(path),
+            "--events",
+            str(events_path),
+        ]
         if every != 1:
             argv += ["--trace-every", str(every)]
         assert main(argv) == 0
@@ -153,8 +213,9 @@ def test_trace_csv_and_npz_hold_every_nth_sample_with_the_events_states(files, t
     states = np.array([r[5] for r in rows])
     events = {e["kind"]: e["t"] for e in read_events(events_path)}
     assert set(states[t < events["calibrated"]]) <= {"starting", "calibrating"}
-    assert set(states[(t > events["calibrated"]) & (t < events["fault_detected"])]) == \
-        {"monitoring"}
+    assert set(states[(t > events["calibrated"]) & (t < events["fault_detected"])]) == {
+        "monitoring"
+    }
     assert set(states[t >= events["friction_isolated"]]) == {"friction_isolated"}
     # after isolation θ is the fit the event reports, not NaN, and the reported level (the
     # median of the trusted windows' levels since the detection) follows the window's level
@@ -174,33 +235,80 @@ def test_trace_csv_and_npz_hold_every_nth_sample_with_the_events_states(files, t
 def test_trace_of_the_realtime_path_and_bad_arguments(files, tmp_path, capsys):
     root, model, _ = files
     rec = scenario_recording("test_case_2")
-    short = write_recording(tmp_path / "short.csv",
-                            Recording({k: v[:40] for k, v in rec.columns.items()},
-                                      dict(rec.meta)))
+    short = write_recording(
+        tmp_path / "short.csv",
+        Recording({k: v[:40] for k, v in rec.columns.items()}, dict(rec.meta)),
+    )
     path = tmp_path / "rt.csv"
-    assert main(["replay", str(short), "--model", str(model), "--realtime", "--trace",
-                 str(path), "--trace-every", "3"]) == 0
+    assert (
+        main(
+            [
+                "replay",
+                str(short),
+                "--model",
+                str(model),
+                "--realtime",
+                "--trace",
+                str(path),
+                "--trace-every",
+                "3",
+            ]
+        )
+        == 0
+    )
     assert len(_trace_rows(path)[1]) == 14
-    assert main(["replay", str(short), "--model", str(model), "--trace", str(path),
-                 "--trace-every", "0"]) == 2
-    assert main(["replay", str(short), "--model", str(model), "--trace",
-                 str(tmp_path / "no" / "dir.csv")]) == 2
+    assert (
+        main(
+            [
+                "replay",
+                str(short),
+                "--model",
+                str(model),
+                "--trace",
+                str(path),
+                "--trace-every",
+                "0",
+            ]
+        )
+        == 2
+    )
+    assert (
+        main(
+            [
+                "replay",
+                str(short),
+                "--model",
+                str(model),
+                "--trace",
+                str(tmp_path / "no" / "dir.csv"),
+            ]
+        )
+        == 2
+    )
     assert main(["replay", str(short), "--model", str(model), "--trace-every", "4"]) == 2
     err = capsys.readouterr().err
     assert "--trace-every thins the trace file: it needs --trace FILE" in err
     assert "--trace-every must be" in err and "directory" in err and "does not exist" in err
 
 
-@pytest.mark.parametrize("option, target, fragment", [
-    ("--trace", "rec", "is also an input"),        # it replaced the recording with the trace
-    ("--events", "rec", "is also an input"),
-    ("--summary", "model", "is also an input"),
-    ("--plot", "out.txt", "cannot write a plot as .txt"),   # a matplotlib traceback after the run
-    ("--summary", "events", "name the same file"),
-    ("--events", "no/dir.jsonl", "does not exist"),
-])
-def test_outputs_that_cannot_be_written_or_would_destroy_an_input(files, tmp_path, capsys,
-                                                                  option, target, fragment):
+@pytest.mark.parametrize(
+    "option, target, fragment",
+    [
+        ("--trace", "rec", "is also an input"),  # it replaced the recording with the trace
+        ("--events", "rec", "is also an input"),
+        ("--summary", "model", "is also an input"),
+        (
+            "--plot",
+            "out.txt",
+            "cannot write a plot as .txt",
+        ),  # a matplotlib traceback after the run
+        ("--summary", "events", "name the same file"),
+        ("--events", "no/dir.jsonl", "does not exist"),
+    ],
+)
+def test_outputs_that_cannot_be_written_or_would_destroy_an_input(
+    files, tmp_path, capsys, option, target, fragment
+):
     """Refused before the replay, with one line; the inputs stay as they were and nothing is
     written."""
     root, model, rec = files
@@ -218,8 +326,7 @@ def test_outputs_that_cannot_be_written_or_would_destroy_an_input(files, tmp_pat
     assert not events.exists() and list(tmp_path.iterdir()) == []
 
 
-def test_ctrl_c_in_a_paced_replay_keeps_what_was_replayed(files, tmp_path, capsys,
-                                                          monkeypatch):
+def test_ctrl_c_in_a_paced_replay_keeps_what_was_replayed(files, tmp_path, capsys, monkeypatch):
     """Ctrl-C in `--realtime` lost every event already shown: no --events, --summary or
     --trace was written. Now the replay stops there, the outputs hold the part replayed,
     and the exit code is 130 with one line on stderr."""
@@ -236,9 +343,24 @@ def test_ctrl_c_in_a_paced_replay_keeps_what_was_replayed(files, tmp_path, capsy
 
     monkeypatch.setattr(time, "sleep", sleep)
     out = {name: tmp_path / name for name in ("ev.jsonl", "sum.json", "trace.csv")}
-    assert main(["replay", str(rec), "--model", str(model), "--realtime",
-                 "--events", str(out["ev.jsonl"]), "--summary", str(out["sum.json"]),
-                 "--trace", str(out["trace.csv"])]) == 130
+    assert (
+        main(
+            [
+                "replay",
+                str(rec),
+                "--model",
+                str(model),
+                "--realtime",
+                "--events",
+                str(out["ev.jsonl"]),
+                "--summary",
+                str(out["sum.json"]),
+                "--trace",
+                str(out["trace.csv"]),
+            ]
+        )
+        == 130
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("fdi replay: interrupted at t = ")
     summary = json.loads(out["sum.json"].read_text())

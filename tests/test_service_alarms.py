@@ -21,12 +21,12 @@ import time
 
 import pytest
 import yaml
+from reliability_support import Collector, model_path
 
 from fdi_daemon.io.links.base import ReconnectingLink
 from fdi_daemon.io.sample import Sample
 from fdi_daemon.service.loop import ServiceLoop
 from fdi_daemon.service.notify import Notifier
-from reliability_support import Collector, model_path
 
 FS = 256.0
 WATCHDOG_SEC = 30.0
@@ -112,17 +112,30 @@ class TimedNotifier(Notifier):
 def test_a_five_minute_link_outage_keeps_the_watchdog_fed(tmp_path):
     clock = SimClock()
     device = Device(clock)
-    link = ReconnectingLink(lambda: DeviceLink(device), backoff_initial_s=0.1,
-                            backoff_max_s=5.0, stall_timeout_s=3.0, clock=clock,
-                            sleep=clock.sleep)
+    link = ReconnectingLink(
+        lambda: DeviceLink(device),
+        backoff_initial_s=0.1,
+        backoff_max_s=5.0,
+        stall_timeout_s=3.0,
+        clock=clock,
+        sleep=clock.sleep,
+    )
     from test_e2e_service import NotifyListener
 
     systemd = NotifyListener(tmp_path / "notify.sock")  # reads as systemd does
     notifier = TimedNotifier(str(systemd.path), clock)
     out = Collector()
-    loop = ServiceLoop(link, QuietMonitor(), out, fs_hz=FS, read_timeout_s=0.05,
-                       status_period_s=1.0, notifier=notifier,
-                       watchdog_period_s=WATCHDOG_SEC / 2, clock=clock)
+    loop = ServiceLoop(
+        link,
+        QuietMonitor(),
+        out,
+        fs_hz=FS,
+        read_timeout_s=0.05,
+        status_period_s=1.0,
+        notifier=notifier,
+        watchdog_period_s=WATCHDOG_SEC / 2,
+        clock=clock,
+    )
     link.open()
     phases = [(60.0, True), (300.0, False), (60.0, True)]
     outage = (clock.now + 60.0, clock.now + 360.0)
@@ -133,8 +146,10 @@ def test_a_five_minute_link_outage_keeps_the_watchdog_fed(tmp_path):
             while clock.now < end:
                 loop.iterate()
         deadline = time.monotonic() + 10.0
-        while len(systemd.times("WATCHDOG=1")) < len(notifier.ping_times) \
-                and time.monotonic() < deadline:
+        while (
+            len(systemd.times("WATCHDOG=1")) < len(notifier.ping_times)
+            and time.monotonic() < deadline
+        ):
             time.sleep(0.05)
         received = len(systemd.times("WATCHDOG=1"))
     finally:
@@ -151,13 +166,19 @@ def test_a_five_minute_link_outage_keeps_the_watchdog_fed(tmp_path):
 
 # ----------------------------------------------------------------------------- the process
 
+
 def write_config(path, link, state_dir):
     config = {
-        "link": {**link, "reconnect": {"backoff_initial_s": 0.1, "backoff_max_s": 1.0,
-                                       "stall_timeout_s": 1.0}},
+        "link": {
+            **link,
+            "reconnect": {"backoff_initial_s": 0.1, "backoff_max_s": 1.0, "stall_timeout_s": 1.0},
+        },
         "model": {"path": str(model_path())},
-        "sinks": {"event_log": "events.jsonl", "status_socket": "status.sock",
-                  "modbus_status": {"enabled": False}},
+        "sinks": {
+            "event_log": "events.jsonl",
+            "status_socket": "status.sock",
+            "modbus_status": {"enabled": False},
+        },
         "recorder": {"enabled": False},
         "service": {"state_dir": str(state_dir)},
         "alarms": {"allow_remote_acknowledge": True},
@@ -181,8 +202,13 @@ def socket_request(path, request: dict) -> dict:
 
 @pytest.mark.slow
 def test_reload_and_sigkill_restart_keep_an_active_alarm(tmp_path):
-    from test_e2e_service import (CALIBRATION_TIMEOUT_S, DaemonProcess, NotifyListener,
-                                  monitoring, start_device)
+    from test_e2e_service import (
+        CALIBRATION_TIMEOUT_S,
+        DaemonProcess,
+        NotifyListener,
+        monitoring,
+        start_device,
+    )
 
     device, link = start_device("serial", seed=4)
     notify = NotifyListener(tmp_path / "notify.sock")
@@ -200,18 +226,27 @@ def test_reload_and_sigkill_restart_keep_an_active_alarm(tmp_path):
         daemon.wait_for(monitoring, CALIBRATION_TIMEOUT_S, "calibration")
         device.set_fault("bearing_supply", 0.35)
         daemon.wait_event("alarm_raised")
-        first = daemon.wait_for(lambda s: alarm_of(s) if alarm_of(s).get("annunciated")
-                                else None, 60.0, "the alarm in the snapshot")
+        first = daemon.wait_for(
+            lambda s: alarm_of(s) if alarm_of(s).get("annunciated") else None,
+            60.0,
+            "the alarm in the snapshot",
+        )
         assert first["alarm_id"] == 1 and first["state"] == "unacknowledged"
 
         # SIGHUP: the monitor recalibrates on the faulty rig; the alarm goes on
         announced = sum(line.startswith("fdi run: config") for line in daemon.lines)
         os.kill(daemon.proc.pid, signal.SIGHUP)
-        daemon.wait_for(lambda s: sum(line.startswith("fdi run: config")
-                                      for line in daemon.lines) > announced, 60.0, "reload")
+        daemon.wait_for(
+            lambda s: sum(line.startswith("fdi run: config") for line in daemon.lines) > announced,
+            60.0,
+            "reload",
+        )
         samples = daemon.snapshot()["link"]["samples"]
-        snap = daemon.wait_for(lambda s: s if s["link"]["samples"] > samples + 3 * 256
-                               else None, 60.0, "3 s of samples after the reload")
+        snap = daemon.wait_for(
+            lambda s: s if s["link"]["samples"] > samples + 3 * 256 else None,
+            60.0,
+            "3 s of samples after the reload",
+        )
         assert alarm_of(snap)["alarm_id"] == 1 and alarm_of(snap)["annunciated"], snap["alarm"]
         assert snap["counters"].get("fault_detected", 0) >= 1  # counters not reset
         assert len(raised()) == 1
@@ -219,8 +254,11 @@ def test_reload_and_sigkill_restart_keep_an_active_alarm(tmp_path):
         # SIGKILL and a restart: the state file brings the same alarm back
         assert daemon.stop(signal.SIGKILL) == -signal.SIGKILL
         daemon = DaemonProcess(config, tmp_path, env=env)
-        snap = daemon.wait_for(lambda s: s if s.get("alarm") and s["link"]["samples"] > 3 * 256
-                               else None, CALIBRATION_TIMEOUT_S, "the restarted daemon")
+        snap = daemon.wait_for(
+            lambda s: s if s.get("alarm") and s["link"]["samples"] > 3 * 256 else None,
+            CALIBRATION_TIMEOUT_S,
+            "the restarted daemon",
+        )
         assert alarm_of(snap)["alarm_id"] == 1 and alarm_of(snap)["annunciated"], snap["alarm"]
         assert alarm_of(snap)["priority"] >= 1
         assert snap["counters"].get("fault_detected", 0) >= 1
@@ -232,8 +270,9 @@ def test_reload_and_sigkill_restart_keep_an_active_alarm(tmp_path):
         stall_start = time.monotonic()
         device.inject("stall", seconds=6.0)
         daemon.wait_event("link_lost", after=before)
-        down = daemon.wait_for(lambda s: s if not s["link"]["connected"] else None, 30.0,
-                               "the link down in the status")
+        down = daemon.wait_for(
+            lambda s: s if not s["link"]["connected"] else None, 30.0, "the link down in the status"
+        )
         assert down["state"] != "starting"
         daemon.wait_event("link_restored", after=before)
         pings = [t for t in notify.times("WATCHDOG=1") if t > stall_start]

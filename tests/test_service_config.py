@@ -5,15 +5,16 @@ from pathlib import Path
 import pytest
 
 from fdi_daemon.errors import ConfigError
-from fdi_daemon.service.config import (SCHEMA, config_from_dict, default_config_path,
-                                       load_config)
+from fdi_daemon.service.config import SCHEMA, config_from_dict, default_config_path, load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def minimal(**sections):
-    data = {"link": {"kind": "modbus-tcp", "host": "127.0.0.1", "port": 5502},
-            "model": {"path": "model.yaml"}}
+    data = {
+        "link": {"kind": "modbus-tcp", "host": "127.0.0.1", "port": 5502},
+        "model": {"path": "model.yaml"},
+    }
     data.update(sections)
     return data
 
@@ -28,32 +29,38 @@ def test_defaults_are_filled_in(tmp_path):
     assert cfg.simulated_device is None
 
 
-@pytest.mark.parametrize("data, key", [
-    ({"linkk": {}}, "linkk"),
-    ({"sinks": {"modbus_status": {"prot": 1}}}, "sinks.modbus_status.prot"),
-    ({"recorder": {"rotate_minutes": 5}}, "recorder.rotate_minutes"),
-    ({"service": {"deadline": 0.1}}, "service.deadline"),
-    ({"monitor": {"detectr": {}}}, "monitor.detectr"),
-])
+@pytest.mark.parametrize(
+    "data, key",
+    [
+        ({"linkk": {}}, "linkk"),
+        ({"sinks": {"modbus_status": {"prot": 1}}}, "sinks.modbus_status.prot"),
+        ({"recorder": {"rotate_minutes": 5}}, "recorder.rotate_minutes"),
+        ({"service": {"deadline": 0.1}}, "service.deadline"),
+        ({"monitor": {"detectr": {}}}, "monitor.detectr"),
+    ],
+)
 def test_unknown_keys_are_errors_naming_the_path(data, key):
     with pytest.raises(ConfigError, match=rf"{key.replace('.', '[.]')}: unknown key"):
         config_from_dict(minimal(**data), "rig.yaml")
 
 
-@pytest.mark.parametrize("data, key", [
-    ({"sinks": {"modbus_status": {"port": 70000}}}, "sinks.modbus_status.port"),
-    ({"sinks": {"modbus_status": {"port": "502"}}}, "sinks.modbus_status.port"),
-    ({"sinks": {"stdout": "yes"}}, "sinks.stdout"),
-    ({"recorder": {"fsync_period_s": 2.0}}, "recorder.fsync_period_s"),
-    ({"recorder": {"rotate_seconds": -1}}, "recorder.rotate_seconds"),
-    ({"recorder": {"rotate_bytes": True}}, "recorder.rotate_bytes"),
-    ({"service": {"fs": 0}}, "service.fs"),
-    ({"service": {"queue_size": 1.5}}, "service.queue_size"),
-    ({"service": {"deadline_s": None}}, "service.deadline_s"),
-    ({"sinks": "all"}, "sinks"),
-    ({"alarms": {"steps": "x"}}, "alarms.steps"),  # a KeyError naming the type list
-    ({"alarms": {"steps": [3, 1]}}, "alarms.steps"),
-])
+@pytest.mark.parametrize(
+    "data, key",
+    [
+        ({"sinks": {"modbus_status": {"port": 70000}}}, "sinks.modbus_status.port"),
+        ({"sinks": {"modbus_status": {"port": "502"}}}, "sinks.modbus_status.port"),
+        ({"sinks": {"stdout": "yes"}}, "sinks.stdout"),
+        ({"recorder": {"fsync_period_s": 2.0}}, "recorder.fsync_period_s"),
+        ({"recorder": {"rotate_seconds": -1}}, "recorder.rotate_seconds"),
+        ({"recorder": {"rotate_bytes": True}}, "recorder.rotate_bytes"),
+        ({"service": {"fs": 0}}, "service.fs"),
+        ({"service": {"queue_size": 1.5}}, "service.queue_size"),
+        ({"service": {"deadline_s": None}}, "service.deadline_s"),
+        ({"sinks": "all"}, "sinks"),
+        ({"alarms": {"steps": "x"}}, "alarms.steps"),  # a KeyError naming the type list
+        ({"alarms": {"steps": [3, 1]}}, "alarms.steps"),
+    ],
+)
 def test_bad_values_are_errors_naming_the_key(data, key):
     with pytest.raises(ConfigError) as info:
         config_from_dict(minimal(**data), "rig.yaml")
@@ -80,25 +87,38 @@ def test_link_settings_are_checked_by_the_links_rules():
     with pytest.raises(ConfigError, match=r"^rig.yaml: link.port: required"):
         config_from_dict({"link": {"kind": "serial"}, "model": {"path": "m"}}, "rig.yaml")
     with pytest.raises(ConfigError, match=r"^rig.yaml: link.baud: unknown key"):
-        config_from_dict({"link": {"kind": "serial", "port": "/dev/ttyS0", "baud": 9600},
-                          "model": {"path": "m"}}, "rig.yaml")
+        config_from_dict(
+            {
+                "link": {"kind": "serial", "port": "/dev/ttyS0", "baud": 9600},
+                "model": {"path": "m"},
+            },
+            "rig.yaml",
+        )
 
 
 def test_simulated_device_section():
-    data = {"model": {"path": "m.yaml"},
-            "simulated_device": {"transport": "serial",
-                                 "faults": [{"at_s": 30, "accel_bias": 0.2},
-                                            {"at_s": 20, "bearing_supply": 0.3}]}}
+    data = {
+        "model": {"path": "m.yaml"},
+        "simulated_device": {
+            "transport": "serial",
+            "faults": [{"at_s": 30, "accel_bias": 0.2}, {"at_s": 20, "bearing_supply": 0.3}],
+        },
+    }
     cfg = config_from_dict(data, "rig.yaml")
     assert cfg.link == {}
     assert [f["at_s"] for f in cfg.simulated_device["faults"]] == [20.0, 30.0]
-    assert cfg.simulated_device["faults"][0] == {"at_s": 20.0, "name": "bearing_supply",
-                                                 "value": 0.3}
+    assert cfg.simulated_device["faults"][0] == {
+        "at_s": 20.0,
+        "name": "bearing_supply",
+        "value": 0.3,
+    }
     bad = {"model": {"path": "m"}, "simulated_device": {"faults": [{"at_s": 1, "rust": 1}]}}
     with pytest.raises(ConfigError, match=r"simulated_device.faults\[0\].rust: unknown key"):
         config_from_dict(bad, "rig.yaml")
-    bad = {"model": {"path": "m"}, "simulated_device": {"faults": [{"at_s": 1,
-                                                                    "bearing_supply": 3}]}}
+    bad = {
+        "model": {"path": "m"},
+        "simulated_device": {"faults": [{"at_s": 1, "bearing_supply": 3}]},
+    }
     with pytest.raises(ConfigError, match=r"faults\[0\].bearing_supply must be a fraction"):
         config_from_dict(bad, "rig.yaml")
     with pytest.raises(ConfigError, match="link.kind: set by simulated_device"):
@@ -127,8 +147,11 @@ def test_load_config_reports_file_problems(tmp_path):
         load_config(bad)
 
 
-@pytest.mark.parametrize("path", [default_config_path()] + sorted(
-    (ROOT / "configs").glob("rig_*.yaml")), ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "path",
+    [default_config_path()] + sorted((ROOT / "configs").glob("rig_*.yaml")),
+    ids=lambda p: p.name,
+)
 def test_shipped_configs_are_valid(path):
     cfg = load_config(path)
     assert cfg.model_path.name.endswith(".yaml")
@@ -159,12 +182,12 @@ def test_packaged_model_is_the_shipped_one():
     shipped = ROOT / "configs" / "model_sim_rig.yaml"
     if not (packaged.exists() and shipped.exists()):
         pytest.skip("model_sim_rig.yaml not in both places yet")
-    assert packaged.read_bytes() == shipped.read_bytes(), \
+    assert packaged.read_bytes() == shipped.read_bytes(), (
         "fdi_daemon/data/model_sim_rig.yaml differs from configs/model_sim_rig.yaml"
+    )
 
 
-def test_default_state_dir_is_systemds_then_xdg_never_the_working_directory(
-        tmp_path, monkeypatch):
+def test_default_state_dir_is_systemds_then_xdg_never_the_working_directory(tmp_path, monkeypatch):
     monkeypatch.delenv("STATE_DIRECTORY", raising=False)
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
     monkeypatch.delenv("XDG_STATE_HOME", raising=False)
@@ -179,21 +202,34 @@ def test_default_state_dir_is_systemds_then_xdg_never_the_working_directory(
     assert cfg.state_dir == tmp_path / "home" / "mine"  # the config's own wins
 
 
-@pytest.mark.parametrize("sections, message", [
-    # an event log pointed at the replayed recording would append JSON lines to it
-    ({"link": {"kind": "replay", "path": "rec.csv"}, "sinks": {"event_log": "{dir}/rec.csv"}},
-     r"sinks.event_log {dir}/rec.csv: is also an input of this command \(link.path\)"),
-    ({"alarms": {"state_file": "{dir}/model.yaml"}},
-     r"alarms.state_file {dir}/model.yaml: is also an input of this command \(model.path\)"),
-    ({"alarms": {"trend": "events.jsonl"}},
-     "alarms.trend and sinks.event_log name the same file {state}/events.jsonl"),
-])
+@pytest.mark.parametrize(
+    "sections, message",
+    [
+        # an event log pointed at the replayed recording would append JSON lines to it
+        (
+            {
+                "link": {"kind": "replay", "path": "rec.csv"},
+                "sinks": {"event_log": "{dir}/rec.csv"},
+            },
+            r"sinks.event_log {dir}/rec.csv: is also an input of this command \(link.path\)",
+        ),
+        (
+            {"alarms": {"state_file": "{dir}/model.yaml"}},
+            r"alarms.state_file {dir}/model.yaml: is also an input of this command \(model.path\)",
+        ),
+        (
+            {"alarms": {"trend": "events.jsonl"}},
+            "alarms.trend and sinks.event_log name the same file {state}/events.jsonl",
+        ),
+    ],
+)
 def test_an_output_that_is_an_input_or_another_output_is_refused(tmp_path, sections, message):
     state = tmp_path / "state"
     data = minimal(service={"state_dir": str(state)})
     for name, section in sections.items():
-        data[name] = {k: v.format(dir=tmp_path) if isinstance(v, str) else v
-                      for k, v in section.items()}
+        data[name] = {
+            k: v.format(dir=tmp_path) if isinstance(v, str) else v for k, v in section.items()
+        }
     (tmp_path / "rec.csv").write_text("t,v_in,accel\n")
     with pytest.raises(ConfigError, match=message.format(dir=tmp_path, state=state)):
         config_from_dict(data, "rig.yaml", tmp_path)

@@ -65,16 +65,19 @@ class StubMonitor:
         events = []
         if self.last is not None:
             if sample.seq <= self.last:
-                return [{"t": sample.t, "kind": "bad_sample", "count": 1,
-                         "reason": "duplicate"}]
+                return [{"t": sample.t, "kind": "bad_sample", "count": 1, "reason": "duplicate"}]
             if sample.seq > self.last + 1:
-                events.append({"t": sample.t, "kind": "data_gap",
-                               "missing_samples": sample.seq - self.last - 1})
+                events.append(
+                    {
+                        "t": sample.t,
+                        "kind": "data_gap",
+                        "missing_samples": sample.seq - self.last - 1,
+                    }
+                )
         self.last = sample.seq
         self.seen.append(sample.seq)
         if sample.seq == self.alarm_seq:
-            events.append({"t": sample.t, "kind": "fault_detected", "theta1": 1.0,
-                           "theta2": 0.1})
+            events.append({"t": sample.t, "kind": "fault_detected", "theta1": 1.0, "theta2": 0.1})
         return events
 
     def finish(self):
@@ -116,8 +119,12 @@ def run(batches, monitor=None, clock=None, **kw):
 
 
 def test_gaps_and_duplicates_are_the_monitors_and_counted():
-    batches = [batch(range(0, 8)), batch(range(8, 12)) + batch(range(15, 16)),
-               batch([15, 14]) + batch(range(16, 20)), batch(range(0, 4))]
+    batches = [
+        batch(range(0, 8)),
+        batch(range(8, 12)) + batch(range(15, 16)),
+        batch([15, 14]) + batch(range(16, 20)),
+        batch(range(0, 4)),
+    ]
     loop, monitor, out = run(batches)
     gaps = [e for e in out.events if e["kind"] == "data_gap"]
     assert [g["missing_samples"] for g in gaps] == [3]
@@ -144,8 +151,9 @@ def test_events_counts_and_snapshot_schema():
     clock = FakeClock()
     batches = [batch(range(i, i + 8)) for i in range(0, 64, 8)]
     lost = {"t": None, "kind": "link_lost", "link": "scripted"}
-    loop, monitor, out = run(batches, monitor=StubMonitor(clock, alarm_seq=40), clock=clock,
-                             events=[lost])
+    loop, monitor, out = run(
+        batches, monitor=StubMonitor(clock, alarm_seq=40), clock=clock, events=[lost]
+    )
     kinds = [e["kind"] for e in out.events]
     assert kinds == ["link_lost", "fault_detected", "bad_sample"]
     assert sum(len(b) for b in out.batches) == 64 == loop.samples
@@ -165,8 +173,9 @@ def test_latency_and_deadline_are_paced_by_the_sample_counter():
     batches = [batch(range(i, i + 8)) for i in range(0, 80, 8)]
     link = ScriptedLink(batches, clock)
     out = Collect()
-    loop = ServiceLoop(link, StubMonitor(clock, step_s=20e-6), out, fs_hz=FS, clock=clock,
-                       deadline_s=0.05)
+    loop = ServiceLoop(
+        link, StubMonitor(clock, step_s=20e-6), out, fs_hz=FS, clock=clock, deadline_s=0.05
+    )
     for _ in range(5):
         loop.iterate()
     assert loop.deadline_misses == 0
@@ -178,9 +187,14 @@ def test_latency_and_deadline_are_paced_by_the_sample_counter():
     assert loop.deadline_misses > 0
     assert loop.late_arrivals == loop.deadline_misses  # the link was late, not the loop
     # now the loop is slow (60 ms per sample) with samples arriving on time
-    slow = ServiceLoop(ScriptedLink([batch(range(i, i + 8)) for i in range(0, 80, 8)], clock),
-                       StubMonitor(clock, step_s=0.06), Collect(), fs_hz=FS, clock=clock,
-                       deadline_s=0.05)
+    slow = ServiceLoop(
+        ScriptedLink([batch(range(i, i + 8)) for i in range(0, 80, 8)], clock),
+        StubMonitor(clock, step_s=0.06),
+        Collect(),
+        fs_hz=FS,
+        clock=clock,
+        deadline_s=0.05,
+    )
     slow.iterate()
     assert slow.deadline_misses == 8 and slow.late_arrivals == 0
     assert slow.snapshot()["link"]["late_arrivals"] == 0
@@ -231,13 +245,20 @@ def test_watchdog_pings_while_the_loop_runs_with_or_without_samples():
     batches = [batch(range(i, i + 8)) for i in range(0, 256, 8)] + [[]] * 40
     link = ScriptedLink(batches, clock, read_s=0.05)
     notifier = Pinger()
-    loop = ServiceLoop(link, StubMonitor(clock), Collect(), fs_hz=FS, clock=clock,
-                       notifier=notifier, watchdog_period_s=0.2)
-    for _ in range(32):   # 1.6 s of flowing data
+    loop = ServiceLoop(
+        link,
+        StubMonitor(clock),
+        Collect(),
+        fs_hz=FS,
+        clock=clock,
+        notifier=notifier,
+        watchdog_period_s=0.2,
+    )
+    for _ in range(32):  # 1.6 s of flowing data
         loop.iterate()
     flowing = notifier.pings
     assert 6 <= flowing <= 9
-    for _ in range(40):   # 2 s with nothing: a ping every 0.2 s all the same
+    for _ in range(40):  # 2 s with nothing: a ping every 0.2 s all the same
         loop.iterate()
     assert 8 <= notifier.pings - flowing <= 11
     assert notifier.statuses and "monitoring" in notifier.statuses[-1]

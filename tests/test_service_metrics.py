@@ -29,8 +29,8 @@ def scrape(url: str) -> dict[str, dict]:
     for family in text_string_to_metric_families(text):
         families[family.name] = {
             "type": family.type,
-            "samples": {(s.name, tuple(sorted(s.labels.items()))): s.value
-                        for s in family.samples}}
+            "samples": {(s.name, tuple(sorted(s.labels.items()))): s.value for s in family.samples},
+        }
     return families
 
 
@@ -46,14 +46,31 @@ class FakeLoop:
 
 
 SNAPSHOT = {
-    "time": 1.7e9, "t": 25.5, "state": "friction_isolated",
-    "link": {"connected": True, "rate_hz": 256.0, "samples": 6528, "gaps": 2,
-             "missing_samples": 7, "duplicates": 1, "bad_samples": 3, "deadline_misses": 4,
-             "late_arrivals": 1},
-    "monitor": {"friction_level": 1.42, "theta1": 1.42, "theta2": 1.05, "statistic": 1.3,
-                "threshold": 30.0, "residual_rms": None},
+    "time": 1.7e9,
+    "t": 25.5,
+    "state": "friction_isolated",
+    "link": {
+        "connected": True,
+        "rate_hz": 256.0,
+        "samples": 6528,
+        "gaps": 2,
+        "missing_samples": 7,
+        "duplicates": 1,
+        "bad_samples": 3,
+        "deadline_misses": 4,
+        "late_arrivals": 1,
+    },
+    "monitor": {
+        "friction_level": 1.42,
+        "theta1": 1.42,
+        "theta2": 1.05,
+        "statistic": 1.3,
+        "threshold": 30.0,
+        "residual_rms": None,
+    },
     "counters": {"calibrated": 1, "fault_detected": 2, "friction_isolated": 1, "data_gap": 2},
-    "uptime_s": 30.0, "dropped_outputs": 0,
+    "uptime_s": 30.0,
+    "dropped_outputs": 0,
 }
 
 
@@ -81,16 +98,20 @@ def test_scrape_parses_and_carries_the_status():
     # the histogram: cumulative buckets on the loop's own bin edges, in seconds
     hist = got["fdi_tick_latency_seconds"]
     assert hist["type"] == "histogram"
-    buckets = sorted((float(dict(labels)["le"]), v) for (name, labels), v
-                     in hist["samples"].items() if name.endswith("_bucket"))
+    buckets = sorted(
+        (float(dict(labels)["le"]), v)
+        for (name, labels), v in hist["samples"].items()
+        if name.endswith("_bucket")
+    )
     assert buckets[-1] == (math.inf, 100)
     le, counts = zip(*buckets)
     assert list(counts) == sorted(counts)  # cumulative
     for edge, count in buckets:  # each bucket counts exactly the values below its edge
         assert count == sum(v * 1e-6 < edge for v in latencies), edge
     assert value(got, "fdi_tick_latency_seconds", "fdi_tick_latency_seconds_count") == 100
-    assert value(got, "fdi_tick_latency_seconds", "fdi_tick_latency_seconds_sum") == \
-        pytest.approx(sum(latencies) * 1e-6)
+    assert value(got, "fdi_tick_latency_seconds", "fdi_tick_latency_seconds_sum") == pytest.approx(
+        sum(latencies) * 1e-6
+    )
     assert 1e-5 == pytest.approx(le[0]) and 10.0 == pytest.approx(le[-2])
 
 
@@ -123,17 +144,23 @@ def test_grafana_dashboard_queries_the_exported_metrics(tmp_path):
     finally:
         server.close()
     dashboard = json.loads((ROOT / "configs" / "grafana_fdi.json").read_text())
-    exprs = [target["expr"] for panel in dashboard["panels"]
-             for target in panel.get("targets", [])]
+    exprs = [target["expr"] for panel in dashboard["panels"] for target in panel.get("targets", [])]
     assert exprs
     used = set()
     for expr in exprs:
         for name in exported:
             if name in expr:
                 used.add(name)
-    for needed in ("fdi_friction_level", "fdi_statistic", "fdi_state", "fdi_alarm_episodes",
-                   "fdi_samples", "fdi_gaps", "fdi_deadline_misses",
-                   "fdi_tick_latency_seconds"):
+    for needed in (
+        "fdi_friction_level",
+        "fdi_statistic",
+        "fdi_state",
+        "fdi_alarm_episodes",
+        "fdi_samples",
+        "fdi_gaps",
+        "fdi_deadline_misses",
+        "fdi_tick_latency_seconds",
+    ):
         assert needed in used, f"no panel shows {needed}"
     for expr in exprs:  # every metric a panel asks for exists
         for name in re.findall(r"\bfdi_[a-z0-9_]+", expr):
@@ -148,13 +175,23 @@ def test_a_taken_port_is_one_clear_config_error(tmp_path):
 
     first = MetricsServer(StatusBoard(), "127.0.0.1:0")
     try:
-        cfg = config_from_dict({
-            "link": {"kind": "modbus-tcp"}, "model": {"path": "model.yaml"},
-            "metrics": {"listen": f"127.0.0.1:{first.port}"},
-            "sinks": {"status_socket": None, "stdout": False}, "recorder": {"enabled": False},
-            "service": {"state_dir": str(tmp_path)}}, "rig.yaml", tmp_path)
-        with pytest.raises(ConfigError, match=rf"rig.yaml: cannot open an output: metrics "
-                                              rf"exporter on 127.0.0.1:{first.port}: "):
+        cfg = config_from_dict(
+            {
+                "link": {"kind": "modbus-tcp"},
+                "model": {"path": "model.yaml"},
+                "metrics": {"listen": f"127.0.0.1:{first.port}"},
+                "sinks": {"status_socket": None, "stdout": False},
+                "recorder": {"enabled": False},
+                "service": {"state_dir": str(tmp_path)},
+            },
+            "rig.yaml",
+            tmp_path,
+        )
+        with pytest.raises(
+            ConfigError,
+            match=rf"rig.yaml: cannot open an output: metrics "
+            rf"exporter on 127.0.0.1:{first.port}: ",
+        ):
             Sinks(cfg, 256.0, "modbus-tcp", StatusBoard())
     finally:
         first.close()

@@ -13,12 +13,21 @@ import subprocess
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from fdi_daemon.service.sinks import (STATUS_REGISTER_COUNT, ModbusStatusServer, StatusBoard,
-                                      decode_status, encode_status, status_values)
+from fdi_daemon.service.sinks import (
+    STATUS_REGISTER_COUNT,
+    ModbusStatusServer,
+    StatusBoard,
+    decode_status,
+    encode_status,
+    status_values,
+)
 
-SNAPSHOT = {"state": "fault_detected", "t": 21.25,
-            "monitor": {"theta1": 0.75, "theta2": -2.5},
-            "link": {"connected": True, "samples": 70000}}
+SNAPSHOT = {
+    "state": "fault_detected",
+    "t": 21.25,
+    "monitor": {"theta1": 0.75, "theta2": -2.5},
+    "link": {"connected": True, "samples": 70000},
+}
 ILLEGAL_FUNCTION, GATEWAY_NO_RESPONSE = 1, 11
 
 
@@ -75,8 +84,9 @@ def test_writes_stay_refused(client):
 
 def test_words_are_high_word_first_big_endian_bytes():
     """The documented layout, from struct (an independent packing), word for word."""
-    regs = encode_status(status_values({**SNAPSHOT, "t": 123456.789,
-                                        "link": {"samples": 0x12345678}}, 7))
+    regs = encode_status(
+        status_values({**SNAPSHOT, "t": 123456.789, "link": {"samples": 0x12345678}}, 7)
+    )
     assert regs[17:21] == list(struct.unpack(">4H", struct.pack(">d", 123456.789)))
     assert regs[5:7] == list(struct.unpack(">2H", struct.pack(">f", 0.75)))
     assert regs[7:9] == [0xC020, 0x0000]  # -2.5f
@@ -85,8 +95,12 @@ def test_words_are_high_word_first_big_endian_bytes():
 
 
 def _mbpoll(port: int, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(["mbpoll", "-m", "tcp", "-p", str(port), "-0", "-1", "-o", "3",
-                           *args, "127.0.0.1"], capture_output=True, text=True, timeout=30)
+    return subprocess.run(
+        ["mbpoll", "-m", "tcp", "-p", str(port), "-0", "-1", "-o", "3", *args, "127.0.0.1"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
 
 
 def _values(stdout: str) -> dict[int, str]:
@@ -123,8 +137,13 @@ def test_coil_writes_never_reach_the_alarm_command_register():
     calls = []
     board = StatusBoard()
     board.publish(SNAPSHOT)
-    srv = ModbusStatusServer(board, host="127.0.0.1", port=0, device_id=1,
-                             requests=lambda request: calls.append(request) or {"ok": True})
+    srv = ModbusStatusServer(
+        board,
+        host="127.0.0.1",
+        port=0,
+        device_id=1,
+        requests=lambda request: calls.append(request) or {"ok": True},
+    )
     c = ModbusTcpClient("127.0.0.1", port=srv.port, timeout=5, retries=0)
     try:
         assert c.connect()

@@ -13,18 +13,25 @@ import time
 from datetime import datetime
 
 import pytest
+from mqtt_support import Broker, Subscriber, needs_mosquitto
 
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.service.config import config_from_dict
-from fdi_daemon.service.mqtt_sink import (AlarmOutbox, MqttSink, read_password,
-                                          status_payload, topic_prefix)
+from fdi_daemon.service.mqtt_sink import (
+    AlarmOutbox,
+    MqttSink,
+    read_password,
+    status_payload,
+    topic_prefix,
+)
 from fdi_daemon.service.sinks import stamp_event
-from mqtt_support import Broker, Subscriber, needs_mosquitto
 
 
 def minimal(**sections):
-    data = {"link": {"kind": "modbus-tcp", "host": "127.0.0.1", "port": 5502},
-            "model": {"path": "model.yaml"}}
+    data = {
+        "link": {"kind": "modbus-tcp", "host": "127.0.0.1", "port": 5502},
+        "model": {"path": "model.yaml"},
+    }
     data.update(sections)
     return data
 
@@ -60,8 +67,11 @@ def test_outbox_survives_a_restart_in_order_and_flags_what_was_sent(tmp_path):
     with open(path, "a") as fh:
         fh.write('{"ack": 3')  # a line torn by the crash
     again = AlarmOutbox(path, max_messages=100)
-    assert [(m["id"], m.get("dup", False)) for m in again.pending.values()] == \
-        [(2, True), (3, False), (4, False)]
+    assert [(m["id"], m.get("dup", False)) for m in again.pending.values()] == [
+        (2, True),
+        (3, False),
+        (4, False),
+    ]
     for message_id in (2, 3, 4):
         again.ack(message_id)
     again.close()
@@ -74,9 +84,14 @@ def test_status_payload_carries_the_friction_level_and_buffer_losses(tmp_path):
     box = AlarmOutbox(tmp_path / "out.jsonl", max_messages=1)
     box.add(alarm(1.0))
     box.add(alarm(2.0))
-    snap = {"time": 1.7e9, "state": "friction_isolated", "t": 20.5,
-            "monitor": {"friction_level": 1.42, "theta1": 1.42, "theta2": 1.0},
-            "link": {"connected": True, "samples": 5000}, "counters": {"fault_detected": 1}}
+    snap = {
+        "time": 1.7e9,
+        "state": "friction_isolated",
+        "t": 20.5,
+        "monitor": {"friction_level": 1.42, "theta1": 1.42, "theta2": 1.0},
+        "link": {"connected": True, "samples": 5000},
+        "counters": {"fault_detected": 1},
+    }
     payload = status_payload(snap, box, skipped_events=3)
     assert payload["online"] is True and payload["state"] == "friction_isolated"
     assert payload["friction_level"] == 1.42 and payload["alarm_episodes"] == 1
@@ -92,8 +107,9 @@ def test_event_lines_carry_rfc3339_time_and_schema_and_keep_t_and_kind():
     line = stamp_event(event, now=1795456800.123456)
     assert line["t"] == 20.019 and line["kind"] == "fault_detected" and line["schema"] == 2
     assert line["time"] == "2026-11-23T18:00:00.123456Z"
-    assert datetime.fromisoformat(line["time"].replace("Z", "+00:00")).timestamp() == \
-        pytest.approx(1795456800.123456, abs=1e-6)
+    assert datetime.fromisoformat(line["time"].replace("Z", "+00:00")).timestamp() == pytest.approx(
+        1795456800.123456, abs=1e-6
+    )
     assert "time" not in event  # the loop's copy (status alarms) is left alone
     # a link event keeps the wall clock at which the link layer noticed it
     lost = stamp_event({"t": None, "kind": "link_lost", "time": 1795456799.5}, now=1.0)
@@ -119,23 +135,36 @@ def test_mqtt_and_metrics_are_off_by_default(tmp_path):
 
 @pytest.mark.parametrize("key", ["password", "passwd", "secret"])
 def test_a_secret_written_into_the_config_is_refused(key):
-    with pytest.raises(ConfigError, match=rf"mqtt\.{key}: secrets are not read from the "
-                                          r"config.*password_file.*password_env"):
-        config_from_dict(minimal(mqtt={"enabled": True, "username": "fdi", key: "hunter2"}),
-                         "rig.yaml")
+    with pytest.raises(
+        ConfigError,
+        match=rf"mqtt\.{key}: secrets are not read from the "
+        r"config.*password_file.*password_env",
+    ):
+        config_from_dict(
+            minimal(mqtt={"enabled": True, "username": "fdi", key: "hunter2"}), "rig.yaml"
+        )
 
 
 def test_password_from_a_file_beside_the_config_or_the_environment(tmp_path, monkeypatch):
     (tmp_path / "mqtt.secret").write_text("s3cret\n")
-    cfg = config_from_dict(minimal(mqtt={"username": "fdi", "password_file": "mqtt.secret",
-                                         "tls": {"enabled": True, "ca_file": "ca.pem"}}),
-                           "rig.yaml", tmp_path)
+    cfg = config_from_dict(
+        minimal(
+            mqtt={
+                "username": "fdi",
+                "password_file": "mqtt.secret",
+                "tls": {"enabled": True, "ca_file": "ca.pem"},
+            }
+        ),
+        "rig.yaml",
+        tmp_path,
+    )
     assert cfg.mqtt["password_file"] == str(tmp_path / "mqtt.secret")
     assert cfg.mqtt["tls"]["ca_file"] == str(tmp_path / "ca.pem")
     assert read_password(cfg.mqtt) == "s3cret"
     monkeypatch.setenv("FDI_MQTT_PASSWORD", "from-env")
-    env = config_from_dict(minimal(mqtt={"username": "fdi",
-                                         "password_env": "FDI_MQTT_PASSWORD"}), "rig.yaml")
+    env = config_from_dict(
+        minimal(mqtt={"username": "fdi", "password_env": "FDI_MQTT_PASSWORD"}), "rig.yaml"
+    )
     assert read_password(env.mqtt) == "from-env"
     monkeypatch.delenv("FDI_MQTT_PASSWORD")
     with pytest.raises(ConfigError, match="FDI_MQTT_PASSWORD is not set"):
@@ -145,15 +174,18 @@ def test_password_from_a_file_beside_the_config_or_the_environment(tmp_path, mon
         read_password(cfg.mqtt, "rig.yaml")
 
 
-@pytest.mark.parametrize("section, message", [
-    ({"mqtt": {"password_file": "a", "password_env": "B"}}, "set one"),
-    ({"mqtt": {"site": "plant/hall"}}, "mqtt.site must be a non-empty MQTT topic level"),
-    ({"mqtt": {"rig": "#"}}, "mqtt.rig must be"),
-    ({"mqtt": {"port": 70000}}, "mqtt.port"),
-    ({"mqtt": {"tls": {"ca": "x"}}}, "mqtt.tls.ca: unknown key"),
-    ({"metrics": {"listen": "9108"}}, "metrics.listen must be HOST:PORT"),
-    ({"metrics": {"port": 9108}}, "metrics.port: unknown key"),
-])
+@pytest.mark.parametrize(
+    "section, message",
+    [
+        ({"mqtt": {"password_file": "a", "password_env": "B"}}, "set one"),
+        ({"mqtt": {"site": "plant/hall"}}, "mqtt.site must be a non-empty MQTT topic level"),
+        ({"mqtt": {"rig": "#"}}, "mqtt.rig must be"),
+        ({"mqtt": {"port": 70000}}, "mqtt.port"),
+        ({"mqtt": {"tls": {"ca": "x"}}}, "mqtt.tls.ca: unknown key"),
+        ({"metrics": {"listen": "9108"}}, "metrics.listen must be HOST:PORT"),
+        ({"metrics": {"port": 9108}}, "metrics.port: unknown key"),
+    ],
+)
 def test_bad_mqtt_and_metrics_settings_name_the_key(section, message):
     with pytest.raises(ConfigError, match=message):
         config_from_dict(minimal(**section), "rig.yaml")
@@ -170,8 +202,10 @@ def test_password_without_user_is_refused(tmp_path):
 
 
 def sink_settings(port, **more):
-    cfg = config_from_dict(minimal(mqtt={"enabled": True, "port": port, "site": "lab",
-                                         "rig": "rig7", **more}), "rig.yaml")
+    cfg = config_from_dict(
+        minimal(mqtt={"enabled": True, "port": port, "site": "lab", "rig": "rig7", **more}),
+        "rig.yaml",
+    )
     return cfg.mqtt
 
 
@@ -205,8 +239,7 @@ def test_alarms_wait_on_disk_while_the_broker_is_away_and_arrive_in_order(tmp_pa
         sink.event(stamp_event({"t": 2.0, "kind": "calibrated"}))
         sink.event(alarm(10.0))
         sub.wait(lambda s: alarm_ids(s) == [1], 20, "the first alarm", broker.tail)
-        assert [m["payload"]["kind"] for m in sub.on("/event")] == ["calibrated",
-                                                                   "fault_detected"]
+        assert [m["payload"]["kind"] for m in sub.on("/event")] == ["calibrated", "fault_detected"]
         assert sub.on("/event")[1]["qos"] == 1 and sub.on("/event")[0]["qos"] == 0
 
         broker.stop()  # the broker goes away during the alarm
@@ -221,16 +254,20 @@ def test_alarms_wait_on_disk_while_the_broker_is_away_and_arrive_in_order(tmp_pa
         deadline = time.monotonic() + 20
         while len(sink.outbox) < 4 and time.monotonic() < deadline:
             time.sleep(0.05)
-        on_disk = [json.loads(line)["msg"]["kind"] for line in outbox.read_text().splitlines()
-                   if '"msg"' in line]
+        on_disk = [
+            json.loads(line)["msg"]["kind"]
+            for line in outbox.read_text().splitlines()
+            if '"msg"' in line
+        ]
         assert on_disk == kinds  # kept on disk, in order, while the broker is away
         assert sink.skipped_events == 1  # the data_gap is not an alarm: skipped, counted
 
         broker.start()  # back on the same port, with the subscriber's session
         sub.wait(lambda s: len(alarm_ids(s)) >= 5, 60, "the buffered alarms", broker.tail)
         check_at_least_once_in_order(sub, [1, 2, 3, 4, 5])
-        assert [m["payload"]["kind"] for m in sub.on("/event") if "id" in m["payload"]] == \
-            ["fault_detected"] + kinds
+        assert [m["payload"]["kind"] for m in sub.on("/event") if "id" in m["payload"]] == [
+            "fault_detected"
+        ] + kinds
         deadline = time.monotonic() + 20
         while len(sink.outbox) and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -268,34 +305,94 @@ def test_an_alarm_sent_before_a_crash_is_sent_again_flagged_dup(tmp_path):
 
 
 @needs_mosquitto
-def test_password_and_tls_from_the_config_against_a_broker_that_requires_them(tmp_path,
-                                                                             caplog):
+def test_password_and_tls_from_the_config_against_a_broker_that_requires_them(tmp_path, caplog):
     certs = tmp_path / "certs"
     certs.mkdir()
 
     def openssl(*args):
         subprocess.run(["openssl", *args], check=True, capture_output=True, cwd=certs)
 
-    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-subj",
-            "/CN=fdi test CA", "-keyout", "ca.key", "-out", "ca.pem")
-    openssl("req", "-newkey", "rsa:2048", "-nodes", "-subj", "/CN=127.0.0.1",
-            "-keyout", "server.key", "-out", "server.csr")
+    openssl(
+        "req",
+        "-x509",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-days",
+        "2",
+        "-subj",
+        "/CN=fdi test CA",
+        "-keyout",
+        "ca.key",
+        "-out",
+        "ca.pem",
+    )
+    openssl(
+        "req",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-subj",
+        "/CN=127.0.0.1",
+        "-keyout",
+        "server.key",
+        "-out",
+        "server.csr",
+    )
     (certs / "san.ext").write_text("subjectAltName=IP:127.0.0.1\n")
-    openssl("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
-            "-CAcreateserial", "-days", "2", "-extfile", "san.ext", "-out", "server.pem")
+    openssl(
+        "x509",
+        "-req",
+        "-in",
+        "server.csr",
+        "-CA",
+        "ca.pem",
+        "-CAkey",
+        "ca.key",
+        "-CAcreateserial",
+        "-days",
+        "2",
+        "-extfile",
+        "san.ext",
+        "-out",
+        "server.pem",
+    )
     passwd = tmp_path / "broker.passwd"
-    subprocess.run(["mosquitto_passwd", "-b", "-c", str(passwd), "fdi", "s3cret"], check=True,
-                   capture_output=True)
-    broker = Broker(tmp_path / "broker", extra=(
-        f"allow_anonymous false\npassword_file {passwd}\ncafile {certs / 'ca.pem'}\n"
-        f"certfile {certs / 'server.pem'}\nkeyfile {certs / 'server.key'}\n")).start()
+    subprocess.run(
+        ["mosquitto_passwd", "-b", "-c", str(passwd), "fdi", "s3cret"],
+        check=True,
+        capture_output=True,
+    )
+    broker = Broker(
+        tmp_path / "broker",
+        extra=(
+            f"allow_anonymous false\npassword_file {passwd}\ncafile {certs / 'ca.pem'}\n"
+            f"certfile {certs / 'server.pem'}\nkeyfile {certs / 'server.key'}\n"
+        ),
+    ).start()
     (tmp_path / "mqtt.secret").write_text("s3cret\n")
-    settings = config_from_dict(minimal(mqtt={
-        "enabled": True, "port": broker.port, "site": "lab", "rig": "rig7", "username": "fdi",
-        "password_file": "mqtt.secret", "tls": {"enabled": True, "ca_file": "certs/ca.pem"}}),
-        "rig.yaml", tmp_path).mqtt
-    sub = Subscriber(broker.port, "fdi/lab/rig7/#", username="fdi", password="s3cret",
-                     ca_file=str(certs / "ca.pem"))
+    settings = config_from_dict(
+        minimal(
+            mqtt={
+                "enabled": True,
+                "port": broker.port,
+                "site": "lab",
+                "rig": "rig7",
+                "username": "fdi",
+                "password_file": "mqtt.secret",
+                "tls": {"enabled": True, "ca_file": "certs/ca.pem"},
+            }
+        ),
+        "rig.yaml",
+        tmp_path,
+    ).mqtt
+    sub = Subscriber(
+        broker.port,
+        "fdi/lab/rig7/#",
+        username="fdi",
+        password="s3cret",
+        ca_file=str(certs / "ca.pem"),
+    )
     sink = MqttSink(settings, tmp_path / "outbox.jsonl")
     try:
         sink.event(alarm(10.0))
@@ -335,34 +432,47 @@ def test_daemon_sinks_send_the_event_log_line_and_reopen_after_a_reload(tmp_path
     """The daemon's `Sinks` wiring: the MQTT message is the event log's line (same
     ``time``) plus ``id``; closing and rebuilding them (what SIGHUP does) rebinds the
     metrics port and reconnects with the same client id, and ids go on."""
+    from mqtt_support import free_port
+
     from fdi_daemon.service.daemon import Sinks
     from fdi_daemon.service.sinks import StatusBoard
-    from mqtt_support import free_port
 
     broker = Broker(tmp_path / "broker").start()
     metrics_port = free_port()
-    cfg = config_from_dict(minimal(
-        mqtt={"enabled": True, "port": broker.port, "site": "lab", "rig": "rig7"},
-        metrics={"listen": f"127.0.0.1:{metrics_port}"},
-        sinks={"status_socket": None, "stdout": False}, recorder={"enabled": False},
-        service={"state_dir": str(tmp_path / "state")}), "rig.yaml", tmp_path)
+    cfg = config_from_dict(
+        minimal(
+            mqtt={"enabled": True, "port": broker.port, "site": "lab", "rig": "rig7"},
+            metrics={"listen": f"127.0.0.1:{metrics_port}"},
+            sinks={"status_socket": None, "stdout": False},
+            recorder={"enabled": False},
+            service={"state_dir": str(tmp_path / "state")},
+        ),
+        "rig.yaml",
+        tmp_path,
+    )
     sub = Subscriber(broker.port, "fdi/lab/rig7/event")
     try:
         for reload in range(2):
             sinks = Sinks(cfg, 256.0, "modbus-tcp", StatusBoard())
             try:
                 assert sinks.metrics.port == metrics_port
-                sinks.event({"t": 20.0 + reload, "kind": "fault_detected", "theta1": 1.0,
-                             "theta2": float("nan")})
-                sub.wait(lambda s: len(alarm_ids(s)) == reload + 1, 30, "the alarm",
-                         broker.tail)
+                sinks.event(
+                    {
+                        "t": 20.0 + reload,
+                        "kind": "fault_detected",
+                        "theta1": 1.0,
+                        "theta2": float("nan"),
+                    }
+                )
+                sub.wait(lambda s: len(alarm_ids(s)) == reload + 1, 30, "the alarm", broker.tail)
             finally:
                 sinks.close()
     finally:
         sub.close()
         broker.stop()
-    lines = [json.loads(line) for line in
-             (tmp_path / "state" / "events.jsonl").read_text().splitlines()]
+    lines = [
+        json.loads(line) for line in (tmp_path / "state" / "events.jsonl").read_text().splitlines()
+    ]
     messages = [m["payload"] for m in sub.on("/event")]
     assert [m["id"] for m in messages] == [1, 2]
     assert [{k: v for k, v in m.items() if k != "id"} for m in messages] == lines
@@ -400,8 +510,9 @@ def test_a_full_buffer_drops_the_oldest_alarms_counts_and_logs_them(tmp_path, ca
     silent = socket.socket()  # a broker that never answers: nothing is ever delivered
     silent.bind(("127.0.0.1", 0))
     silent.listen()
-    sink = MqttSink(sink_settings(silent.getsockname()[1], buffer_max_messages=2),
-                    tmp_path / "outbox.jsonl")
+    sink = MqttSink(
+        sink_settings(silent.getsockname()[1], buffer_max_messages=2), tmp_path / "outbox.jsonl"
+    )
     try:
         for i in range(5):
             sink.event(alarm(float(i)))

@@ -68,12 +68,15 @@ def test_relative_notify_socket_is_refused_loudly(caplog):
     assert "neither a path" in caplog.text
 
 
-@pytest.mark.parametrize("env, expected", [
-    ({}, None),
-    ({"WATCHDOG_USEC": "10000000"}, 5.0),
-    ({"WATCHDOG_USEC": "10000000", "WATCHDOG_PID": "1"}, None),
-    ({"WATCHDOG_USEC": "0"}, None),
-    ({"WATCHDOG_USEC": "ten"}, None),
-])
+@pytest.mark.parametrize(
+    "env, expected",
+    [
+        ({}, None),
+        ({"WATCHDOG_USEC": "10000000"}, 5.0),
+        ({"WATCHDOG_USEC": "10000000", "WATCHDOG_PID": "1"}, None),
+        ({"WATCHDOG_USEC": "0"}, None),
+        ({"WATCHDOG_USEC": "ten"}, None),
+    ],
+)
 def test_watchdog_period(env, expected):
     assert watchdog_period_s(env) == expected

@@ -17,8 +17,10 @@ FS = 256.0
 
 
 def samples(seq0, n, rng):
-    return [Sample(seq0 + i, (seq0 + i) / FS, float(v), float(a), math.nan)
-            for i, (v, a) in enumerate(rng.normal(size=(n, 2)))]
+    return [
+        Sample(seq0 + i, (seq0 + i) / FS, float(v), float(a), math.nan)
+        for i, (v, a) in enumerate(rng.normal(size=(n, 2)))
+    ]
 
 
 def test_files_follow_the_recording_contract(tmp_path):
@@ -26,7 +28,7 @@ def test_files_follow_the_recording_contract(tmp_path):
     batch = samples(100, 300, rng)
     rec = Recorder(tmp_path, FS, meta={"link": "modbus-tcp"})
     for i in range(0, 300, 7):
-        rec.append(batch[i:i + 7])
+        rec.append(batch[i : i + 7])
     rec.close()
     (path,) = rec.files_written
     back = read_recording(path)  # strict: no gaps
@@ -40,8 +42,8 @@ def test_files_follow_the_recording_contract(tmp_path):
 def test_rotation_by_duration_and_on_device_restart(tmp_path):
     rng = np.random.default_rng(2)
     rec = Recorder(tmp_path, FS, rotate_seconds=1.0)
-    rec.append(samples(0, 600, rng))          # 2.34 s -> 3 files
-    rec.append(samples(5, 10, rng))           # counter restarted -> a 4th file
+    rec.append(samples(0, 600, rng))  # 2.34 s -> 3 files
+    rec.append(samples(5, 10, rng))  # counter restarted -> a 4th file
     rec.close()
     lengths = [len(read_recording(p)) for p in rec.files_written]
     assert lengths == [256, 256, 88, 10]
@@ -92,8 +94,9 @@ CHILD = textwrap.dedent("""
 
 @pytest.mark.slow
 def test_sigkill_loses_at_most_one_second(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(tmp_path)],
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CHILD, str(tmp_path)], stdout=subprocess.PIPE, text=True
+    )
     last_handed_over = -1
     try:
         for line in proc.stdout:

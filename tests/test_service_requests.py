@@ -10,9 +10,15 @@ import pytest
 
 from fdi_daemon.alarms.lifecycle import AlarmSettings
 from fdi_daemon.service.alarm_keeper import AlarmKeeper
-from fdi_daemon.service.sinks import (COMMAND_REGISTERS, STATUS_REGISTER_COUNT, EventLog,
-                                      ModbusStatusServer, StatusBoard, StatusSocketServer,
-                                      decode_status)
+from fdi_daemon.service.sinks import (
+    COMMAND_REGISTERS,
+    STATUS_REGISTER_COUNT,
+    EventLog,
+    ModbusStatusServer,
+    StatusBoard,
+    StatusSocketServer,
+    decode_status,
+)
 
 
 def raised_keeper(allow_remote: bool) -> AlarmKeeper:
@@ -40,9 +46,14 @@ def test_status_socket_requests(tmp_path):
     server = StatusSocketServer(tmp_path / "s.sock", board, requests=keeper.handle)
     try:
         greeting, snapshot, ack, again, shelve, bad, junk = ask(
-            tmp_path / "s.sock", b"", b'{"request": "acknowledge"}',
-            b'{"request": "acknowledge"}', b'{"request": "shelve", "duration_s": 600}',
-            b'{"request": "reboot"}', b'{"no": 1')
+            tmp_path / "s.sock",
+            b"",
+            b'{"request": "acknowledge"}',
+            b'{"request": "acknowledge"}',
+            b'{"request": "shelve", "duration_s": 600}',
+            b'{"request": "reboot"}',
+            b'{"no": 1',
+        )
     finally:
         server.close()
     assert greeting["t"] == snapshot["t"] == 3.0
@@ -51,8 +62,7 @@ def test_status_socket_requests(tmp_path):
     assert shelve["ok"] and shelve["alarm"]["state_code"] == 4
     assert not bad["ok"] and "unknown request" in bad["error"]
     assert not junk["ok"] and "JSON object" in junk["error"]
-    assert [e["kind"] for e in keeper.take_pending()] == ["alarm_acknowledged",
-                                                          "alarm_shelved"]
+    assert [e["kind"] for e in keeper.take_pending()] == ["alarm_acknowledged", "alarm_shelved"]
 
 
 def test_status_socket_requests_refused_unless_enabled(tmp_path):
@@ -87,18 +97,19 @@ def test_modbus_command_registers(allow):
         assert again.isError() and again.exception_code == 3  # nothing to acknowledge
         shelve = client.write_register(COMMAND_REGISTERS["shelve_minutes"], 90, device_id=1)
         assert not shelve.isError()
-        board.publish({"state": "monitoring", "time": keeper._clock(),
-                       "alarm": keeper.summary()})
-        values = decode_status(client.read_input_registers(
-            0, count=STATUS_REGISTER_COUNT, device_id=1).registers)
+        board.publish({"state": "monitoring", "time": keeper._clock(), "alarm": keeper.summary()})
+        values = decode_status(
+            client.read_input_registers(0, count=STATUS_REGISTER_COUNT, device_id=1).registers
+        )
         assert values["alarm_state"] == 4 and values["alarm_id"] == 1
         assert values["shelve_minutes"] == 90 and values["alarm_active"] == 0
-        too_long = client.write_register(COMMAND_REGISTERS["shelve_minutes"], 60000,
-                                         device_id=1)
+        too_long = client.write_register(COMMAND_REGISTERS["shelve_minutes"], 60000, device_id=1)
         assert too_long.isError() and too_long.exception_code == 3
         assert client.write_register(1, 0, device_id=1).isError()  # others stay read-only
-        assert client.write_register(COMMAND_REGISTERS["alarm_command"], 2,
-                                     device_id=1).isError() is False  # unshelve
+        assert (
+            client.write_register(COMMAND_REGISTERS["alarm_command"], 2, device_id=1).isError()
+            is False
+        )  # unshelve
         assert not keeper.lifecycle.shelved(keeper._clock())
     finally:
         client.close()
@@ -109,12 +120,13 @@ def test_event_log_follows_a_rename_by_logrotate(tmp_path):
     path = tmp_path / "events.jsonl"
     log = EventLog(path)
     log.write({"t": 1.0, "kind": "calibrated"})
-    path.rename(tmp_path / "events.jsonl.1")          # logrotate's default (create) mode
+    path.rename(tmp_path / "events.jsonl.1")  # logrotate's default (create) mode
     log.write({"t": 2.0, "kind": "fault_detected"})
-    path.unlink()                                     # or someone deletes it
+    path.unlink()  # or someone deletes it
     log.write({"t": 3.0, "kind": "cleared"})
     log.close()
-    assert [json.loads(x)["t"] for x in (tmp_path / "events.jsonl.1").read_text().splitlines()
-            ] == [1.0]
+    assert [json.loads(x)["t"] for x in (tmp_path / "events.jsonl.1").read_text().splitlines()] == [
+        1.0
+    ]
     assert [json.loads(x)["t"] for x in path.read_text().splitlines()] == [3.0]
     assert log.reopened == 2

@@ -7,17 +7,27 @@ import pytest
 
 
 def fdi(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "fdi_daemon", *args], capture_output=True,
-                          text=True, timeout=120, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "fdi_daemon", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=cwd,
+    )
 
 
-@pytest.mark.parametrize("text, expected", [
-    ("link: {kind: modbus-tcp}\nmodel: {path: m.yaml}\nsinks: {stdot: true}\n",
-     "sinks.stdot: unknown key"),
-    ("link: {kind: modbus-tcp, prot: 5}\nmodel: {path: m.yaml}\n", "link.prot: unknown key"),
-    ("link: {kind: modbus-tcp}\nmodel: {path: missing-model.yaml}\n", "no such model file"),
-    ("link: {kind: modbus-tcp}\n", "model.path is required"),
-])
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        (
+            "link: {kind: modbus-tcp}\nmodel: {path: m.yaml}\nsinks: {stdot: true}\n",
+            "sinks.stdot: unknown key",
+        ),
+        ("link: {kind: modbus-tcp, prot: 5}\nmodel: {path: m.yaml}\n", "link.prot: unknown key"),
+        ("link: {kind: modbus-tcp}\nmodel: {path: missing-model.yaml}\n", "no such model file"),
+        ("link: {kind: modbus-tcp}\n", "model.path is required"),
+    ],
+)
 def test_config_mistakes_are_one_line_and_exit_2(tmp_path, text, expected):
     config = tmp_path / "rig.yaml"
     config.write_text(text)
@@ -45,13 +55,15 @@ def test_a_state_dir_that_is_a_file_is_one_line_naming_it(tmp_path):
     assert result.returncode == 2, result.stderr
     assert result.stderr.strip().splitlines() == [
         f"fdi run: error: state directory {tmp_path / 'state'} (--state-dir or "
-        f"service.state_dir) is a file, not a directory"]
+        f"service.state_dir) is a file, not a directory"
+    ]
     assert (tmp_path / "state").read_text() == "a file"
 
 
 @pytest.mark.parametrize("state_dir_option", [False, True])
 def test_outputs_go_to_the_xdg_state_dir_or_state_dir_never_the_working_directory(
-        tmp_path, monkeypatch, state_dir_option):
+    tmp_path, monkeypatch, state_dir_option
+):
     monkeypatch.delenv("STATE_DIRECTORY", raising=False)
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
     work = tmp_path / "repo"
@@ -75,14 +87,19 @@ def test_a_replayed_recording_at_another_rate_than_the_model_is_one_line(tmp_pat
 
     model = Path(__file__).resolve().parents[1] / "configs" / "model_sim_rig.yaml"
     n = 512
-    rec = write_recording(tmp_path / "slow.csv", Recording(
-        {"t": np.arange(n) / 128.0, "v_in": np.zeros(n), "accel": np.zeros(n)},
-        {"fs": "128"}))
+    rec = write_recording(
+        tmp_path / "slow.csv",
+        Recording(
+            {"t": np.arange(n) / 128.0, "v_in": np.zeros(n), "accel": np.zeros(n)}, {"fs": "128"}
+        ),
+    )
     config = tmp_path / "rig.yaml"
-    config.write_text(f"link: {{kind: replay, path: {rec}, realtime: false}}\n"
-                      f"model: {{path: {model}}}\n")
+    config.write_text(
+        f"link: {{kind: replay, path: {rec}, realtime: false}}\nmodel: {{path: {model}}}\n"
+    )
     result = fdi("run", "--config", str(config), "--state-dir", str(tmp_path / "state"))
     assert result.returncode == 2, result.stderr[-2000:]
     assert result.stderr.strip().splitlines()[-1] == (
-        f"fdi run: error: {rec}: sampled at 128 Hz but the model is for 256 Hz")
+        f"fdi run: error: {rec}: sampled at 128 Hz but the model is for 256 Hz"
+    )
     assert "Traceback" not in result.stderr

@@ -12,10 +12,20 @@ from pathlib import Path
 import pytest
 
 from fdi_daemon.dashboard.client import fetch_snapshot
-from fdi_daemon.service.sinks import (STATUS_REGISTER_COUNT, STATUS_REGISTERS, EventLog,
-                                      ModbusStatusServer, StatusBoard, StatusSocketServer,
-                                      StdoutLog, Worker, decode_status, encode_status,
-                                      format_event, status_values)
+from fdi_daemon.service.sinks import (
+    STATUS_REGISTER_COUNT,
+    STATUS_REGISTERS,
+    EventLog,
+    ModbusStatusServer,
+    StatusBoard,
+    StatusSocketServer,
+    StdoutLog,
+    Worker,
+    decode_status,
+    encode_status,
+    format_event,
+    status_values,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -41,8 +51,9 @@ def test_event_log_appends_strict_json_and_fsyncs_alarms(tmp_path, monkeypatch):
 
 def test_stdout_lines_with_and_without_journald_priorities():
     out = io.StringIO()
-    StdoutLog(out, priorities=True).write({"t": 20.5, "kind": "fault_detected",
-                                           "theta1": 0.25, "theta2": -0.5})
+    StdoutLog(out, priorities=True).write(
+        {"t": 20.5, "kind": "fault_detected", "theta1": 0.25, "theta2": -0.5}
+    )
     StdoutLog(out, priorities=False).write({"t": 21.0, "kind": "calibrated"})
     first, second = out.getvalue().splitlines()
     assert first.startswith("<4>") and "FAULT DETECTED" in first and "θ1=+0.25" in first
@@ -50,8 +61,9 @@ def test_stdout_lines_with_and_without_journald_priorities():
     assert "missing=3" in format_event({"t": 1.0, "kind": "data_gap", "missing": 3})
     lost = format_event({"t": None, "kind": "link_lost", "reason": "refused", "time": 1e9})
     assert "LINK LOST" in lost and "reason=refused" in lost and "time=" not in lost
-    isolated = format_event({"t": 20.5, "kind": "friction_isolated", "friction_level": None,
-                             "coulomb_change": 1.6})  # the level is not measured yet
+    isolated = format_event(
+        {"t": 20.5, "kind": "friction_isolated", "friction_level": None, "coulomb_change": 1.6}
+    )  # the level is not measured yet
     assert "friction_level" not in isolated and "coulomb_change=1.6" in isolated
 
 
@@ -92,8 +104,7 @@ def test_worker_survives_a_failing_handler(caplog):
 
 def test_status_socket_serves_json_lines(tmp_path):
     board = StatusBoard()
-    board.publish({"time": 1.0, "state": "monitoring", "t": 5.0,
-                   "monitor": {"theta1": math.inf}})
+    board.publish({"time": 1.0, "state": "monitoring", "t": 5.0, "monitor": {"theta1": math.inf}})
     path = tmp_path / "run" / "status.sock"
     server = StatusSocketServer(path, board)
     try:
@@ -117,11 +128,20 @@ def test_status_socket_serves_json_lines(tmp_path):
 
 
 def test_status_register_encoding_round_trips():
-    snapshot = {"state": "friction_isolated", "t": 123456.789,
-                "link": {"connected": True, "samples": 70000, "gaps": 2, "crc_errors": 5,
-                         "tick_latency_us": {"p50": 20.0, "p99": 180.4}},
-                "monitor": {"theta1": 0.125, "theta2": -2.5, "friction_level": None},
-                "counters": {"fault_detected": 1, "friction_isolated": 1}, "uptime_s": 99.9}
+    snapshot = {
+        "state": "friction_isolated",
+        "t": 123456.789,
+        "link": {
+            "connected": True,
+            "samples": 70000,
+            "gaps": 2,
+            "crc_errors": 5,
+            "tick_latency_us": {"p50": 20.0, "p99": 180.4},
+        },
+        "monitor": {"theta1": 0.125, "theta2": -2.5, "friction_level": None},
+        "counters": {"fault_detected": 1, "friction_isolated": 1},
+        "uptime_s": 99.9,
+    }
     values = decode_status(encode_status(status_values(snapshot, 7)))
     assert values["state"] == 4 and values["alarm_active"] == 1 and values["heartbeat"] == 7
     assert values["theta1"] == 0.125 and values["theta2"] == -2.5
@@ -146,8 +166,14 @@ def test_modbus_status_server_with_a_real_client():
     from pymodbus.client import ModbusTcpClient
 
     board = StatusBoard()
-    board.publish({"state": "fault_detected", "t": 21.25, "monitor": {"theta1": 0.75},
-                   "link": {"connected": True, "samples": 5440}})
+    board.publish(
+        {
+            "state": "fault_detected",
+            "t": 21.25,
+            "monitor": {"theta1": 0.75},
+            "link": {"connected": True, "samples": 5440},
+        }
+    )
     server = ModbusStatusServer(board, host="127.0.0.1", port=0, device_id=1)
     client = ModbusTcpClient("127.0.0.1", port=server.port, timeout=5)
     try:
@@ -161,8 +187,7 @@ def test_modbus_status_server_with_a_real_client():
         ir = client.read_input_registers(1, count=3, device_id=1)
         assert ir.registers[0] == 4 and ir.registers[2] == (first_heartbeat + 1) & 0xFFFF
         theta = client.read_holding_registers(5, count=2, device_id=1)
-        assert math.isnan(client.convert_from_registers(theta.registers,
-                                                        client.DATATYPE.FLOAT32))
+        assert math.isnan(client.convert_from_registers(theta.registers, client.DATATYPE.FLOAT32))
         assert client.write_register(1, 0, device_id=1).isError()  # read-only
         assert client.read_holding_registers(0, count=1, device_id=9).isError()
     finally:

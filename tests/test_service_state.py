@@ -10,13 +10,13 @@ import sqlite3
 
 import numpy as np
 import pytest
+from reliability_support import load_test_model
 
 from fdi_daemon.alarms.lifecycle import AlarmSettings
 from fdi_daemon.io.sample import Sample
 from fdi_daemon.service.alarm_keeper import AlarmKeeper
 from fdi_daemon.service.state_file import model_identity, read_state, write_state
 from fdi_daemon.service.trend import MinuteAggregator, TrendStore, read_trend, trend_meta
-from reliability_support import load_test_model
 
 
 class Clock:
@@ -36,6 +36,7 @@ def snapshot(level, t=1.0, baseline=None):
 
 # ----------------------------------------------------------------------------- state file
 
+
 def test_state_file_round_trip_and_atomic_replace(tmp_path):
     path = tmp_path / "state.json"
     write_state(path, {"model": "abc", "alarm": {"x": 1}})
@@ -50,15 +51,17 @@ def test_a_missing_state_file_is_a_fresh_start_without_a_word(tmp_path, caplog):
     assert caplog.records == []
 
 
-@pytest.mark.parametrize("content, why", [
-    ('{"format": "fdi-state", "version": 1, "model": "ab', "corrupt"),
-    ("", "corrupt"),
-    ('[1, 2]', "corrupt"),
-    ('{"format": "fdi-state", "version": 7, "model": "abc"}', "corrupt"),
-    ('{"format": "fdi-state", "version": 1, "model": "other"}', "another model"),
-])
-def test_a_bad_state_file_is_refused_with_one_line_and_kept_aside(tmp_path, caplog, content,
-                                                                     why):
+@pytest.mark.parametrize(
+    "content, why",
+    [
+        ('{"format": "fdi-state", "version": 1, "model": "ab', "corrupt"),
+        ("", "corrupt"),
+        ('[1, 2]', "corrupt"),
+        ('{"format": "fdi-state", "version": 7, "model": "abc"}', "corrupt"),
+        ('{"format": "fdi-state", "version": 1, "model": "other"}', "another model"),
+    ],
+)
+def test_a_bad_state_file_is_refused_with_one_line_and_kept_aside(tmp_path, caplog, content, why):
     path = tmp_path / "state.json"
     path.write_text(content)
     with caplog.at_level(logging.WARNING, logger="fdi.state"):
@@ -70,8 +73,9 @@ def test_a_bad_state_file_is_refused_with_one_line_and_kept_aside(tmp_path, capl
 def test_model_identity_follows_the_units_of_the_level_only():
     model = load_test_model()
     base = model_identity(model)
-    assert base == model_identity(load_test_model(detector={"threshold": 99.0},
-                                                  provenance={"note": "edited"}))
+    assert base == model_identity(
+        load_test_model(detector={"threshold": 99.0}, provenance={"note": "edited"})
+    )
     other = load_test_model()
     other.fault_filter.gamma_f = other.fault_filter.gamma_f + 0.1
     assert model_identity(other) != base
@@ -79,6 +83,7 @@ def test_model_identity_follows_the_units_of_the_level_only():
 
 
 # ----------------------------------------------------------------------------- trend
+
 
 def test_minute_aggregator_statistics_against_numpy():
     rng = np.random.default_rng(4)
@@ -106,12 +111,29 @@ def test_minute_aggregator_statistics_against_numpy():
 def test_trend_store_round_trip_and_view(tmp_path):
     path = tmp_path / "trend.sqlite"
     store = TrendStore(path, {"steps": [0.25, 0.5, 1.0]})
-    row = {"minute": 29_000_000, "level_mean": 0.4321, "level_min": 0.1, "level_max": 0.9,
-           "baseline": None, "command_rms_v": 1.2345, "readings": 600, "samples": 15360,
-           "priority": 1, "alarm_state": 1}
+    row = {
+        "minute": 29_000_000,
+        "level_mean": 0.4321,
+        "level_min": 0.1,
+        "level_max": 0.9,
+        "baseline": None,
+        "command_rms_v": 1.2345,
+        "readings": 600,
+        "samples": 15360,
+        "priority": 1,
+        "alarm_state": 1,
+    }
     store.append(row)
-    store.append({**row, "minute": row["minute"] + 1, "level_mean": None, "level_min": None,
-                  "level_max": None, "readings": 0})
+    store.append(
+        {
+            **row,
+            "minute": row["minute"] + 1,
+            "level_mean": None,
+            "level_min": None,
+            "level_max": None,
+            "readings": 0,
+        }
+    )
     store.append({**row, "level_mean": 0.0, "readings": 3})  # fewer readings: not replaced
     store.close()
     data = read_trend(path)
@@ -121,11 +143,11 @@ def test_trend_store_round_trip_and_view(tmp_path):
     assert trend_meta(path)["steps"] == [0.25, 0.5, 1.0]
     assert len(read_trend(path, since_unix=29_000_001 * 60)["time_unix"]) == 1
     with sqlite3.connect(path) as db:
-        assert db.execute("SELECT level_mean_m FROM trend_minute").fetchall() == [(432,),
-                                                                                  (None,)]
+        assert db.execute("SELECT level_mean_m FROM trend_minute").fetchall() == [(432,), (None,)]
 
 
 # ----------------------------------------------------------------------------- keeper
+
 
 def test_keeper_level_above_the_baseline_sets_the_priority():
     clock = Clock()
@@ -151,8 +173,7 @@ def test_keeper_requests_are_refused_unless_allowed_and_emitted_by_the_loop():
     assert answer["ok"] and answer["alarm"]["state"] == "acknowledged"
     answer = keeper.handle({"request": "shelve", "by": "test", "duration_s": 60})
     assert answer["ok"] and answer["alarm"]["state_code"] == 4
-    assert [e["kind"] for e in keeper.take_pending()] == ["alarm_acknowledged",
-                                                          "alarm_shelved"]
+    assert [e["kind"] for e in keeper.take_pending()] == ["alarm_acknowledged", "alarm_shelved"]
     assert keeper.take_pending() == []
 
 
@@ -163,8 +184,9 @@ def test_keeper_state_survives_a_file_round_trip(tmp_path):
     keeper.status(snapshot(0.7))
     write_state(tmp_path / "s.json", keeper.state({"fault_detected": 1, "calibrated": 3}))
     clock.now += 30
-    restored = AlarmKeeper(AlarmSettings(), "m", stored=read_state(tmp_path / "s.json", "m"),
-                           clock=clock)
+    restored = AlarmKeeper(
+        AlarmSettings(), "m", stored=read_state(tmp_path / "s.json", "m"), clock=clock
+    )
     assert restored.summary()["priority"] == 2 and restored.lifecycle.active
     assert restored.event_counts == {"fault_detected": 1, "calibrated": 3}
     assert restored.detector_event({"kind": "fault_detected"}) == []
@@ -185,8 +207,7 @@ def test_state_file_is_fsynced_before_the_rename(tmp_path, monkeypatch):
     calls = []
     real_fsync, real_replace = os.fsync, os.replace
     monkeypatch.setattr(os, "fsync", lambda fd: (calls.append("fsync"), real_fsync(fd)))
-    monkeypatch.setattr(os, "replace", lambda a, b: (calls.append("replace"),
-                                                     real_replace(a, b)))
+    monkeypatch.setattr(os, "replace", lambda a, b: (calls.append("replace"), real_replace(a, b)))
     write_state(tmp_path / "state.json", {"model": "m"})
     assert calls == ["fsync", "replace", "fsync"]  # file, rename, then the folder
     assert json.loads((tmp_path / "state.json").read_text())["model"] == "m"
@@ -202,12 +223,20 @@ def test_minutes_past_retention_are_folded_into_hours(tmp_path):
     for k in range(n):
         resting = k % 300 < 40
         mean = float(rng.uniform(0, 1))
-        rows.append({"minute": first + k, "level_mean": None if resting else mean,
-                     "level_min": None if resting else mean - 0.1,
-                     "level_max": None if resting else mean + 0.1, "baseline": 0.05,
-                     "command_rms_v": float(rng.uniform(0.5, 1.5)),
-                     "readings": 0 if resting else int(rng.integers(100, 600)),
-                     "samples": 15360, "priority": int(k > 2000), "alarm_state": 0})
+        rows.append(
+            {
+                "minute": first + k,
+                "level_mean": None if resting else mean,
+                "level_min": None if resting else mean - 0.1,
+                "level_max": None if resting else mean + 0.1,
+                "baseline": 0.05,
+                "command_rms_v": float(rng.uniform(0.5, 1.5)),
+                "readings": 0 if resting else int(rng.integers(100, 600)),
+                "samples": 15360,
+                "priority": int(k > 2000),
+                "alarm_state": 0,
+            }
+        )
         store.append(rows[-1])
     store.close()
     with sqlite3.connect(path) as db:
@@ -225,7 +254,7 @@ def test_minutes_past_retention_are_folded_into_hours(tmp_path):
         assert hour[1] == expected_mean
         lows = [round((r["level_mean"] - 0.1) * 1000) for r in sel if r["readings"]]
         assert hour[2] == (min(lows) if lows else None)
-        assert hour[5] == round(math.sqrt((cmd ** 2 * 15360).sum() / (15360 * len(sel))))
+        assert hour[5] == round(math.sqrt((cmd**2 * 15360).sum() / (15360 * len(sel))))
         assert hour[6] == w.sum() and hour[7] == 15360 * len(sel)
         assert hour[8] == max(r["priority"] for r in sel) and hour[4] == 50
     data = read_trend(path)  # the view: hours, then minutes, one time axis
@@ -247,14 +276,21 @@ def test_a_file_that_is_not_a_trend_database_is_moved_aside(tmp_path, caplog):
 
 
 def test_a_reload_keeps_the_alarm_unless_the_model_changes_its_unit(tmp_path, caplog):
-    from fdi_daemon.service.config import config_from_dict
-    from fdi_daemon.service.daemon import Daemon
     from reliability_support import model_path
 
-    config = config_from_dict({"link": {"kind": "replay", "path": "rec.csv"},
-                               "model": {"path": str(model_path())},
-                               "service": {"state_dir": str(tmp_path)},
-                               "alarms": {"steps": [0.3, 0.6]}}, "rig.yaml", tmp_path)
+    from fdi_daemon.service.config import config_from_dict
+    from fdi_daemon.service.daemon import Daemon
+
+    config = config_from_dict(
+        {
+            "link": {"kind": "replay", "path": "rec.csv"},
+            "model": {"path": str(model_path())},
+            "service": {"state_dir": str(tmp_path)},
+            "alarms": {"steps": [0.3, 0.6]},
+        },
+        "rig.yaml",
+        tmp_path,
+    )
     daemon = Daemon()
     first = daemon.alarm_keeper(config, load_test_model())
     first.detector_event({"kind": "fault_detected"})

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest_sim import FS, scenario_path
+
 from hil_sim.rig import FAULTS, RigParams
 from hil_sim.scenarios import load_scenario, simulate
 
@@ -32,13 +32,13 @@ def test_every_fault_has_a_scenario_and_identical_data_before_it():
             assert np.array_equal(faulty[col][before], clean[col][before]), (name, col)
         assert np.all(faulty["other_fault_active"][before] == 0.0)
         assert np.all(faulty["other_fault_active"][after] == 1.0)
-        assert np.all(faulty["fault_active"] == 0.0)      # never a friction fault
+        assert np.all(faulty["fault_active"] == 0.0)  # never a friction fault
         assert np.all(faulty["friction_force"] == 0.0)
 
 
 def test_accel_bias_step_shifts_the_reading_only():
     faulty, clean, _, after = _with_and_without("accel_bias")
-    lsb = 2 * RigParams().accel_range_m_per_s2 / 2 ** 16
+    lsb = 2 * RigParams().accel_range_m_per_s2 / 2**16
     shift = faulty["accel"][after] - clean["accel"][after]
     assert np.all(np.abs(shift - 0.3) <= lsb)
     assert np.array_equal(faulty["accel_true"], clean["accel_true"])  # the motion is unchanged
@@ -47,7 +47,7 @@ def test_accel_bias_step_shifts_the_reading_only():
 def test_valve_gain_loss_scales_the_motion():
     faulty, clean, _, after = _with_and_without("valve_gain")
     ratio = faulty["accel"][after].std() / clean["accel"][after].std()
-    assert 0.5 < ratio < 0.7   # gain 0.6 on a flow-controlled actuator below the roll-off
+    assert 0.5 < ratio < 0.7  # gain 0.6 on a flow-controlled actuator below the roll-off
 
 
 def test_supply_drop_lowers_chamber_pressures_and_changes_the_response():
@@ -67,9 +67,9 @@ def test_accel_dropout_reads_zero():
 def test_accel_saturation_clips_at_the_reduced_range():
     faulty, clean, _, after = _with_and_without("accel_saturation")
     limit = 0.06 * RigParams().accel_range_m_per_s2
-    lsb = 2 * RigParams().accel_range_m_per_s2 / 2 ** 16
+    lsb = 2 * RigParams().accel_range_m_per_s2 / 2**16
     assert np.abs(faulty["accel"][faulty.t >= T_FAULT]).max() <= limit + lsb
-    assert np.abs(clean["accel"][after]).max() > limit + 0.5   # the clean peaks are higher
+    assert np.abs(clean["accel"][after]).max() > limit + 0.5  # the clean peaks are higher
     clipped = np.abs(faulty["accel"][after]) >= limit - lsb
     assert 0.05 < clipped.mean() < 0.6
 

@@ -6,16 +6,18 @@ import dataclasses
 
 import numpy as np
 import pytest
-
 from conftest_sim import FS, run_sine_with_supply, sine
+
 from hil_sim.rig import Rig, RigParams
 from hil_sim.rig.params import GRAVITY_M_PER_S2
 
 
 def _expected_contact_n(p: RigParams, supply_fraction: float) -> float:
     lift_area = p.bearing_mass_kg * GRAVITY_M_PER_S2 / p.bearing_contact_pressure_pa
-    return max(0.0, p.bearing_mass_kg * GRAVITY_M_PER_S2
-               - supply_fraction * p.bearing_supply_pa * lift_area)
+    return max(
+        0.0,
+        p.bearing_mass_kg * GRAVITY_M_PER_S2 - supply_fraction * p.bearing_supply_pa * lift_area,
+    )
 
 
 def test_nominal_bearing_supply_has_no_bearing_friction():
@@ -49,10 +51,10 @@ def test_test_case_fault_sizes(test_case_recordings):
     large = test_case_recordings["test_case_2"]
     f1 = np.abs(small["friction_force"][small.t > 3.3])
     f2 = np.abs(large["friction_force"][large.t > 3.2])
-    assert 0.3 < f1.mean() < 1.2          # small, high-slip
-    assert 2.0 < f2.mean() < 4.5          # abrupt, larger
-    assert small["stuck"][small.t > 3.3].mean() < 0.02   # high slip
-    assert large["stuck"][large.t > 3.2].mean() < 0.3    # low stick
+    assert 0.3 < f1.mean() < 1.2  # small, high-slip
+    assert 2.0 < f2.mean() < 4.5  # abrupt, larger
+    assert small["stuck"][small.t > 3.3].mean() < 0.02  # high slip
+    assert large["stuck"][large.t > 3.2].mean() < 0.3  # low stick
     assert np.all(small["friction_force"][small.t < 3.05] == 0.0)
     assert np.all(large["friction_force"][large.t < 2.9] == 0.0)
 
@@ -69,7 +71,7 @@ def test_seal_stiction_before_any_fault_fades_with_amplitude():
     for amplitude, freq in ((0.1, 2.0), (0.3, 4.0), (1.4, 8.0)):
         out = Rig(seed=1).run(sine(amplitude, freq, 4.0))
         assert np.all(out["friction_force"] == 0.0)
-        stuck[amplitude] = out["stuck"][int(FS):].mean()
+        stuck[amplitude] = out["stuck"][int(FS) :].mean()
         # the mass rests exactly while stuck
         assert np.all(out["velocity_true"][out["stuck"] > 0] == 0.0)
     assert stuck[0.1] > 0.05
@@ -83,6 +85,6 @@ def test_seal_friction_shows_in_acceleration_peaks():
     u = sine(1.4, 8.0, 3.0)
     with_seal = Rig(p, seed=0).run(u)
     no_seal = Rig(dataclasses.replace(p, seal_coulomb_n=1e-9, seal_static_n=1e-9), seed=0).run(u)
-    diff = (with_seal["accel_true"] - no_seal["accel_true"])[int(FS):]
+    diff = (with_seal["accel_true"] - no_seal["accel_true"])[int(FS) :]
     jump = 2 * p.seal_coulomb_n / p.moving_mass_kg
     assert 0.3 * jump < np.abs(diff).max() < 3 * jump

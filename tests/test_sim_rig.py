@@ -6,16 +6,19 @@ import dataclasses
 
 import numpy as np
 import pytest
-
 from conftest_sim import FS, h1_response, sine
+
 from hil_sim.rig import FAULTS, Rig, RigOutput, RigParams
 
 
 def _excitation(seconds: float, seed: int = 5) -> np.ndarray:
     rng = np.random.default_rng(seed)
     t = np.arange(int(seconds * FS)) / FS
-    return (0.8 * np.sin(2 * np.pi * 3.0 * t) + 0.6 * np.sin(2 * np.pi * 0.7 * t)
-            + 0.2 * rng.standard_normal(len(t)))
+    return (
+        0.8 * np.sin(2 * np.pi * 3.0 * t)
+        + 0.6 * np.sin(2 * np.pi * 0.7 * t)
+        + 0.2 * rng.standard_normal(len(t))
+    )
 
 
 def _run_with_fault(rig: Rig, u: np.ndarray, chunks: list[int]) -> dict[str, np.ndarray]:
@@ -26,9 +29,9 @@ def _run_with_fault(rig: Rig, u: np.ndarray, chunks: list[int]) -> dict[str, np.
         if pos <= 600 < pos + size:  # split so the fault lands exactly on sample 600
             parts.append(rig.run(u[pos:600]))
             rig.set_bearing_supply(0.3)
-            parts.append(rig.run(u[600:pos + size]))
+            parts.append(rig.run(u[600 : pos + size]))
         else:
-            parts.append(rig.run(u[pos:pos + size]))
+            parts.append(rig.run(u[pos : pos + size]))
         pos += size
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
@@ -100,7 +103,7 @@ def test_frequency_response_looks_like_paper_fig3(sweep_recording):
     assert 6.0 <= f_peak <= 14.0
     at = lambda hz: mag[np.argmin(np.abs(f - hz))]  # noqa: E731
     assert at(15.0) < peak
-    assert at(20.0) < 0.4 * peak          # rolling off above 10 Hz
+    assert at(20.0) < 0.4 * peak  # rolling off above 10 Hz
     assert mag[(f >= 30) & (f <= 45)].max() < 0.05 * peak  # little motion above 30 Hz
     # differentiator: phase near +90° at 1 Hz minus small lags
     assert 45.0 < np.degrees(np.angle(G[np.argmin(np.abs(f - 1.0))])) < 95.0
@@ -126,11 +129,14 @@ def test_long_multisine_stays_finite_inside_stroke_and_friction_dissipates():
     rig = Rig(seed=9)
     rig.set_centring(30.0)
     t = np.arange(int(300 * FS)) / FS
-    u = (0.7 * np.sin(2 * np.pi * 0.3 * t) + 0.5 * np.sin(2 * np.pi * 2.1 * t)
-         + 0.5 * np.sin(2 * np.pi * 7.3 * t))
+    u = (
+        0.7 * np.sin(2 * np.pi * 0.3 * t)
+        + 0.5 * np.sin(2 * np.pi * 2.1 * t)
+        + 0.5 * np.sin(2 * np.pi * 7.3 * t)
+    )
     out = rig.run(u[: len(u) // 2])
     rig.set_bearing_supply(0.2)  # stick-slip through the second half
-    out2 = rig.run(u[len(u) // 2:])
+    out2 = rig.run(u[len(u) // 2 :])
     p = RigParams()
     for o in (out, out2):
         for name, col in o.items():
@@ -189,9 +195,9 @@ def test_friction_free_response_is_fitted_by_a_fourth_order_model():
     """Eq. (1) must be able to describe the fault-free rig: a 4th-order output-error model
     (independent scipy least squares) fitted on one chirp run simulates another seed's run
     with >= 90 % fit (100·(1 - ||y - ŷ|| / ||y - mean y||))."""
+    from conftest_sim import scenario_path
     from scipy import optimize, signal
 
-    from conftest_sim import scenario_path
     from hil_sim.scenarios import load_scenario, simulate
 
     scenario = load_scenario(scenario_path("ident_chirp_long"))
@@ -202,8 +208,9 @@ def test_friction_free_response_is_fitted_by_a_fourth_order_model():
         return signal.lfilter(np.r_[0.0, theta[:4]], np.r_[1.0, theta[4:]], u)
 
     u, y = est.v_in, est.accel
-    lagged = np.column_stack([-np.roll(y, k) for k in range(1, 5)]
-                             + [np.roll(u, k) for k in range(1, 5)])[8:]
+    lagged = np.column_stack(
+        [-np.roll(y, k) for k in range(1, 5)] + [np.roll(u, k) for k in range(1, 5)]
+    )[8:]
     arx, *_ = np.linalg.lstsq(lagged, y[8:], rcond=None)
     theta = optimize.least_squares(lambda th: sim(th, u) - y, np.r_[arx[4:], arx[:4]]).x
     assert np.all(np.abs(np.roots(np.r_[1.0, theta[4:]])) < 1.0)

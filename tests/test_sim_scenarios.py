@@ -5,17 +5,27 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
-
 from conftest_sim import FS, SCENARIOS, scenario_path
+
 from fdi_daemon.cli import main
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.recordings import read_recording
 from hil_sim.excitation import chirp
 from hil_sim.scenarios import load_scenario, simulate
 
-EXPECTED = ["ident_chirp", "ident_chirp_long", "test_case_1", "test_case_2",
-            "signature_calibration", "fault_free_hour", "fault_accel_bias", "fault_valve_gain",
-            "fault_supply_pressure", "fault_accel_dropout", "fault_accel_saturation"]
+EXPECTED = [
+    "ident_chirp",
+    "ident_chirp_long",
+    "test_case_1",
+    "test_case_2",
+    "signature_calibration",
+    "fault_free_hour",
+    "fault_accel_bias",
+    "fault_valve_gain",
+    "fault_supply_pressure",
+    "fault_accel_dropout",
+    "fault_accel_saturation",
+]
 
 
 @pytest.mark.parametrize("name", EXPECTED)
@@ -25,8 +35,19 @@ def test_scenarios_load_and_simulate(name):
     assert rec.meta["scenario"] == name
     assert rec.fs == FS
     assert np.all(np.isfinite(rec.accel))
-    assert set(("t", "v_in", "accel", "position", "seq", "friction_force",
-                "seal_friction_force", "fault_active", "bearing_supply")) <= set(rec.columns)
+    assert set(
+        (
+            "t",
+            "v_in",
+            "accel",
+            "position",
+            "seq",
+            "friction_force",
+            "seal_friction_force",
+            "fault_active",
+            "bearing_supply",
+        )
+    ) <= set(rec.columns)
     assert list(rec.columns)[:5] == ["t", "v_in", "accel", "position", "seq"]
 
 
@@ -40,7 +61,7 @@ def test_ident_chirp_is_the_papers_experiment():
     assert len(rec) == 1024
     expected = chirp(np.arange(1024) / FS, 0.7, 0.0, 20.0, 4.0)
     assert np.abs(rec["valve_drive"] - expected).max() < 1e-12
-    assert np.abs(rec.v_in - expected).max() < 5e-3     # ADC noise and quantisation
+    assert np.abs(rec.v_in - expected).max() < 5e-3  # ADC noise and quantisation
     assert np.all(rec["fault_active"] == 0.0)
 
 
@@ -61,7 +82,7 @@ def test_signature_calibration_has_fault_window_and_varied_amplitudes():
     assert np.all(rec["fault_active"][inside] == 1.0)
     assert np.all(rec["fault_active"][rec.t < float(rec.meta["friction_fault_t"])] == 0.0)
     # the velocity amplitude varies (so gamma_f is identifiable) within the fault window
-    whole_segments = rec.t >= 12.5   # segments are 2.5 s long
+    whole_segments = rec.t >= 12.5  # segments are 2.5 s long
     segment_rms = rec["velocity_true"][whole_segments].reshape(-1, 640).std(axis=1)
     assert segment_rms.max() > 2 * segment_rms.min()
     assert {seg["frequency_hz"] for seg in scenario.excitation} == {6.0, 8.0}
@@ -73,8 +94,8 @@ def test_fault_free_hour_drifts_but_stays_fault_free():
     rec = simulate(scenario, duration_s=600.0)
     assert np.all(rec["fault_active"] == 0.0)
     assert np.all(rec["other_fault_active"] == 0.0)
-    assert rec["bearing_supply"].min() < 0.99           # the bearing supply drifts ...
-    assert np.abs(rec["position_true"]).max() < 0.04     # ... the piston stays off the stops
+    assert rec["bearing_supply"].min() < 0.99  # the bearing supply drifts ...
+    assert np.abs(rec["position_true"]).max() < 0.04  # ... the piston stays off the stops
     assert np.abs(rec.v_in).max() < 2.5
     # changing operation: the per-10 s RMS of the drive varies
     rms = rec.v_in[: 600 * 256].reshape(60, -1).std(axis=1)
@@ -92,8 +113,10 @@ def test_random_excitation_depends_on_seed_only():
 
 BAD = [
     ({"colour": 1}, "colour"),
-    ({"excitation": [{"kind": "sine", "amplitude_v": 1, "frequency_hz": 8, "phase": 0}]},
-     "excitation[0].phase"),
+    (
+        {"excitation": [{"kind": "sine", "amplitude_v": 1, "frequency_hz": 8, "phase": 0}]},
+        "excitation[0].phase",
+    ),
     ({"excitation": [{"kind": "square", "amplitude_v": 1}]}, "excitation[0].kind"),
     ({"excitation": [{"kind": "sine", "amplitude_v": 1}]}, "excitation[0].frequency_hz"),
     ({"duration_s": "long"}, "duration_s"),
@@ -106,8 +129,10 @@ BAD = [
 
 @pytest.mark.parametrize("change, key", BAD)
 def test_bad_scenario_is_a_one_line_config_error_naming_the_key(tmp_path, change, key):
-    data = {"duration_s": 2.0, "excitation": [{"kind": "sine", "amplitude_v": 1.0,
-                                               "frequency_hz": 8.0}]}
+    data = {
+        "duration_s": 2.0,
+        "excitation": [{"kind": "sine", "amplitude_v": 1.0, "frequency_hz": 8.0}],
+    }
     data.update(change)
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(data))
@@ -130,8 +155,19 @@ def test_missing_duration_and_broken_yaml(tmp_path):
 
 def test_cli_record_writes_a_readable_recording(tmp_path, capsys):
     out = tmp_path / "tc1.csv"
-    code = main(["sim", "record", str(scenario_path("test_case_1")), "-o", str(out),
-                 "--seed", "7", "--duration", "4"])
+    code = main(
+        [
+            "sim",
+            "record",
+            str(scenario_path("test_case_1")),
+            "-o",
+            str(out),
+            "--seed",
+            "7",
+            "--duration",
+            "4",
+        ]
+    )
     assert code == 0
     rec = read_recording(out)
     assert len(rec) == 4 * 256
@@ -145,20 +181,24 @@ def test_cli_record_writes_a_readable_recording(tmp_path, capsys):
 
 def test_cli_record_npz(tmp_path):
     out = tmp_path / "chirp.npz"
-    assert main(["sim", "record", str(scenario_path("ident_chirp")), "-o", str(out),
-                 "--quiet"]) == 0
+    assert (
+        main(["sim", "record", str(scenario_path("ident_chirp")), "-o", str(out), "--quiet"]) == 0
+    )
     assert len(read_recording(out)) == 1024
 
 
-@pytest.mark.parametrize("argv_tail, fragment", [
-    (["missing.yaml", "-o", "X.csv"], "no such scenario file"),
-    ([str(scenario_path("ident_chirp")), "-o", "X.txt"], "unknown recording format"),
-    ([str(scenario_path("ident_chirp")), "-o", "X.csv", "--duration", "-1"], "--duration"),
-    ([str(scenario_path("ident_chirp")), "-o", "X.dir/x.csv"], "does not exist"),
-    # an IsADirectoryError and a MemoryError traceback, after the simulation / before it
-    ([str(scenario_path("ident_chirp")), "-o", "X.made_dir"], "is a directory"),
-    ([str(scenario_path("ident_chirp")), "-o", "X.csv", "--duration", "1e12"], "memory"),
-])
+@pytest.mark.parametrize(
+    "argv_tail, fragment",
+    [
+        (["missing.yaml", "-o", "X.csv"], "no such scenario file"),
+        ([str(scenario_path("ident_chirp")), "-o", "X.txt"], "unknown recording format"),
+        ([str(scenario_path("ident_chirp")), "-o", "X.csv", "--duration", "-1"], "--duration"),
+        ([str(scenario_path("ident_chirp")), "-o", "X.dir/x.csv"], "does not exist"),
+        # an IsADirectoryError and a MemoryError traceback, after the simulation / before it
+        ([str(scenario_path("ident_chirp")), "-o", "X.made_dir"], "is a directory"),
+        ([str(scenario_path("ident_chirp")), "-o", "X.csv", "--duration", "1e12"], "memory"),
+    ],
+)
 def test_cli_record_bad_input_exits_2_with_one_line(tmp_path, capsys, argv_tail, fragment):
     argv_tail = [str(tmp_path / a) if a.startswith("X.") else a for a in argv_tail]
     (tmp_path / "X.made_dir").mkdir()

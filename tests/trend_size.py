@@ -30,16 +30,27 @@ def main(folder: str, days: float = 365.0) -> None:
     start = time.perf_counter()
     for k in range(n):
         level = 0.08 + 1.2 * k / n + 0.03 * rng.standard_normal()
-        store.append({"minute": first + k, "level_mean": level, "level_min": level - 0.06,
-                      "level_max": level + 0.06, "baseline": 0.08,
-                      "command_rms_v": 0.8 + 0.4 * rng.random(), "readings": 600,
-                      "samples": 15360, "priority": min(3, int(level / 0.4)),
-                      "alarm_state": 1})
+        store.append(
+            {
+                "minute": first + k,
+                "level_mean": level,
+                "level_min": level - 0.06,
+                "level_max": level + 0.06,
+                "baseline": 0.08,
+                "command_rms_v": 0.8 + 0.4 * rng.random(),
+                "readings": 600,
+                "samples": 15360,
+                "priority": min(3, int(level / 0.4)),
+                "alarm_state": 1,
+            }
+        )
         if k in (90 * 1440, 180 * 1440):
             print(f"day {k // 1440}: {path.stat().st_size / 1e6:.2f} MB", flush=True)
     store.close()
-    print(f"{days:g} days, {n} rows appended in {time.perf_counter() - start:.0f} s; "
-          f"{path.name} {path.stat().st_size / 1e6:.2f} MB")
+    print(
+        f"{days:g} days, {n} rows appended in {time.perf_counter() - start:.0f} s; "
+        f"{path.name} {path.stat().st_size / 1e6:.2f} MB"
+    )
 
 
 if __name__ == "__main__":

@@ -37,16 +37,26 @@ def response(f_hz: float, amplitude_v: float = 1.0, settle_s: float = 6.0, seed:
 
     periods = max(4, int(math.ceil(4 * f_hz)))
     duration = settle_s + periods / f_hz
-    rec = simulate(scenario_from_dict({
-        "name": "velocity_response", "duration_s": duration, "seed": seed,
-        "centring_gain_v_per_m": 30.0,
-        "excitation": [{"kind": "sine", "amplitude_v": amplitude_v, "frequency_hz": f_hz}]}))
+    rec = simulate(
+        scenario_from_dict(
+            {
+                "name": "velocity_response",
+                "duration_s": duration,
+                "seed": seed,
+                "centring_gain_v_per_m": 30.0,
+                "excitation": [{"kind": "sine", "amplitude_v": amplitude_v, "frequency_hz": f_hz}],
+            }
+        )
+    )
     model = load_model(REPO / "configs" / "model_sim_rig.yaml")
     xhat = IIRFilter(model.plant_b, model.plant_a).run(rec.v_in)
-    estimates = {"highpass": VelocityEstimator(model.fs).run(rec.accel),
-                 "model_observer": ModelVelocityObserver(model.fs).run(rec.accel, xhat),
-                 "position_observer": PositionVelocityObserver(model.fs, crossover_hz=15.0).run(
-                     rec.accel, rec["position"])}
+    estimates = {
+        "highpass": VelocityEstimator(model.fs).run(rec.accel),
+        "model_observer": ModelVelocityObserver(model.fs).run(rec.accel, xhat),
+        "position_observer": PositionVelocityObserver(model.fs, crossover_hz=15.0).run(
+            rec.accel, rec["position"]
+        ),
+    }
     last = rec.t >= rec.t[-1] - periods / f_hz + 0.5 / model.fs
     truth = _fundamental(rec.columns["velocity_true"][last], rec.t[last], f_hz)
     out = {}
@@ -61,8 +71,10 @@ def table(frequencies=FREQUENCIES_HZ) -> dict[float, dict[str, tuple[float, floa
 
 
 if __name__ == "__main__":
-    print("| f (Hz) | high-pass gain | phase | model observer gain | phase | "
-          "position observer (15 Hz) gain | phase |")
+    print(
+        "| f (Hz) | high-pass gain | phase | model observer gain | phase | "
+        "position observer (15 Hz) gain | phase |"
+    )
     print("|---|---|---|---|---|---|---|")
     for f, row in table().items():
         cells = " | ".join(f"{g:.3f} | {p:+.1f}°" for g, p in row.values())

@@ -16,9 +16,8 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import butter, lfilter
-
 from creeping_friction_episodes import _creep, models
+from scipy.signal import butter, lfilter
 
 PHASES_DEG = (20.0, 25.0, 30.0, 40.0)
 SHARES = (0.2, 0.3, 0.4, 0.5)
@@ -27,7 +26,7 @@ SHARES = (0.2, 0.3, 0.4, 0.5)
 def _window_sums(x: np.ndarray, n: int) -> np.ndarray:
     c = np.concatenate([[0.0], np.cumsum(x)])
     out = np.full(x.size, np.nan)
-    out[n - 1:] = c[n:] - c[:-n]
+    out[n - 1 :] = c[n:] - c[:-n]
     return out
 
 
@@ -56,12 +55,12 @@ def measure(model, rec) -> list[str]:
         theta1 = (s[:, 2] * s[:, 3] - s[:, 1] * s[:, 4]) / (s[:, 0] * s[:, 2] - s[:, 1] ** 2)
         over = monitor.over_baseline(theta1, b.v_rms)
     sel = (np.asarray(rec.columns["t"]) > first) & b.moving & (b.counts == n)
-    v2 = _window_sums(b.velocity ** 2, n)
+    v2 = _window_sums(b.velocity**2, n)
     lines = []
     for phase in PHASES_DEG:
         f_hz = trusted_from_hz(pl.velocity, phase)
         low = lfilter(*butter(2, f_hz, fs=model.fs), b.velocity)
-        share = _window_sums(low ** 2, n) / v2
+        share = _window_sums(low**2, n) / v2
         cells = []
         for bound in SHARES:
             trusted = share <= bound
@@ -78,6 +77,9 @@ if __name__ == "__main__":
         model = models(Path(tmp), ["highpass"])["highpass + baseline"]
         for ramp_s, record_s in ((600.0, 1800.0), (3600.0, 7200.0)):
             spec, _ = _creep(ramp_s, record_s)
-            print(f"creeping over {ramp_s:.0f} s: longest run below half the margin, "
-                  f"trusted share, per phase bound and velocity share", flush=True)
+            print(
+                f"creeping over {ramp_s:.0f} s: longest run below half the margin, "
+                f"trusted share, per phase bound and velocity share",
+                flush=True,
+            )
             print("\n".join(measure(model, simulate(scenario_from_dict(spec)))), flush=True)

@@ -56,15 +56,33 @@ from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-__all__ = ["AlarmSettings", "AlarmLifecycle", "LIFECYCLE_KINDS", "STATES", "STATE_CODES",
-           "DETECTOR_FAULT_KINDS", "DETECTOR_INPUTS"]
+__all__ = [
+    "AlarmSettings",
+    "AlarmLifecycle",
+    "LIFECYCLE_KINDS",
+    "STATES",
+    "STATE_CODES",
+    "DETECTOR_FAULT_KINDS",
+    "DETECTOR_INPUTS",
+]
 
 STATES = ("normal", "unacknowledged", "acknowledged", "returned_unacknowledged")
 #: register codes of the alarm state (4 = shelved, whatever the state underneath)
-STATE_CODES = {"normal": 0, "unacknowledged": 1, "acknowledged": 2,
-               "returned_unacknowledged": 3, "shelved": 4}
-LIFECYCLE_KINDS = ("alarm_raised", "alarm_priority", "alarm_acknowledged", "alarm_shelved",
-                   "alarm_unshelved", "alarm_returned")
+STATE_CODES = {
+    "normal": 0,
+    "unacknowledged": 1,
+    "acknowledged": 2,
+    "returned_unacknowledged": 3,
+    "shelved": 4,
+}
+LIFECYCLE_KINDS = (
+    "alarm_raised",
+    "alarm_priority",
+    "alarm_acknowledged",
+    "alarm_shelved",
+    "alarm_unshelved",
+    "alarm_returned",
+)
 DETECTOR_FAULT_KINDS = ("fault_detected", "friction_isolated", "other_fault")
 #: the detector events that drive the lifecycle
 DETECTOR_INPUTS = frozenset(DETECTOR_FAULT_KINDS + ("cleared",))
@@ -89,15 +107,23 @@ class AlarmSettings:
     def __post_init__(self) -> None:
         steps = tuple(float(s) for s in self.steps)
         object.__setattr__(self, "steps", steps)
-        if not steps or any(not (s > 0 and math.isfinite(s)) for s in steps) \
-                or list(steps) != sorted(set(steps)):
+        if (
+            not steps
+            or any(not (s > 0 and math.isfinite(s)) for s in steps)
+            or list(steps) != sorted(set(steps))
+        ):
             raise ValueError("steps must be positive, finite and strictly increasing")
         if not 0 <= self.deadband < steps[0]:
             raise ValueError("deadband must be in [0, the lowest step)")
         if not 0 < self.return_level <= steps[0] - self.deadband:
             raise ValueError("return_level must be in (0, the lowest step - deadband]")
-        for name in ("raise_delay_s", "lower_delay_s", "return_delay_s", "max_shelve_s",
-                     "smoothing_s"):
+        for name in (
+            "raise_delay_s",
+            "lower_delay_s",
+            "return_delay_s",
+            "max_shelve_s",
+            "smoothing_s",
+        ):
             value = getattr(self, name)
             if not (value >= 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a finite number >= 0")
@@ -106,12 +132,12 @@ class AlarmSettings:
 @dataclass
 class _State:
     state: str = "normal"
-    alarm_id: int = 0            # id of the current (or last) alarm; 0 = none yet
+    alarm_id: int = 0  # id of the current (or last) alarm; 0 = none yet
     started: float | None = None
     classification: str | None = None  # "friction" | "other" | None (not isolated yet)
     priority: int = 0
     peak_priority: int = 0
-    level: float | None = None   # smoothed level (the decisions' input)
+    level: float | None = None  # smoothed level (the decisions' input)
     level_time: float | None = None  # time of the last valid reading
     peak_level: float | None = None
     detector_fault: bool = False
@@ -153,18 +179,25 @@ class AlarmLifecycle:
     def summary(self, now: float) -> dict[str, Any]:
         """What the status snapshot and the registers show."""
         s = self._s
-        return {"state": s.state, "state_code": STATE_CODES["shelved" if self.shelved(now)
-                                                            else s.state],
-                "alarm_id": s.alarm_id, "priority": s.priority,
-                "peak_priority": s.peak_priority, "started": s.started,
-                "classification": s.classification, "level": s.level,
-                "peak_level": s.peak_level, "shelved_until": s.shelved_until,
-                "annunciated": self.active and not self.shelved(now),
-                "counters": dict(s.counters)}
+        return {
+            "state": s.state,
+            "state_code": STATE_CODES["shelved" if self.shelved(now) else s.state],
+            "alarm_id": s.alarm_id,
+            "priority": s.priority,
+            "peak_priority": s.peak_priority,
+            "started": s.started,
+            "classification": s.classification,
+            "level": s.level,
+            "peak_level": s.peak_level,
+            "shelved_until": s.shelved_until,
+            "annunciated": self.active and not self.shelved(now),
+            "counters": dict(s.counters),
+        }
 
     # ------------------------------------------------------------------ inputs
-    def step(self, now: float, level: float | None = None,
-             event: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
+    def step(
+        self, now: float, level: float | None = None, event: Mapping[str, Any] | None = None
+    ) -> list[dict[str, Any]]:
         """One input: the time, a level reading (None/NaN: none) and/or a detector event."""
         s = self._s
         if s.last_time is not None and now < s.last_time:
@@ -178,8 +211,9 @@ class AlarmLifecycle:
         self._on_time(now, out)
         return out
 
-    def run(self, inputs: Iterable[tuple[float, float | None, Mapping[str, Any] | None]]
-            ) -> list[dict[str, Any]]:
+    def run(
+        self, inputs: Iterable[tuple[float, float | None, Mapping[str, Any] | None]]
+    ) -> list[dict[str, Any]]:
         """Batch path: ``step`` over (time, level, event) tuples; same events, same state."""
         out: list[dict[str, Any]] = []
         for now, level, event in inputs:
@@ -198,33 +232,40 @@ class AlarmLifecycle:
         s.acknowledged_at = now
         return True, "acknowledged", [self._event(now, "alarm_acknowledged", by=by)]
 
-    def shelve(self, now: float, duration_s: float, by: str = ""
-               ) -> tuple[bool, str, list[dict]]:
+    def shelve(self, now: float, duration_s: float, by: str = "") -> tuple[bool, str, list[dict]]:
         """Shelve the alarm point for ``duration_s`` (0 < d <= max_shelve_s)."""
-        if not (isinstance(duration_s, (int, float)) and 0 < duration_s
-                <= self.settings.max_shelve_s):
-            return (False, f"shelve duration must be in (0, {self.settings.max_shelve_s:g}] s",
-                    [])
+        if not (
+            isinstance(duration_s, (int, float)) and 0 < duration_s <= self.settings.max_shelve_s
+        ):
+            return (False, f"shelve duration must be in (0, {self.settings.max_shelve_s:g}] s", [])
         self._s.shelved_until = now + float(duration_s)
-        return True, "shelved", [self._event(now, "alarm_shelved", by=by,
-                                             until=self._s.shelved_until)]
+        return (
+            True,
+            "shelved",
+            [self._event(now, "alarm_shelved", by=by, until=self._s.shelved_until)],
+        )
 
     def unshelve(self, now: float, by: str = "") -> tuple[bool, str, list[dict]]:
         if not self.shelved(now):
             return False, "not shelved", []
         self._s.shelved_until = None
-        return True, "unshelved", [self._event(now, "alarm_unshelved", by=by,
-                                               reason="request")]
+        return True, "unshelved", [self._event(now, "alarm_unshelved", by=by, reason="request")]
 
     # ------------------------------------------------------------------ persistence
     def to_dict(self) -> dict[str, Any]:
-        return {"version": STATE_VERSION, "settings": {**asdict(self.settings),
-                                                       "steps": list(self.settings.steps)},
-                "state": {**asdict(self._s)}}
+        return {
+            "version": STATE_VERSION,
+            "settings": {**asdict(self.settings), "steps": list(self.settings.steps)},
+            "state": {**asdict(self._s)},
+        }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], settings: AlarmSettings | None = None,
-                  now: float | None = None) -> "AlarmLifecycle":
+    def from_dict(
+        cls,
+        data: Mapping[str, Any],
+        settings: AlarmSettings | None = None,
+        now: float | None = None,
+    ) -> AlarmLifecycle:
         """Restore a state written by `to_dict` (ValueError if it is not one).
 
         ``settings``: the current settings (default: the stored ones). ``now``: the time of
@@ -234,8 +275,9 @@ class AlarmLifecycle:
             raise ValueError(f"not an alarm state of version {STATE_VERSION}")
         try:
             stored = dict(data["state"])
-            state = _State(**{**stored, "counters": {**_State().counters,
-                                                     **dict(stored.get("counters", {}))}})
+            state = _State(
+                **{**stored, "counters": {**_State().counters, **dict(stored.get("counters", {}))}}
+            )
             if settings is None:
                 settings = AlarmSettings(**data["settings"])
         except (KeyError, TypeError) as exc:
@@ -253,9 +295,16 @@ class AlarmLifecycle:
     def _event(self, now: float, kind: str, **extra: Any) -> dict[str, Any]:
         s = self._s
         s.counters[kind] = s.counters.get(kind, 0) + 1
-        return {"kind": kind, "time": now, "alarm_id": s.alarm_id, "state": s.state,
-                "priority": s.priority, "level": s.level, "shelved": self.shelved(now),
-                **extra}
+        return {
+            "kind": kind,
+            "time": now,
+            "alarm_id": s.alarm_id,
+            "state": s.state,
+            "priority": s.priority,
+            "level": s.level,
+            "shelved": self.shelved(now),
+            **extra,
+        }
 
     def _on_event(self, now: float, event: Mapping[str, Any], out: list) -> None:
         s = self._s
@@ -283,8 +332,7 @@ class AlarmLifecycle:
         s.peak_priority = s.priority
         s.peak_level = s.level
         s.acknowledged_at = None
-        out.append(self._event(now, "alarm_raised", cause=cause,
-                               classification=s.classification))
+        out.append(self._event(now, "alarm_raised", cause=cause, classification=s.classification))
 
     def _crossed(self, level: float) -> int:
         return sum(level >= step for step in self.settings.steps)
@@ -322,17 +370,28 @@ class AlarmLifecycle:
             previous = s.priority
             s.priority += direction
             s.peak_priority = max(s.peak_priority, s.priority)
-            out.append(self._event(now, "alarm_priority", previous=previous,
-                                   step=self.settings.steps[max(s.priority, previous) - 1]))
+            out.append(
+                self._event(
+                    now,
+                    "alarm_priority",
+                    previous=previous,
+                    step=self.settings.steps[max(s.priority, previous) - 1],
+                )
+            )
 
     def _on_time(self, now: float, out: list) -> None:
         s, cfg = self._s, self.settings
         if s.shelved_until is not None and now >= s.shelved_until:
             s.shelved_until = None
             out.append(self._event(now, "alarm_unshelved", reason="expired"))
-        if (self.active and not s.detector_fault and s.cleared_at is not None
-                and now - s.cleared_at >= cfg.return_delay_s
-                and s.low_s is not None and s.low_s >= cfg.return_delay_s):
+        if (
+            self.active
+            and not s.detector_fault
+            and s.cleared_at is not None
+            and now - s.cleared_at >= cfg.return_delay_s
+            and s.low_s is not None
+            and s.low_s >= cfg.return_delay_s
+        ):
             s.state = "normal" if s.state == "acknowledged" else "returned_unacknowledged"
             s.priority = 0
             out.append(self._event(now, "alarm_returned"))

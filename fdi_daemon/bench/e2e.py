@@ -46,8 +46,14 @@ import numpy as np
 import yaml
 
 #: events raised by one sample (link events and bad_sample runs are stamped otherwise)
-SAMPLE_EVENTS = ("calibrated", "fault_detected", "friction_isolated", "other_fault",
-                 "cleared", "data_gap")
+SAMPLE_EVENTS = (
+    "calibrated",
+    "fault_detected",
+    "friction_isolated",
+    "other_fault",
+    "cleared",
+    "data_gap",
+)
 HOUR_S = 3600.0
 STARTUP_TIMEOUT_S = 180.0
 
@@ -79,8 +85,16 @@ class Device:
 
     def __init__(self, transport: str, seed: int = 1) -> None:
         how = ["--modbus-tcp", "127.0.0.1:0"] if transport == "modbus-tcp" else ["--serial"]
-        self.proc = _fdi("sim", "serve", *how, "--seed", str(seed), stdin=subprocess.PIPE,
-                         stdout=subprocess.PIPE, text=True)
+        self.proc = _fdi(
+            "sim",
+            "serve",
+            *how,
+            "--seed",
+            str(seed),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         try:
             self._connect(transport, how)
         except BaseException:  # a SIGTERM or Ctrl-C while it starts: stop it too
@@ -102,8 +116,12 @@ class Device:
         self.fs_hz = float(status["fs_hz"])
         if transport == "modbus-tcp":
             host, port = self.where.rsplit(":", 1)
-            self.link = {"kind": "modbus-tcp", "host": host, "port": int(port),
-                         "poll_interval_s": 0.01}
+            self.link = {
+                "kind": "modbus-tcp",
+                "host": host,
+                "port": int(port),
+                "poll_interval_s": 0.01,
+            }
         else:
             self.link = {"kind": "serial", "port": self.where}
 
@@ -140,20 +158,37 @@ class Daemon:
     def __init__(self, link: dict, model: Path, state_dir: Path, recorder: bool = True) -> None:
         self.state_dir = state_dir
         config = {
-            "link": {**link, "reconnect": {"backoff_initial_s": 0.1, "backoff_max_s": 1.0,
-                                           "stall_timeout_s": 3.0}}
-            if link["kind"] not in ("sim", "replay") else link,
+            "link": {
+                **link,
+                "reconnect": {
+                    "backoff_initial_s": 0.1,
+                    "backoff_max_s": 1.0,
+                    "stall_timeout_s": 3.0,
+                },
+            }
+            if link["kind"] not in ("sim", "replay")
+            else link,
             "model": {"path": str(model)},
-            "sinks": {"event_log": "events.jsonl", "stdout": False,
-                      "status_socket": "status.sock", "modbus_status": {"enabled": False}},
+            "sinks": {
+                "event_log": "events.jsonl",
+                "stdout": False,
+                "status_socket": "status.sock",
+                "modbus_status": {"enabled": False},
+            },
             "recorder": {"enabled": recorder, "dir": "recordings", "rotate_seconds": 3600},
             "service": {"state_dir": str(state_dir)},
         }
         path = state_dir / "rig.yaml"
         path.write_text(yaml.safe_dump(config))
         self.stderr = open(state_dir / "daemon.stderr", "w")
-        self.proc = _fdi("run", "--config", str(path), stdout=subprocess.DEVNULL,
-                         stderr=self.stderr, cwd=state_dir)
+        self.proc = _fdi(
+            "run",
+            "--config",
+            str(path),
+            stdout=subprocess.DEVNULL,
+            stderr=self.stderr,
+            cwd=state_dir,
+        )
         self.events_path = state_dir / "events.jsonl"
 
     def snapshot(self) -> dict | None:
@@ -168,8 +203,10 @@ class Daemon:
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
             if self.proc.poll() is not None:
-                raise RuntimeError(f"the daemon exited while waiting for {what}: "
-                                   f"{(self.state_dir / 'daemon.stderr').read_text()[-2000:]}")
+                raise RuntimeError(
+                    f"the daemon exited while waiting for {what}: "
+                    f"{(self.state_dir / 'daemon.stderr').read_text()[-2000:]}"
+                )
             snap = self.snapshot()
             if snap is not None and predicate(snap):
                 return snap
@@ -237,8 +274,10 @@ class EventWatcher:
         end = time.monotonic() + timeout_s
         while self.count(*kinds) < count:
             if time.monotonic() > end:
-                raise RuntimeError(f"timed out waiting for {' or '.join(kinds)} #{count}; "
-                                   f"events seen: {self.kinds()}")
+                raise RuntimeError(
+                    f"timed out waiting for {' or '.join(kinds)} #{count}; "
+                    f"events seen: {self.kinds()}"
+                )
             time.sleep(0.01)
 
     def stop(self) -> None:
@@ -250,12 +289,17 @@ def _percentiles(values_ms: list[float]) -> dict:
     arr = np.asarray(values_ms, dtype=float)
     if arr.size == 0:
         return {"p50": None, "p99": None, "max": None, "events": 0}
-    return {"p50": float(np.percentile(arr, 50)), "p99": float(np.percentile(arr, 99)),
-            "max": float(arr.max()), "events": int(arr.size)}
+    return {
+        "p50": float(np.percentile(arr, 50)),
+        "p99": float(np.percentile(arr, 99)),
+        "max": float(arr.max()),
+        "events": int(arr.size),
+    }
 
 
-def measure_link(transport: str, model: Path, fault_cycles: int, stalls: int,
-                 cpu_window_s: float, work_dir: Path) -> dict:
+def measure_link(
+    transport: str, model: Path, fault_cycles: int, stalls: int, cpu_window_s: float, work_dir: Path
+) -> dict:
     """Latency and CPU share of the daemon on one transport (see the module docstring)."""
     state = work_dir / transport
     state.mkdir()
@@ -263,16 +307,17 @@ def measure_link(transport: str, model: Path, fault_cycles: int, stalls: int,
     daemon = watcher = None
     try:
         daemon = Daemon(device.link, model, state)
-        daemon.wait_for(lambda s: s.get("state") == "monitoring", STARTUP_TIMEOUT_S,
-                        "monitoring")
+        daemon.wait_for(lambda s: s.get("state") == "monitoring", STARTUP_TIMEOUT_S, "monitoring")
         first = daemon.snapshot()
         cpu0, wall0 = daemon.cpu_s(), time.monotonic()
         time.sleep(cpu_window_s)
         cpu1, wall1 = daemon.cpu_s(), time.monotonic()
         last = daemon.snapshot()
-        cpu = {"percent_of_one_core": 100.0 * (cpu1 - cpu0) / (wall1 - wall0),
-               "window_s": wall1 - wall0,
-               "samples_in_window": last["link"]["samples"] - first["link"]["samples"]}
+        cpu = {
+            "percent_of_one_core": 100.0 * (cpu1 - cpu0) / (wall1 - wall0),
+            "window_s": wall1 - wall0,
+            "samples_in_window": last["link"]["samples"] - first["link"]["samples"],
+        }
 
         watcher = EventWatcher(daemon.events_path)
         for cycle in range(1, fault_cycles + 1):
@@ -289,9 +334,11 @@ def measure_link(transport: str, model: Path, fault_cycles: int, stalls: int,
             time.sleep(0.3)
         time.sleep(0.2)
         watcher.stop()
-        latency = [(e["kind"], 1e3 * (seen - device.sent_at(e["t"])))
-                   for seen, e in watcher.seen if e["kind"] in SAMPLE_EVENTS
-                   and isinstance(e.get("t"), (int, float))]
+        latency = [
+            (e["kind"], 1e3 * (seen - device.sent_at(e["t"])))
+            for seen, e in watcher.seen
+            if e["kind"] in SAMPLE_EVENTS and isinstance(e.get("t"), (int, float))
+        ]
         final = daemon.snapshot() or {}
     finally:
         if watcher is not None:
@@ -299,39 +346,60 @@ def measure_link(transport: str, model: Path, fault_cycles: int, stalls: int,
         if daemon is not None:
             daemon.stop()
         device.stop()
-    by_kind = {kind: _percentiles([ms for k, ms in latency if k == kind])
-               for kind in dict.fromkeys(k for k, _ in latency)}
-    return {"latency_ms": _percentiles([ms for _, ms in latency]), "by_kind": by_kind,
-            "cpu": cpu, "deadline_misses": final.get("link", {}).get("deadline_misses"),
-            "samples": final.get("link", {}).get("samples"),
-            "lateness_us": final.get("link", {}).get("lateness_us"),
-            "other_fault_events": watcher.kinds().count("other_fault")}
+    by_kind = {
+        kind: _percentiles([ms for k, ms in latency if k == kind])
+        for kind in dict.fromkeys(k for k, _ in latency)
+    }
+    return {
+        "latency_ms": _percentiles([ms for _, ms in latency]),
+        "by_kind": by_kind,
+        "cpu": cpu,
+        "deadline_misses": final.get("link", {}).get("deadline_misses"),
+        "samples": final.get("link", {}).get("samples"),
+        "lateness_us": final.get("link", {}).get("lateness_us"),
+        "other_fault_events": watcher.kinds().count("other_fault"),
+    }
 
 
 def measure_memory(model: Path, simulated_s: float, work_dir: Path) -> dict:
     """Resident memory of the daemon after ``simulated_s`` of samples (see the docstring)."""
     state = work_dir / "memory"
     state.mkdir()
-    scenario = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / \
-        "fault_free_hour.yaml"
-    link = {"kind": "sim", "realtime": False, "seed": 3,
-            "scenario": str(scenario) if scenario.exists() else None}
+    scenario = (
+        Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "fault_free_hour.yaml"
+    )
+    link = {
+        "kind": "sim",
+        "realtime": False,
+        "seed": 3,
+        "scenario": str(scenario) if scenario.exists() else None,
+    }
     daemon = Daemon(link, model, state)
     try:
-        start = daemon.wait_for(lambda s: s.get("state") == "monitoring", STARTUP_TIMEOUT_S,
-                                "monitoring")
+        start = daemon.wait_for(
+            lambda s: s.get("state") == "monitoring", STARTUP_TIMEOUT_S, "monitoring"
+        )
         at_start = {**daemon.memory_mib(), "t": start["t"]}
         wall0 = time.monotonic()
-        end = daemon.wait_for(lambda s: (s.get("t") or 0) >= simulated_s,
-                              max(600.0, simulated_s), f"{simulated_s:g} s of samples")
+        end = daemon.wait_for(
+            lambda s: (s.get("t") or 0) >= simulated_s,
+            max(600.0, simulated_s),
+            f"{simulated_s:g} s of samples",
+        )
         wall = time.monotonic() - wall0
         after = {**daemon.memory_mib(), "t": end["t"]}
         samples = end["link"]["samples"]
     finally:
         daemon.stop()
-    return {"simulated_s": simulated_s, "samples": samples, "at_monitoring_mib": at_start,
-            "after_mib": after, "growth_mib": after["VmRSS"] - at_start["VmRSS"],
-            "wall_s": wall, "scenario": link["scenario"] or "device default"}
+    return {
+        "simulated_s": simulated_s,
+        "samples": samples,
+        "at_monitoring_mib": at_start,
+        "after_mib": after,
+        "growth_mib": after["VmRSS"] - at_start["VmRSS"],
+        "wall_s": wall,
+        "scenario": link["scenario"] or "device default",
+    }
 
 
 def bench_e2e(quick: bool = False, model: str | Path | None = None) -> dict:
@@ -363,12 +431,18 @@ def e2e_table(e2e: dict):
         r = e2e[transport]
         lat = r["latency_ms"]
         if lat["events"]:
-            table.add_row(f"{transport}: sample -> event written p50 / p99 (ms)",
-                          f"{lat['p50']:.1f} / {lat['p99']:.1f}  ({lat['events']} events)")
-        table.add_row(f"{transport}: daemon CPU at 256 Hz (% of one core)",
-                      f"{r['cpu']['percent_of_one_core']:.1f}")
+            table.add_row(
+                f"{transport}: sample -> event written p50 / p99 (ms)",
+                f"{lat['p50']:.1f} / {lat['p99']:.1f}  ({lat['events']} events)",
+            )
+        table.add_row(
+            f"{transport}: daemon CPU at 256 Hz (% of one core)",
+            f"{r['cpu']['percent_of_one_core']:.1f}",
+        )
     mem = e2e["memory"]
-    table.add_row(f"resident memory after {mem['simulated_s'] / 60:g} simulated min (MiB)",
-                  f"{mem['after_mib']['VmRSS']:.0f} (at start {mem['at_monitoring_mib']['VmRSS']:.0f},"
-                  f" peak {mem['after_mib']['VmHWM']:.0f})")
+    table.add_row(
+        f"resident memory after {mem['simulated_s'] / 60:g} simulated min (MiB)",
+        f"{mem['after_mib']['VmRSS']:.0f} (at start {mem['at_monitoring_mib']['VmRSS']:.0f},"
+        f" peak {mem['after_mib']['VmHWM']:.0f})",
+    )
     return table

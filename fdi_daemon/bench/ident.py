@@ -21,8 +21,12 @@ N_SAMPLES = 1024
 
 
 def _plant_data(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    poles = [0.85 * np.exp(2j * np.pi * 8 / FS_HZ), 0.85 * np.exp(-2j * np.pi * 8 / FS_HZ),
-             0.9, 0.6]
+    poles = [
+        0.85 * np.exp(2j * np.pi * 8 / FS_HZ),
+        0.85 * np.exp(-2j * np.pi * 8 / FS_HZ),
+        0.9,
+        0.6,
+    ]
     a = np.real(np.poly(poles))
     b = 0.05 * np.concatenate([[0.0], np.real(np.poly([1.0, -0.5, 0.3]))])
     t = np.arange(N_SAMPLES) / FS_HZ
@@ -35,7 +39,7 @@ def _signature_data(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     f = np.real(np.poly([0.9 * np.exp(0.3j), 0.9 * np.exp(-0.3j), 0.7]))
     b = np.array([-0.10, 0.06, -0.04, -0.02])
     t = np.arange(N_SAMPLES) / FS_HZ
-    v = 0.1 * (0.3 + 0.7 * t / t[-1]) * np.sin(2 * np.pi * (2.0 * t + 0.75 * t ** 2))
+    v = 0.1 * (0.3 + 0.7 * t / t[-1]) * np.sin(2 * np.pi * (2.0 * t + 0.75 * t**2))
     r = signal.lfilter(b, f, np.sign(v) + 3.0 * v)
     return r + 0.05 * np.std(r) * rng.standard_normal(N_SAMPLES), v
 

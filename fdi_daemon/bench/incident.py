@@ -29,21 +29,37 @@ def creeping_fault_scenarios(duration_s: float, seed: int = 0):
         "duration_s": float(duration_s),
         "seed": int(seed),
         "centring_gain_v_per_m": 30.0,
-        "excitation": [{"kind": "random", "amplitude_v": [0.8, 1.6],
-                        "frequency_hz": [1.0, 9.0], "segment_s": [5.0, 40.0]}],
+        "excitation": [
+            {
+                "kind": "random",
+                "amplitude_v": [0.8, 1.6],
+                "frequency_hz": [1.0, 9.0],
+                "segment_s": [5.0, 40.0],
+            }
+        ],
     }
     third = duration_s / 3.0
-    ramp = {"bearing_supply": {"times_s": [0.0, third, 2 * third, duration_s],
-                               "values": [1.0, 1.0, FAULT_BEARING_SUPPLY,
-                                          FAULT_BEARING_SUPPLY]}}
-    return (scenario_from_dict({**base, "name": "bench_quiet"}),
-            scenario_from_dict({**base, "name": "bench_creeping_fault", "drift": ramp}))
+    ramp = {
+        "bearing_supply": {
+            "times_s": [0.0, third, 2 * third, duration_s],
+            "values": [1.0, 1.0, FAULT_BEARING_SUPPLY, FAULT_BEARING_SUPPLY],
+        }
+    }
+    return (
+        scenario_from_dict({**base, "name": "bench_quiet"}),
+        scenario_from_dict({**base, "name": "bench_creeping_fault", "drift": ramp}),
+    )
 
 
 def _figures(rec, wall_s: float, cpu_s: float, events: list) -> dict:
-    return {"samples": len(rec), "wall_s": wall_s, "cpu_s": cpu_s,
-            "samples_per_s": len(rec) / wall_s, "samples_per_cpu_s": len(rec) / cpu_s,
-            "alarm_episodes": sum(e["kind"] == "fault_detected" for e in events)}
+    return {
+        "samples": len(rec),
+        "wall_s": wall_s,
+        "cpu_s": cpu_s,
+        "samples_per_s": len(rec) / wall_s,
+        "samples_per_cpu_s": len(rec) / cpu_s,
+        "alarm_episodes": sum(e["kind"] == "fault_detected" for e in events),
+    }
 
 
 def bench_incident_replay(duration_s: float = 1800.0, seed: int = 0, passes: int = 3) -> dict:
@@ -67,12 +83,19 @@ def bench_incident_replay(duration_s: float = 1800.0, seed: int = 0, passes: int
 
         def replay(name, rec):
             return lambda part: events[name].extend(
-                monitors[name].run(rec.samples(part), trace_every=BLOCK)[0])
+                monitors[name].run(rec.samples(part), trace_every=BLOCK)[0]
+            )
 
-        spent.append(side_by_side([replay("quiet", quiet), replay("incident", incident)],
-                                  len(quiet)))
+        spent.append(
+            side_by_side([replay("quiet", quiet), replay("incident", incident)], len(quiet))
+        )
     (q_wall, q_cpu), (i_wall, i_cpu) = np.median(spent, axis=0)
     q = _figures(quiet, q_wall, q_cpu, events["quiet"])
     i = _figures(incident, i_wall, i_cpu, events["incident"])
-    return {"duration_s": float(duration_s), "passes": passes, "quiet": q, "incident": i,
-            "incident_over_quiet": i["samples_per_s"] / q["samples_per_s"]}
+    return {
+        "duration_s": float(duration_s),
+        "passes": passes,
+        "quiet": q,
+        "incident": i,
+        "incident_over_quiet": i["samples_per_s"] / q["samples_per_s"],
+    }

@@ -43,10 +43,13 @@ def _system():
     coulomb_n, viscous = 0.5, 2.0
     num, den = friction_tf(params)
     plant_b, plant_a = nominal_tf(params)
-    model = FdiModel(fs=FS_HZ, plant_b=plant_b, plant_a=plant_a,
-                     fault_filter=FaultFilter(b=-coulomb_n * num, f=den, nk=0,
-                                              gamma_f=viscous / coulomb_n),
-                     velocity=VelocityEstimator(FS_HZ).settings())
+    model = FdiModel(
+        fs=FS_HZ,
+        plant_b=plant_b,
+        plant_a=plant_a,
+        fault_filter=FaultFilter(b=-coulomb_n * num, f=den, nk=0, gamma_f=viscous / coulomb_n),
+        velocity=VelocityEstimator(FS_HZ).settings(),
+    )
     u = multisine(BLOCK_S, FS_HZ, 1.0, 12.0, 0.7, seed=1, n_tones=6)
     out = MsdSimulator(params, seed=0).run(u)
     return model, out["v_in"], out["accel"]
@@ -61,8 +64,12 @@ class _Baseline:
         vel = VelocityEstimator.from_settings(model.velocity, model.fs)
         ff = model.fault_filter
         b_e = np.concatenate([np.zeros(ff.nk), ff.b])
-        self.filters = [[np.asarray(model.plant_b), np.asarray(model.plant_a)],
-                        [vel.b, vel.a], [b_e, ff.f], [b_e, ff.f]]
+        self.filters = [
+            [np.asarray(model.plant_b), np.asarray(model.plant_a)],
+            [vel.b, vel.a],
+            [b_e, ff.f],
+            [b_e, ff.f],
+        ]
         self.zi = [np.zeros(max(len(b), len(a)) - 1) for b, a in self.filters]
         self.n = window_samples
         self.g1: list[float] = []
@@ -86,8 +93,9 @@ class _Baseline:
             del self.g1[0], self.g2[0], self.r[0]
         if len(self.r) < self.n:
             return float("nan"), float("nan")
-        theta = np.linalg.lstsq(np.column_stack([self.g1, self.g2]), np.asarray(self.r),
-                                rcond=None)[0]
+        theta = np.linalg.lstsq(
+            np.column_stack([self.g1, self.g2]), np.asarray(self.r), rcond=None
+        )[0]
         return float(theta[0]), float(theta[1])
 
 
@@ -109,8 +117,9 @@ def _tick_times_us(steps, v_in, accel, warmup: int) -> list[tuple[np.ndarray, np
     return [(wall[j, warmup:] / 1e3, used[j, warmup:] / 1e3) for j in range(len(steps))]
 
 
-def _batch_pair(model, window: int, rec, v_in: np.ndarray, accel: np.ndarray
-                ) -> tuple[np.ndarray, list]:
+def _batch_pair(
+    model, window: int, rec, v_in: np.ndarray, accel: np.ndarray
+) -> tuple[np.ndarray, list]:
     """One pass over the batch data by a new monitor (``Monitor.run``) and a new reference
     chain, side by side (`bench.side_by_side`); returns (monitor wall s, monitor CPU s,
     reference wall s, reference CPU s) and the monitor's events."""
@@ -122,14 +131,22 @@ def _batch_pair(model, window: int, rec, v_in: np.ndarray, accel: np.ndarray
     ref = ReferenceChain.from_model(model, window)
     events: list = []
     spent = side_by_side(
-        [lambda part: events.extend(monitor.run(rec.samples(part), trace_every=BLOCK)[0]),
-         lambda part: ref.run(v_in[part], accel[part])], len(v_in))
+        [
+            lambda part: events.extend(monitor.run(rec.samples(part), trace_every=BLOCK)[0]),
+            lambda part: ref.run(v_in[part], accel[part]),
+        ],
+        len(v_in),
+    )
     return spent.ravel(), events
 
 
-def bench_monitor(step_samples: int = 20_000, batch_samples: int = 2_000_000,
-                  baseline_samples: int = 3_000, incident_s: float = 1800.0,
-                  batch_pairs: int = 5) -> dict:
+def bench_monitor(
+    step_samples: int = 20_000,
+    batch_samples: int = 2_000_000,
+    baseline_samples: int = 3_000,
+    incident_s: float = 1800.0,
+    batch_pairs: int = 5,
+) -> dict:
     """Measure; returns a dict of numbers (see `fdi bench`). incident_s: length of the
     incident and quiet recordings (0: leave the incident replay out); batch_pairs: passes
     over the batch data, the monitor and the reference chain taking its blocks in turn
@@ -150,27 +167,37 @@ def bench_monitor(step_samples: int = 20_000, batch_samples: int = 2_000_000,
     warmup = 2 * int(FS_HZ)
 
     window = Monitor(model).detector.window_samples
-    rec = Recording({"t": t_all[:batch_samples], "v_in": v_all[:batch_samples],
-                     "accel": a_all[:batch_samples]}, {"fs": str(FS_HZ)})
+    rec = Recording(
+        {"t": t_all[:batch_samples], "v_in": v_all[:batch_samples], "accel": a_all[:batch_samples]},
+        {"fs": str(FS_HZ)},
+    )
     Monitor(model).run(rec.samples(slice(0, 4 * warmup)))  # load the compiled kernels first
-    ReferenceChain.from_model(model, window).run(v_all[:4 * warmup], a_all[:4 * warmup])
+    ReferenceChain.from_model(model, window).run(v_all[: 4 * warmup], a_all[: 4 * warmup])
     monitor = Monitor(model)
     ref = ReferenceChain.from_model(model, window)
-    vs, accs, ts = (v_all[:step_samples].tolist(), a_all[:step_samples].tolist(),
-                    t_all[:step_samples].tolist())
+    vs, accs, ts = (
+        v_all[:step_samples].tolist(),
+        a_all[:step_samples].tolist(),
+        t_all[:step_samples].tolist(),
+    )
     (step_us, step_cpu_us), (ref_us, ref_cpu_us) = _tick_times_us(
         [lambda k, v, a: monitor.step(Sample(k, ts[k], v, a)), lambda k, v, a: ref.step(v, a)],
-        vs, accs, warmup)
+        vs,
+        accs,
+        warmup,
+    )
 
     base = _Baseline(model, window)
     base_v = v_all[:baseline_samples].tolist()
     base_a = a_all[:baseline_samples].tolist()
-    [(base_us, base_cpu_us)] = _tick_times_us([lambda k, v, a: base.step(v, a)], base_v,
-                                              base_a, min(warmup, baseline_samples // 2))
+    [(base_us, base_cpu_us)] = _tick_times_us(
+        [lambda k, v, a: base.step(v, a)], base_v, base_a, min(warmup, baseline_samples // 2)
+    )
     pairs = []  # (monitor wall s, monitor CPU s, reference wall s, reference CPU s)
     for _ in range(batch_pairs):
-        spent, events = _batch_pair(model, window, rec, v_all[:batch_samples],
-                                    a_all[:batch_samples])
+        spent, events = _batch_pair(
+            model, window, rec, v_all[:batch_samples], a_all[:batch_samples]
+        )
         pairs.append(spent)
     batch_s, batch_cpu_s, ref_s, ref_cpu_s = np.median(pairs, axis=0)
     shares = [p[3] / p[1] for p in pairs]
@@ -188,30 +215,40 @@ def bench_monitor(step_samples: int = 20_000, batch_samples: int = 2_000_000,
         "batch_samples_per_cpu_s": batch_samples / batch_cpu_s,
         "batch_samples": int(batch_samples),
         "batch_alarm_episodes": sum(e["kind"] == "fault_detected" for e in events),
-        "baseline_step_us": {"p50": b50, "p99": b99, "max": bworst,
-                             "samples": int(base_us.size)},
+        "baseline_step_us": {"p50": b50, "p99": b99, "max": bworst, "samples": int(base_us.size)},
         "baseline_samples_per_s": base_rate,
         "step_speedup_p50": b50 / p50,
         "batch_speedup": rate / base_rate,
-        "reference_step_us": {"p50": float(np.median(ref_us)),
-                              "p99": float(np.percentile(ref_us, 99)),
-                              "samples": int(ref_us.size)},
+        "reference_step_us": {
+            "p50": float(np.median(ref_us)),
+            "p99": float(np.percentile(ref_us, 99)),
+            "samples": int(ref_us.size),
+        },
         "reference_step_cpu_us_p50": float(np.median(ref_cpu_us)),
         "reference_samples_per_s": batch_samples / ref_s,
         "reference_samples_per_cpu_s": batch_samples / ref_cpu_s,
         "step_cpu_over_reference": float(np.median(step_cpu_us)) / float(np.median(ref_cpu_us)),
         "batch_cpu_share_of_reference": float(np.median(shares)),
         "batch_cpu_share_by_pair": [round(float(x), 4) for x in shares],
-        **({"incident_replay_samples_per_s": incident["incident"]["samples_per_s"],
-            "incident_replay_samples_per_cpu_s": incident["incident"]["samples_per_cpu_s"],
-            "quiet_replay_samples_per_s": incident["quiet"]["samples_per_s"],
-            "quiet_replay_samples_per_cpu_s": incident["quiet"]["samples_per_cpu_s"],
-            "incident_over_quiet_cpu": incident["incident"]["samples_per_cpu_s"]
-                                       / incident["quiet"]["samples_per_cpu_s"],
-            "incident_replay": incident} if incident else {}),
+        **(
+            {
+                "incident_replay_samples_per_s": incident["incident"]["samples_per_s"],
+                "incident_replay_samples_per_cpu_s": incident["incident"]["samples_per_cpu_s"],
+                "quiet_replay_samples_per_s": incident["quiet"]["samples_per_s"],
+                "quiet_replay_samples_per_cpu_s": incident["quiet"]["samples_per_cpu_s"],
+                "incident_over_quiet_cpu": incident["incident"]["samples_per_cpu_s"]
+                / incident["quiet"]["samples_per_cpu_s"],
+                "incident_replay": incident,
+            }
+            if incident
+            else {}
+        ),
         "tick_budget_us": 1e6 / FS_HZ,
-        "targets": {"step_p50_us": 30.0, "batch_samples_per_s": 1_000_000.0,
-                    "step_cpu_over_reference_max": 3.0,
-                    "batch_cpu_share_of_reference_min": 0.3,
-                    "incident_over_quiet_cpu_min": 0.5},
+        "targets": {
+            "step_p50_us": 30.0,
+            "batch_samples_per_s": 1_000_000.0,
+            "step_cpu_over_reference_max": 3.0,
+            "batch_cpu_share_of_reference_min": 0.3,
+            "incident_over_quiet_cpu_min": 0.5,
+        },
     }

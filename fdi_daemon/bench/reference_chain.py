@@ -101,8 +101,8 @@ class ReferenceChain:
         self.a = np.zeros((4, width))
         for row, (b, a) in enumerate(filters):
             a0 = float(a[0])
-            self.b[row, :len(b)] = np.asarray(b, dtype=float) / a0
-            self.a[row, :len(a)] = np.asarray(a, dtype=float) / a0
+            self.b[row, : len(b)] = np.asarray(b, dtype=float) / a0
+            self.a[row, : len(a)] = np.asarray(a, dtype=float) / a0
         self.z = np.zeros((4, width - 1))
         self.ring = np.zeros((int(window_samples), 3))
         self.sums = np.zeros(6)
@@ -110,14 +110,20 @@ class ReferenceChain:
         self.out = np.empty(2)
 
     @classmethod
-    def from_model(cls, model, window_samples: int) -> "ReferenceChain":
+    def from_model(cls, model, window_samples: int) -> ReferenceChain:
         """The chain of a monitor built on ``model`` (its Ĝ, velocity estimator and G_e)."""
         from fdi_daemon.detect.pipeline import Pipeline
 
         pl = Pipeline(model, window_samples)
-        return cls([(pl.plant.b, pl.plant.a), (pl.velocity.b, pl.velocity.a),
-                    (pl.ge_sign.b, pl.ge_sign.a), (pl.ge_velocity.b, pl.ge_velocity.a)],
-                   window_samples)
+        return cls(
+            [
+                (pl.plant.b, pl.plant.a),
+                (pl.velocity.b, pl.velocity.a),
+                (pl.ge_sign.b, pl.ge_sign.a),
+                (pl.ge_velocity.b, pl.ge_velocity.a),
+            ],
+            window_samples,
+        )
 
     def step(self, v_in: float, accel: float) -> None:
         """One compiled call for one sample; θ in ``out``."""
@@ -127,7 +133,17 @@ class ReferenceChain:
         """One compiled call over arrays; θ per sample."""
         theta1 = np.empty(len(v_in))
         theta2 = np.empty(len(v_in))
-        _run(self.b, self.a, self.z, self.ring, self.sums, self.idx,
-             np.ascontiguousarray(v_in, dtype=float), np.ascontiguousarray(accel, dtype=float),
-             theta1, theta2, self.out)
+        _run(
+            self.b,
+            self.a,
+            self.z,
+            self.ring,
+            self.sums,
+            self.idx,
+            np.ascontiguousarray(v_in, dtype=float),
+            np.ascontiguousarray(accel, dtype=float),
+            theta1,
+            theta2,
+            self.out,
+        )
         return theta1, theta2

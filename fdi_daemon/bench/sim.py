@@ -29,11 +29,19 @@ def bench_sim(duration_s: float = 300.0, seed: int = 0) -> dict:
     scenario = Scenario(
         name="bench_changing_operation",
         duration_s=duration_s,
-        excitation=[{"kind": "random", "amplitude_v": (0.3, 1.6), "frequency_hz": (1.0, 12.0),
-                     "segment_s": (5.0, 60.0)}],
+        excitation=[
+            {
+                "kind": "random",
+                "amplitude_v": (0.3, 1.6),
+                "frequency_hz": (1.0, 12.0),
+                "segment_s": (5.0, 60.0),
+            }
+        ],
         centring_gain_v_per_m=30.0,
-        drift={"supply_pressure": {"times_s": [0.0, HOUR_S], "values": [1.0, 0.97]},
-               "temperature_k": {"times_s": [0.0, HOUR_S], "values": [293.0, 303.0]}},
+        drift={
+            "supply_pressure": {"times_s": [0.0, HOUR_S], "values": [1.0, 0.97]},
+            "temperature_k": {"times_s": [0.0, HOUR_S], "values": [293.0, 303.0]},
+        },
     )
     t0 = time.perf_counter()
     simulate(scenario, seed=seed, duration_s=1.0)

@@ -10,18 +10,33 @@ HELP = "store the fault-free friction level per operating condition in the model
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", metavar="REC",
-                        help="fault-free recording of the rig's normal, changing operation "
-                             "(minutes)")
-    parser.add_argument("--model", required=True, metavar="MODEL.yaml",
-                        help="model file with plant and signature")
-    parser.add_argument("-o", "--output", required=True, metavar="MODEL.yaml",
-                        help="model file to write (may equal --model)")
-    parser.add_argument("--min-seconds", type=float, default=20.0,
-                        help="valid (moving) data each velocity bin must hold "
-                             "(default %(default)s)")
-    parser.add_argument("--max-bins", type=int, default=8,
-                        help="at most this many velocity-RMS bins (default %(default)s)")
+    parser.add_argument(
+        "recording",
+        metavar="REC",
+        help="fault-free recording of the rig's normal, changing operation (minutes)",
+    )
+    parser.add_argument(
+        "--model", required=True, metavar="MODEL.yaml", help="model file with plant and signature"
+    )
+    parser.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="MODEL.yaml",
+        help="model file to write (may equal --model)",
+    )
+    parser.add_argument(
+        "--min-seconds",
+        type=float,
+        default=20.0,
+        help="valid (moving) data each velocity bin must hold (default %(default)s)",
+    )
+    parser.add_argument(
+        "--max-bins",
+        type=int,
+        default=8,
+        help="at most this many velocity-RMS bins (default %(default)s)",
+    )
     add_columns_option(parser)
 
 
@@ -39,13 +54,15 @@ def run(args: argparse.Namespace) -> int:
 
     if not (math.isfinite(args.min_seconds) and args.min_seconds > 0) or args.max_bins < 1:
         raise UserError("--min-seconds must be a finite number > 0 and --max-bins >= 1")
-    check_outputs({"--output": args.output}, (args.recording, args.model),
-                  rewrites={"--output": args.model})
+    check_outputs(
+        {"--output": args.output}, (args.recording, args.model), rewrites={"--output": args.model}
+    )
     model = load_model(args.model)
     rec, v_in, accel = load_io(args.recording, args.columns)
     if not same_rate(rec.fs, model.fs):
-        raise UserError(f"{args.recording}: fs = {rec.fs:g} Hz but the model has "
-                        f"fs = {model.fs:g} Hz")
+        raise UserError(
+            f"{args.recording}: fs = {rec.fs:g} Hz but the model has fs = {model.fs:g} Hz"
+        )
     model.extra.pop("baseline", None)  # a new baseline replaces the old one
     monitor = Monitor(model)
     pipeline = monitor.pipeline
@@ -60,24 +77,29 @@ def run(args: argparse.Namespace) -> int:
         "bins": bins,
         "binned_by": "window velocity RMS (m/s)",
         "quantities": QUANTITIES,
-        "provenance": {**provenance.source_entry(args.recording,
-                                                 provenance.command_line("baseline", args)),
-                       "samples": int(len(v_in)),
-                       "valid_seconds": valid_s},
+        "provenance": {
+            **provenance.source_entry(args.recording, provenance.command_line("baseline", args)),
+            "samples": int(len(v_in)),
+            "valid_seconds": valid_s,
+        },
     }
     # the fault-free recording replayed against its own baseline: it must stay silent
     events, _ = Monitor(model).run(rec)
     episodes = sum(e["kind"] == "fault_detected" for e in events)
     model.extra["baseline"]["provenance"]["alarm_episodes_on_source"] = int(episodes)
     save_model(args.output, model)
-    print(f"baseline          : {len(bins)} bin(s) of the window velocity RMS, "
-          f"{valid_s:.0f} s of valid windows")
+    print(
+        f"baseline          : {len(bins)} bin(s) of the window velocity RMS, "
+        f"{valid_s:.0f} s of valid windows"
+    )
     for b in bins:
         lo, hi = b["v_rms_mps"]
-        print(f"  v_rms {1000 * lo:7.1f} .. {1000 * hi:7.1f} mm/s: level {b['level_median']:+.3f}"
-              f" (σ {b['level_sigma']:.3f}, 5-95 % {b['level_p5_p95'][0]:+.3f}.."
-              f"{b['level_p5_p95'][1]:+.3f}), θ1 {b['coulomb_median']:+.3f} "
-              f"(σ {b['coulomb_sigma']:.3f}), {b['seconds']:.0f} s")
+        print(
+            f"  v_rms {1000 * lo:7.1f} .. {1000 * hi:7.1f} mm/s: level {b['level_median']:+.3f}"
+            f" (σ {b['level_sigma']:.3f}, 5-95 % {b['level_p5_p95'][0]:+.3f}.."
+            f"{b['level_p5_p95'][1]:+.3f}), θ1 {b['coulomb_median']:+.3f} "
+            f"(σ {b['coulomb_sigma']:.3f}), {b['seconds']:.0f} s"
+        )
     print(f"check             : {episodes} alarm episode(s) replaying the source against it")
     print(f"model written     : {args.output}")
     return 0

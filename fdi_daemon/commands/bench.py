@@ -10,11 +10,15 @@ HELP = "measure the monitor (per tick, batch, against baselines), the simulator 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="FILE", help="also write the numbers as JSON")
-    parser.add_argument("--quick", action="store_true",
-                        help="smaller samples (a rough figure in a few seconds)")
-    parser.add_argument("--skip-e2e", action="store_true",
-                        help="leave out the daemon end to end (latency, CPU, memory; runs "
-                             "fdi sim serve + fdi run for a few minutes)")
+    parser.add_argument(
+        "--quick", action="store_true", help="smaller samples (a rough figure in a few seconds)"
+    )
+    parser.add_argument(
+        "--skip-e2e",
+        action="store_true",
+        help="leave out the daemon end to end (latency, CPU, memory; runs "
+        "fdi sim serve + fdi run for a few minutes)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,13 +34,21 @@ def run(args: argparse.Namespace) -> int:
 
     check_outputs({"--json": args.json})  # it failed after minutes of measuring
     console = Console()
-    results: dict = {"machine": {"python": platform.python_version(),
-                                 "processor": platform.processor() or platform.machine(),
-                                 "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}}
+    results: dict = {
+        "machine": {
+            "python": platform.python_version(),
+            "processor": platform.processor() or platform.machine(),
+            "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        }
+    }
     with console.status("monitor: per-tick step, batch replay and baselines ..."):
-        results["monitor"] = (bench_monitor(step_samples=5_000, batch_samples=200_000,
-                                            baseline_samples=1_500, incident_s=300.0)
-                              if args.quick else bench_monitor())
+        results["monitor"] = (
+            bench_monitor(
+                step_samples=5_000, batch_samples=200_000, baseline_samples=1_500, incident_s=300.0
+            )
+            if args.quick
+            else bench_monitor()
+        )
     with console.status("simulator ..."):
         results["sim"] = bench_sim(duration_s=30.0) if args.quick else bench_sim()
     with console.status("identification ..."):
@@ -62,23 +74,42 @@ def run(args: argparse.Namespace) -> int:
 def _monitor_table(m: dict):
     from rich.table import Table
 
-    table = Table(title="monitor (256 Hz tick budget: %.0f µs)" % m["tick_budget_us"])
+    table = Table(title=f"monitor (256 Hz tick budget: {m['tick_budget_us']:.0f} µs)")
     for col in ("measure", "fdi", "baseline", "ratio", "target"):
         table.add_column(col, justify="right" if col != "measure" else "left")
     s, b = m["step_us"], m["baseline_step_us"]
-    table.add_row("per-tick step p50 (µs)", f"{s['p50']:.1f}", f"{b['p50']:.1f}",
-                  f"{m['step_speedup_p50']:.1f}x", f"<= {m['targets']['step_p50_us']:.0f}")
-    table.add_row("per-tick step p99 (µs)", f"{s['p99']:.1f}", f"{b['p99']:.1f}",
-                  f"{b['p99'] / s['p99']:.1f}x", "")
+    table.add_row(
+        "per-tick step p50 (µs)",
+        f"{s['p50']:.1f}",
+        f"{b['p50']:.1f}",
+        f"{m['step_speedup_p50']:.1f}x",
+        f"<= {m['targets']['step_p50_us']:.0f}",
+    )
+    table.add_row(
+        "per-tick step p99 (µs)",
+        f"{s['p99']:.1f}",
+        f"{b['p99']:.1f}",
+        f"{b['p99'] / s['p99']:.1f}x",
+        "",
+    )
     table.add_row("per-tick step max (µs)", f"{s['max']:.1f}", f"{b['max']:.1f}", "", "")
-    table.add_row("per-tick step CPU p50 (µs)", f"{m['step_cpu_us_p50']:.1f}",
-                  f"{m['baseline_step_cpu_us_p50']:.1f}",
-                  f"{m['baseline_step_cpu_us_p50'] / m['step_cpu_us_p50']:.1f}x", "")
-    table.add_row("batch replay (samples/s)", f"{m['batch_samples_per_s']:,.0f}",
-                  f"{m['baseline_samples_per_s']:,.0f}", f"{m['batch_speedup']:.0f}x",
-                  f">= {m['targets']['batch_samples_per_s']:,.0f}")
-    table.add_row("batch replay CPU (samples/CPU-s)", f"{m['batch_samples_per_cpu_s']:,.0f}",
-                  "", "", "")
+    table.add_row(
+        "per-tick step CPU p50 (µs)",
+        f"{m['step_cpu_us_p50']:.1f}",
+        f"{m['baseline_step_cpu_us_p50']:.1f}",
+        f"{m['baseline_step_cpu_us_p50'] / m['step_cpu_us_p50']:.1f}x",
+        "",
+    )
+    table.add_row(
+        "batch replay (samples/s)",
+        f"{m['batch_samples_per_s']:,.0f}",
+        f"{m['baseline_samples_per_s']:,.0f}",
+        f"{m['batch_speedup']:.0f}x",
+        f">= {m['targets']['batch_samples_per_s']:,.0f}",
+    )
+    table.add_row(
+        "batch replay CPU (samples/CPU-s)", f"{m['batch_samples_per_cpu_s']:,.0f}", "", "", ""
+    )
     return table
 
 
@@ -90,21 +121,28 @@ def _reference_table(m: dict):
     table = Table(title="monitor against the compiled chain without detector (CPU time)")
     for col in ("measure", "fdi", "reference", "ratio", "target"):
         table.add_column(col, justify="right" if col != "measure" else "left")
-    table.add_row("per-tick CPU p50 (µs)", f"{m['step_cpu_us_p50']:.1f}",
-                  f"{m['reference_step_cpu_us_p50']:.1f}",
-                  f"{m['step_cpu_over_reference']:.1f}x",
-                  f"<= {tg['step_cpu_over_reference_max']:g}x")
-    table.add_row(f"batch (samples/CPU-s; median of {len(m['batch_cpu_share_by_pair'])} "
-                  "side-by-side passes)", f"{m['batch_samples_per_cpu_s']:,.0f}",
-                  f"{m['reference_samples_per_cpu_s']:,.0f}",
-                  f"{m['batch_cpu_share_of_reference']:.2f}",
-                  f">= {tg['batch_cpu_share_of_reference_min']:g}")
+    table.add_row(
+        "per-tick CPU p50 (µs)",
+        f"{m['step_cpu_us_p50']:.1f}",
+        f"{m['reference_step_cpu_us_p50']:.1f}",
+        f"{m['step_cpu_over_reference']:.1f}x",
+        f"<= {tg['step_cpu_over_reference_max']:g}x",
+    )
+    table.add_row(
+        f"batch (samples/CPU-s; median of {len(m['batch_cpu_share_by_pair'])} side-by-side passes)",
+        f"{m['batch_samples_per_cpu_s']:,.0f}",
+        f"{m['reference_samples_per_cpu_s']:,.0f}",
+        f"{m['batch_cpu_share_of_reference']:.2f}",
+        f">= {tg['batch_cpu_share_of_reference_min']:g}",
+    )
     if "incident_replay" in m:
-        table.add_row("incident replay (samples/CPU-s; ref: quiet)",
-                      f"{m['incident_replay_samples_per_cpu_s']:,.0f}",
-                      f"{m['quiet_replay_samples_per_cpu_s']:,.0f}",
-                      f"{m['incident_over_quiet_cpu']:.2f}",
-                      f">= {tg['incident_over_quiet_cpu_min']:g}")
+        table.add_row(
+            "incident replay (samples/CPU-s; ref: quiet)",
+            f"{m['incident_replay_samples_per_cpu_s']:,.0f}",
+            f"{m['quiet_replay_samples_per_cpu_s']:,.0f}",
+            f"{m['incident_over_quiet_cpu']:.2f}",
+            f">= {tg['incident_over_quiet_cpu_min']:g}",
+        )
     return table
 
 
@@ -128,9 +166,14 @@ def _ident_table(ident: dict):
     table.add_column("measure")
     table.add_column("value", justify="right")
     table.add_column("target", justify="right")
-    table.add_row("identify, 1024 samples (s)", f"{ident['identify_1024_samples_s']:.2f}",
-                  f"< {ident['identify_target_s']:g}")
-    table.add_row(f"signature grid, {ident['signature_grid_points']} points (s)",
-                  f"{ident['signature_grid_1024_samples_s']:.2f}",
-                  f"< {ident['signature_target_s']:g}")
+    table.add_row(
+        "identify, 1024 samples (s)",
+        f"{ident['identify_1024_samples_s']:.2f}",
+        f"< {ident['identify_target_s']:g}",
+    )
+    table.add_row(
+        f"signature grid, {ident['signature_grid_points']} points (s)",
+        f"{ident['signature_grid_1024_samples_s']:.2f}",
+        f"< {ident['signature_target_s']:g}",
+    )
     return table

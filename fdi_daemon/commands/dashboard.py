@@ -20,16 +20,28 @@ def _refresh_hz(text: str) -> float:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--connect", metavar="SOCKET",
-                        help="the daemon's status socket (default: the one `fdi run` uses "
-                             "with --config, or with its embedded default config)")
-    parser.add_argument("--config", metavar="RIG.yaml",
-                        help="take the status socket path from this rig config")
-    parser.add_argument("--refresh-hz", type=_refresh_hz, default=10.0, metavar="HZ",
-                        help="screen refresh rate (default 10)")
-    parser.add_argument("--once", action="store_true",
-                        help="print one frame and exit (a text capture; size from --width/"
-                             "--height); no daemon: one line naming the socket, exit 2")
+    parser.add_argument(
+        "--connect",
+        metavar="SOCKET",
+        help="the daemon's status socket (default: the one `fdi run` uses "
+        "with --config, or with its embedded default config)",
+    )
+    parser.add_argument(
+        "--config", metavar="RIG.yaml", help="take the status socket path from this rig config"
+    )
+    parser.add_argument(
+        "--refresh-hz",
+        type=_refresh_hz,
+        default=10.0,
+        metavar="HZ",
+        help="screen refresh rate (default 10)",
+    )
+    parser.add_argument(
+        "--once",
+        action="store_true",
+        help="print one frame and exit (a text capture; size from --width/"
+        "--height); no daemon: one line naming the socket, exit 2",
+    )
     parser.add_argument("--width", type=int, default=None, help="frame width for --once")
     parser.add_argument("--height", type=int, default=None, help="frame height for --once")
 
@@ -41,8 +53,10 @@ def default_socket_path(config_path: str | None) -> str:
     config = load_config(config_path)
     path = config.output_path(config.sinks["status_socket"])
     if path is None:
-        raise UserError(f"{config.source}: sinks.status_socket is null (status socket "
-                        "disabled), so there is nothing to connect to")
+        raise UserError(
+            f"{config.source}: sinks.status_socket is null (status socket "
+            "disabled), so there is nothing to connect to"
+        )
     return str(path)
 
 
@@ -60,8 +74,10 @@ def run(args: argparse.Namespace) -> int:
             console = Console(width=args.width, height=args.height)
             frame = provider()
             if frame.snapshot is None:
-                raise UserError(f"no daemon answers on the status socket {path} "
-                                f"({provider.last_error}); is `fdi run` running?")
+                raise UserError(
+                    f"no daemon answers on the status socket {path} "
+                    f"({provider.last_error}); is `fdi run` running?"
+                )
             console.print(render(frame.snapshot, frame.notice))
             return 0 if frame.notice is None else 1
         run_dashboard(provider, refresh_hz=args.refresh_hz)

@@ -10,21 +10,36 @@ HELP = "replay many recordings (each with its rig's model) on a Dask cluster: on
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recordings", metavar="DIR_OR_GLOB",
-                        help="a folder of recordings (.csv, .csv.gz, .npz, .mat) or a glob "
-                             "pattern (quote it; ** recurses)")
+    parser.add_argument(
+        "recordings",
+        metavar="DIR_OR_GLOB",
+        help="a folder of recordings (.csv, .csv.gz, .npz, .mat) or a glob "
+        "pattern (quote it; ** recurses)",
+    )
     which = parser.add_mutually_exclusive_group(required=True)
     which.add_argument("--model", metavar="MODEL.yaml", help="one model for every recording")
-    which.add_argument("--model-map", metavar="MAP.yaml",
-                       help="YAML mapping of file names or glob patterns to model files "
-                            "(docs/fleet.md)")
-    parser.add_argument("--scheduler", metavar="ADDRESS",
-                        help="address of a dask.distributed scheduler (e.g. tcp://host:8786); "
-                             "default: a local cluster on this machine (127.0.0.1 only)")
-    parser.add_argument("--workers", type=int, metavar="N",
-                        help="worker processes of the local cluster (default: CPU count)")
-    parser.add_argument("--out", metavar="RESULTS.csv|.parquet",
-                        help="write the table (.parquet needs pyarrow); default: print it")
+    which.add_argument(
+        "--model-map",
+        metavar="MAP.yaml",
+        help="YAML mapping of file names or glob patterns to model files (docs/fleet.md)",
+    )
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="address of a dask.distributed scheduler (e.g. tcp://host:8786); "
+        "default: a local cluster on this machine (127.0.0.1 only)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="worker processes of the local cluster (default: CPU count)",
+    )
+    parser.add_argument(
+        "--out",
+        metavar="RESULTS.csv|.parquet",
+        help="write the table (.parquet needs pyarrow); default: print it",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,21 +74,36 @@ def run(args: argparse.Namespace) -> int:
     errors = sum(row["error"] is not None for row in rows)
     alarms = sum(bool(row["alarm_episodes"]) for row in rows)
     recorded_s = sum(row["samples"] / row["fs"] for row in rows if row["samples"])
-    print(f"{len(rows)} recording(s): {alarms} with alarms, {errors} with errors"
-          + (f"; table in {args.out}" if args.out else ""))
-    print(f"{recorded_s:.0f} s of recordings replayed in {done - ready:.1f} s "
-          f"({recorded_s / max(done - ready, 1e-9):.0f}x real time) after "
-          f"{ready - started:.1f} s to start (or reach) the cluster")
+    print(
+        f"{len(rows)} recording(s): {alarms} with alarms, {errors} with errors"
+        + (f"; table in {args.out}" if args.out else "")
+    )
+    print(
+        f"{recorded_s:.0f} s of recordings replayed in {done - ready:.1f} s "
+        f"({recorded_s / max(done - ready, 1e-9):.0f}x real time) after "
+        f"{ready - started:.1f} s to start (or reach) the cluster"
+    )
     return 0
 
 
 def _progress(total: int):
     from rich.console import Console
-    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
-                               TimeRemainingColumn)
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
 
-    progress = Progress(TextColumn("fleet replay"), BarColumn(), MofNCompleteColumn(),
-                        TimeRemainingColumn(), console=Console(stderr=True), transient=True)
+    progress = Progress(
+        TextColumn("fleet replay"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    )
     return progress, progress.add_task("fleet replay", total=total)
 
 
@@ -83,14 +113,28 @@ def _print_table(rows: list[dict]) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    table = Table("file", "model", "samples", "episodes", "first detection s",
-                  "classification", "friction level", "gaps")
+    table = Table(
+        "file",
+        "model",
+        "samples",
+        "episodes",
+        "first detection s",
+        "classification",
+        "friction level",
+        "gaps",
+    )
     for row in rows:
         det, level = row["first_detection_t"], row["friction_level_final"]
-        table.add_row(Path(row["file"]).name, Path(row["model"]).name if row["model"] else "-",
-                      _cell(row["samples"]), _cell(row["alarm_episodes"]),
-                      "-" if det is None else f"{det:.4f}", row["classification"] or "-",
-                      "-" if level is None else f"{level:.4g}", _cell(row["gaps"]))
+        table.add_row(
+            Path(row["file"]).name,
+            Path(row["model"]).name if row["model"] else "-",
+            _cell(row["samples"]),
+            _cell(row["alarm_episodes"]),
+            "-" if det is None else f"{det:.4f}",
+            row["classification"] or "-",
+            "-" if level is None else f"{level:.4g}",
+            _cell(row["gaps"]),
+        )
     console = Console()
     console.print(table)
     for row in rows:

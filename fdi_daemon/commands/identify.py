@@ -11,38 +11,65 @@ HELP = "identify the plant model G from a friction-free recording (v_in -> accel
 MAX_ORDER = 12
 
 
-
 def xcorr_verdict(xcorr: dict, order: int, recording: str, model: str) -> list[str]:
     """What an out-of-band residual-input correlation means and what to try (one line;
     none when it is inside the 99 % band of a white residual)."""
     if not xcorr["max_abs"] > xcorr["bound"]:
         return []
-    return [f"  -> out of band: the residual still follows the input, so the model misses "
-            f"input-driven dynamics (a nonlinearity, too low an order, a delay, or too "
-            f"noisy a fit); try --order {order + 2}, check the band, or "
-            f"`fdi diagnose {recording} --model {model}`"]
+    return [
+        f"  -> out of band: the residual still follows the input, so the model misses "
+        f"input-driven dynamics (a nonlinearity, too low an order, a delay, or too "
+        f"noisy a fit); try --order {order + 2}, check the band, or "
+        f"`fdi diagnose {recording} --model {model}`"
+    ]
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", metavar="REC", help="friction-free recording (e.g. a chirp)")
-    parser.add_argument("-o", "--output", required=True, metavar="MODEL.yaml",
-                        help="model file to write")
+    parser.add_argument(
+        "-o", "--output", required=True, metavar="MODEL.yaml", help="model file to write"
+    )
     parser.add_argument("--order", type=int, default=4, help="model order n (default 4)")
-    parser.add_argument("--plot", metavar="FILE.png",
-                        help="Bode plot of data and model with coherence (paper Fig. 4)")
-    parser.add_argument("--validate", metavar="REC",
-                        help="friction-free recording NOT used for fitting, for the validation "
-                             "metrics (default: report them on the estimation data)")
-    parser.add_argument("--method", choices=("blackman-tukey", "welch"),
-                        default="blackman-tukey", help="spectral estimate (default %(default)s)")
-    parser.add_argument("--lag-samples", type=int, metavar="M",
-                        help="Blackman-Tukey lag window length (default: chosen from the data)")
-    parser.add_argument("--lag-window", choices=("hann", "hamming"), default="hann",
-                        help="lag window shape (default %(default)s)")
-    parser.add_argument("--band", metavar="LO:HI",
-                        help="fit band in Hz (default: chosen from coherence and input spectrum)")
-    parser.add_argument("--min-coherence", type=float, default=0.8,
-                        help="coherence threshold of the automatic band (default %(default)s)")
+    parser.add_argument(
+        "--plot",
+        metavar="FILE.png",
+        help="Bode plot of data and model with coherence (paper Fig. 4)",
+    )
+    parser.add_argument(
+        "--validate",
+        metavar="REC",
+        help="friction-free recording NOT used for fitting, for the validation "
+        "metrics (default: report them on the estimation data)",
+    )
+    parser.add_argument(
+        "--method",
+        choices=("blackman-tukey", "welch"),
+        default="blackman-tukey",
+        help="spectral estimate (default %(default)s)",
+    )
+    parser.add_argument(
+        "--lag-samples",
+        type=int,
+        metavar="M",
+        help="Blackman-Tukey lag window length (default: chosen from the data)",
+    )
+    parser.add_argument(
+        "--lag-window",
+        choices=("hann", "hamming"),
+        default="hann",
+        help="lag window shape (default %(default)s)",
+    )
+    parser.add_argument(
+        "--band",
+        metavar="LO:HI",
+        help="fit band in Hz (default: chosen from coherence and input spectrum)",
+    )
+    parser.add_argument(
+        "--min-coherence",
+        type=float,
+        default=0.8,
+        help="coherence threshold of the automatic band (default %(default)s)",
+    )
     add_columns_option(parser)
 
 
@@ -85,8 +112,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--order must be 1..{MAX_ORDER}, got {args.order}")
     if not 0 <= args.min_coherence <= 1:
         raise UserError(f"--min-coherence must lie in [0, 1], got {args.min_coherence}")
-    check_outputs({"--output": args.output, "--plot": args.plot},
-                  (args.recording, args.validate), plots=("--plot",))
+    check_outputs(
+        {"--output": args.output, "--plot": args.plot},
+        (args.recording, args.validate),
+        plots=("--plot",),
+    )
     band = None
     if args.band is not None:
         band = parse_range(args.band, "--band")
@@ -101,16 +131,27 @@ def run(args: argparse.Namespace) -> int:
     if len(u) < 64:
         raise UserError(f"{args.recording}: {len(u)} samples are too few (need >= 64)")
     try:
-        ident = plant.identify_plant(u, y, fs, args.order, args.method, args.lag_samples,
-                                     args.lag_window, band, args.min_coherence)
+        ident = plant.identify_plant(
+            u,
+            y,
+            fs,
+            args.order,
+            args.method,
+            args.lag_samples,
+            args.lag_window,
+            band,
+            args.min_coherence,
+        )
     except ValueError as exc:
         raise UserError(f"{args.recording}: {exc}") from None
 
     if args.validate:
         val_rec, u_val, y_val = load_io(args.validate, args.columns)
         if not same_rate(val_rec.fs, fs):
-            raise UserError(f"{args.validate}: fs = {val_rec.fs:g} Hz differs from "
-                            f"{fs:g} Hz of {args.recording}")
+            raise UserError(
+                f"{args.validate}: fs = {val_rec.fs:g} Hz differs from "
+                f"{fs:g} Hz of {args.recording}"
+            )
         val_label, t_val = f"validation: {args.validate}", val_rec.t
     else:
         u_val, y_val, t_val = u, y, rec.t
@@ -127,29 +168,48 @@ def run(args: argparse.Namespace) -> int:
         "residual_input_xcorr_max": round(check["xcorr"]["max_abs"], 4),
         "residual_input_xcorr_bound_99": round(check["xcorr"]["bound"], 4),
         "band_hz": [round(v, 4) for v in ident.band_hz],
-        "band_relative_error": [{"band_hz": [round(v, 3) for v in row["band_hz"]],
-                                 "rms": round(row["rms_relative_error"], 4)}
-                                for row in check["band_errors"]],
+        "band_relative_error": [
+            {
+                "band_hz": [round(v, 3) for v in row["band_hz"]],
+                "rms": round(row["rms_relative_error"], 4),
+            }
+            for row in check["band_errors"]
+        ],
         "weighted_cost": float(fit.cost),
         "rms_relative_error": round(fit.rms_relative_error, 5),
-        "coherence_mean_in_band": round(float(np.mean(
-            ident.response.coherence[ident.band_mask()])), 4),
+        "coherence_mean_in_band": round(
+            float(np.mean(ident.response.coherence[ident.band_mask()])), 4
+        ),
     }
     choices = {k: v for k, v in ident.choices.items() if k != "lag_candidates"}
-    prov = {"identify": {
-        **provenance.source_entry(args.recording, provenance.command_line("identify", args)),
-        "validation_source": args.validate,
-        "order": args.order, "choices": choices, "metrics": metrics}}
+    prov = {
+        "identify": {
+            **provenance.source_entry(args.recording, provenance.command_line("identify", args)),
+            "validation_source": args.validate,
+            "order": args.order,
+            "choices": choices,
+            "metrics": metrics,
+        }
+    }
     model = FdiModel(fs=fs, plant_b=fit.b, plant_a=fit.a, provenance=prov)
     save_model(args.output, model)
 
     if args.plot:
         from fdi_daemon.ident.plots import plot_identification
 
-        plot_identification(args.plot, ident.response, ident.model_response(), ident.band_hz,
-                            {"t": t_val, "y": y_val - np.mean(y_val),
-                             "y_sim": check["y_sim"] - np.mean(y_val),
-                             "fit_percent": check["fit_percent"], "label": val_label})
+        plot_identification(
+            args.plot,
+            ident.response,
+            ident.model_response(),
+            ident.band_hz,
+            {
+                "t": t_val,
+                "y": y_val - np.mean(y_val),
+                "y_sim": check["y_sim"] - np.mean(y_val),
+                "fit_percent": check["fit_percent"],
+                "label": val_label,
+            },
+        )
     _report(args, ident, check, val_label)
     return 0
 
@@ -158,9 +218,12 @@ def _report(args, ident, check, val_label) -> None:
     import numpy as np
 
     c = ident.choices
-    spec = (f"Blackman-Tukey, {c['lag_window']} lag window M = {c['lag_samples']} "
-            f"({c['lag_samples_rule']})" if c["method"] == "blackman-tukey"
-            else f"Welch H1, {c['segment_samples']}-sample segments")
+    spec = (
+        f"Blackman-Tukey, {c['lag_window']} lag window M = {c['lag_samples']} "
+        f"({c['lag_samples_rule']})"
+        if c["method"] == "blackman-tukey"
+        else f"Welch H1, {c['segment_samples']}-sample segments"
+    )
     poles = np.roots(ident.fit.a)
     lines = [
         f"spectral estimate : {spec}",
@@ -169,16 +232,18 @@ def _report(args, ident, check, val_label) -> None:
         f"start             : {c['start']} ({c['sk_iterations']} SK iterations, "
         f"{c['reflected_poles']} pole(s) reflected)",
         f"rms relative error: {100 * ident.fit.rms_relative_error:.2f} % (W = 1/|G|)",
-        "poles             : " + ", ".join(f"{p:.4f}" for p in poles)
+        "poles             : "
+        + ", ".join(f"{p:.4f}" for p in poles)
         + f"  (|p| max {np.max(np.abs(poles)):.4f})",
         f"simulation fit    : {check['fit_percent']:.2f} % on {val_label}",
         f"residual-input xcorr: max |r| {check['xcorr']['max_abs']:.3f} "
         f"(99 % band ±{check['xcorr']['bound']:.3f})",
-        *xcorr_verdict(check["xcorr"], args.order, args.validate or args.recording,
-                       args.output),
-        "band errors       : " + ", ".join(
+        *xcorr_verdict(check["xcorr"], args.order, args.validate or args.recording, args.output),
+        "band errors       : "
+        + ", ".join(
             f"{r['band_hz'][0]:.3g}-{r['band_hz'][1]:.3g} Hz {100 * r['rms_relative_error']:.1f} %"
-            for r in check["band_errors"]),
+            for r in check["band_errors"]
+        ),
         f"model written     : {args.output}",
     ]
     print("\n".join(lines))

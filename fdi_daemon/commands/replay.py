@@ -15,24 +15,48 @@ TRACE_POINTS = 400_000
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", metavar="REC", help="recording (.csv, .csv.gz, .npz, .mat)")
-    parser.add_argument("--model", required=True, metavar="MODEL.yaml",
-                        help="model file with plant, fault_filter (signature) and settings")
+    parser.add_argument(
+        "--model",
+        required=True,
+        metavar="MODEL.yaml",
+        help="model file with plant, fault_filter (signature) and settings",
+    )
     parser.add_argument("--events", metavar="EVENTS.jsonl", help="write the events (JSON Lines)")
     parser.add_argument("--summary", metavar="SUMMARY.json", help="write the replay summary")
-    parser.add_argument("--plot", metavar="FILE.png",
-                        help="acceleration, θ1/θ2 with band and signature, residual, statistic")
-    parser.add_argument("--trace", metavar="FILE",
-                        help="write t, theta1, theta2, friction_level, statistic, state per "
-                             "sample (CSV with a header; .npz with the same names)")
-    parser.add_argument("--trace-every", type=int, default=1, metavar="N",
-                        help="with --trace: every N-th sample (default %(default)s)")
-    parser.add_argument("--realtime", action="store_true",
-                        help="pace the samples at fs through the per-tick path (as the daemon)")
-    parser.add_argument("--dashboard", action="store_true",
-                        help="with --realtime: show the live dashboard while replaying (q stops)")
-    parser.add_argument("--alarms", metavar="CONFIG.yaml",
-                        help="the alarm lifecycle's settings and status period from this daemon "
-                             "config (default: the built-in alarms section)")
+    parser.add_argument(
+        "--plot",
+        metavar="FILE.png",
+        help="acceleration, θ1/θ2 with band and signature, residual, statistic",
+    )
+    parser.add_argument(
+        "--trace",
+        metavar="FILE",
+        help="write t, theta1, theta2, friction_level, statistic, state per "
+        "sample (CSV with a header; .npz with the same names)",
+    )
+    parser.add_argument(
+        "--trace-every",
+        type=int,
+        default=1,
+        metavar="N",
+        help="with --trace: every N-th sample (default %(default)s)",
+    )
+    parser.add_argument(
+        "--realtime",
+        action="store_true",
+        help="pace the samples at fs through the per-tick path (as the daemon)",
+    )
+    parser.add_argument(
+        "--dashboard",
+        action="store_true",
+        help="with --realtime: show the live dashboard while replaying (q stops)",
+    )
+    parser.add_argument(
+        "--alarms",
+        metavar="CONFIG.yaml",
+        help="the alarm lifecycle's settings and status period from this daemon "
+        "config (default: the built-in alarms section)",
+    )
     add_columns_option(parser)
 
 
@@ -46,15 +70,23 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.io.outputs import check_outputs, write_json
 
     if args.dashboard and not args.realtime:
-        raise UserError("--dashboard needs --realtime (a batch replay is over before a "
-                        "screen could show it)")
+        raise UserError(
+            "--dashboard needs --realtime (a batch replay is over before a screen could show it)"
+        )
     if args.trace_every < 1:
         raise UserError("--trace-every must be a whole number >= 1")
     if args.trace_every != 1 and not args.trace:
         raise UserError("--trace-every thins the trace file: it needs --trace FILE")
-    check_outputs({"--events": args.events, "--summary": args.summary, "--plot": args.plot,
-                   "--trace": args.trace}, (args.recording, args.model, args.alarms),
-                  plots=("--plot",))
+    check_outputs(
+        {
+            "--events": args.events,
+            "--summary": args.summary,
+            "--plot": args.plot,
+            "--trace": args.trace,
+        },
+        (args.recording, args.model, args.alarms),
+        plots=("--plot",),
+    )
 
     settings, status_period_s = _alarm_settings(args.alarms)
     # rows the trace file or the plot shows (the batch path traces them and the readings')
@@ -64,21 +96,38 @@ def run(args: argparse.Namespace) -> int:
     def runner(monitor, rec, stride):
         nonlocal shown
         n = len(rec)
-        shown = args.trace_every if args.trace else (_plot_every(n, stride) if args.plot
-                                                     else stride)
+        shown = (
+            args.trace_every if args.trace else (_plot_every(n, stride) if args.plot else stride)
+        )
         if args.realtime and args.dashboard:
             from fdi_daemon.dashboard.replay_view import replay_with_dashboard
 
-            return replay_with_dashboard(lambda on_tick: _paced(monitor, rec, on_tick),
-                                         monitor, str(args.recording), args.model, n)
+            return replay_with_dashboard(
+                lambda on_tick: _paced(monitor, rec, on_tick),
+                monitor,
+                str(args.recording),
+                args.model,
+                n,
+            )
         if args.realtime:
             return _paced(monitor, rec, stopped=stopped)
         return _batch(monitor, rec, math.gcd(shown, stride))
 
-    replay = replay_recording(args.recording, args.model, runner, columns=args.columns,
-                              alarm_settings=settings, status_period_s=status_period_s)
-    rec, monitor, events, trace, summary = (replay.recording, replay.monitor, replay.events,
-                                            replay.trace, replay.summary)
+    replay = replay_recording(
+        args.recording,
+        args.model,
+        runner,
+        columns=args.columns,
+        alarm_settings=settings,
+        status_period_s=status_period_s,
+    )
+    rec, monitor, events, trace, summary = (
+        replay.recording,
+        replay.monitor,
+        replay.events,
+        replay.trace,
+        replay.summary,
+    )
     if stopped:  # the outputs hold what was replayed
         summary.update(samples=stopped["samples"], interrupted_at_t=stopped["t"])
     if args.events:
@@ -98,17 +147,27 @@ def run(args: argparse.Namespace) -> int:
         if "fault_active" in rec.columns:
             active = np.flatnonzero(np.asarray(rec["fault_active"]) > 0.5)
             onset = float(rec.t[active[0]]) if active.size else None
-        plot_replay(args.plot, _thinned(trace, shown // trace.every), events, monitor.gamma_f,
-                    monitor.detector.band, monitor.detector.threshold, onset,
-                    title=str(args.recording))
+        plot_replay(
+            args.plot,
+            _thinned(trace, shown // trace.every),
+            events,
+            monitor.gamma_f,
+            monitor.detector.band,
+            monitor.detector.threshold,
+            onset,
+            title=str(args.recording),
+        )
     _report(events, summary)
     if monitor.baseline_note:
         print(f"note: {monitor.baseline_note}")
     if stopped:
         import sys
 
-        print(f"fdi replay: interrupted at t = {stopped['t']:.4f} s; the outputs hold the "
-              f"{stopped['samples']} sample(s) replayed", file=sys.stderr)
+        print(
+            f"fdi replay: interrupted at t = {stopped['t']:.4f} s; the outputs hold the "
+            f"{stopped['samples']} sample(s) replayed",
+            file=sys.stderr,
+        )
         return 130
     return 0
 
@@ -141,16 +200,24 @@ def _thinned(trace, step: int):
 
     if step == 1:
         return trace
-    arrays = {f.name: getattr(trace, f.name)[::step] for f in dataclasses.fields(trace)
-              if f.name != "every"}
+    arrays = {
+        f.name: getattr(trace, f.name)[::step]
+        for f in dataclasses.fields(trace)
+        if f.name != "every"
+    }
     return dataclasses.replace(trace, every=trace.every * step, **arrays)
 
 
 def _progress(total: int, label: str):
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    progress = Progress(TextColumn(label), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                        TimeRemainingColumn(), transient=True)
+    progress = Progress(
+        TextColumn(label),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeRemainingColumn(),
+        transient=True,
+    )
     task = progress.add_task(label, total=total)
     return progress, task
 
@@ -162,8 +229,11 @@ def _batch(monitor, rec, trace_every: int):
         return monitor.run(rec, trace_every=trace_every)
     progress, task = _progress(n, "replay")
     with progress:
-        return monitor.run(rec, trace_every=trace_every,
-                           progress=lambda done, total: progress.update(task, completed=done))
+        return monitor.run(
+            rec,
+            trace_every=trace_every,
+            progress=lambda done, total: progress.update(task, completed=done),
+        )
 
 
 def _paced(monitor, rec, on_tick=None, stopped: dict | None = None):
@@ -187,8 +257,7 @@ def _paced(monitor, rec, on_tick=None, stopped: dict | None = None):
     v_in = np.asarray(cols["v_in"], dtype=float)
     accel = np.asarray(cols["accel"], dtype=float)
     position = monitor.position_column(rec)
-    seq = (np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols
-           else monitor.sample_numbers(t))
+    seq = np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols else monitor.sample_numbers(t)
     period = 1.0 / monitor.fs_hz
     out = {k: np.empty(n) for k in TRACE_NAMES}
     events = []
@@ -196,14 +265,19 @@ def _paced(monitor, rec, on_tick=None, stopped: dict | None = None):
     progress, task = (None, None) if on_tick is not None else _progress(n, "replay (real time)")
     start = time.monotonic()
     k = 0
-    with (progress if progress is not None else contextlib.nullcontext(),
-          _stop_on_interrupt(stopped, lambda: (float(t[k]), k))):
+    with (
+        progress if progress is not None else contextlib.nullcontext(),
+        _stop_on_interrupt(stopped, lambda: (float(t[k]), k)),
+    ):
         for k in range(n):
             delay = start + k * period - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            new = monitor.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]), float(accel[k]),
-                                      float(position[k])))
+            new = monitor.step(
+                Sample(
+                    int(seq[k]), float(t[k]), float(v_in[k]), float(accel[k]), float(position[k])
+                )
+            )
             events.extend(new)
             if last_seq is None or seq[k] > last_seq:  # not dropped: a row, as Monitor.run
                 last_seq = int(seq[k])
@@ -245,8 +319,10 @@ def _line(event: dict) -> str:
         extra += f"  missing={event['missing_samples']}"
     if "alarm_id" in event:
         level = event.get("level")
-        extra += (f"  alarm {event['alarm_id']} {event['state']} priority {event['priority']}"
-                  f"  level={'-' if level is None else f'{level:.3g}'}")
+        extra += (
+            f"  alarm {event['alarm_id']} {event['state']} priority {event['priority']}"
+            f"  level={'-' if level is None else f'{level:.3g}'}"
+        )
     return f"{event['t']:10.4f} s  {event['kind']}{extra}"
 
 
@@ -261,8 +337,10 @@ def _report(events: list, summary: dict) -> None:
         console.print(f"... {len(events) - len(shown)} more event(s)", highlight=False)
     cls = summary["classification"] or "none"
     det = summary["first_detection_t"]
-    console.print(f"{summary['samples']} samples at {summary['fs']:g} Hz: "
-                  f"{summary['alarm_episodes']} alarm episode(s) ({summary['alarms']} "
-                  f"alarm(s), peak priority {summary['alarm_peak_priority']}), first detection "
-                  f"{'-' if det is None else f'{det:.4f} s'}, classification {cls}",
-                  highlight=False)
+    console.print(
+        f"{summary['samples']} samples at {summary['fs']:g} Hz: "
+        f"{summary['alarm_episodes']} alarm episode(s) ({summary['alarms']} "
+        f"alarm(s), peak priority {summary['alarm_peak_priority']}), first detection "
+        f"{'-' if det is None else f'{det:.4f} s'}, classification {cls}",
+        highlight=False,
+    )

@@ -18,53 +18,102 @@ AUTO_METHODS = ("highpass", "model_observer")
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", metavar="REC", help="recording with a friction fault")
-    parser.add_argument("--model", required=True, metavar="MODEL.yaml",
-                        help="model file holding the plant (from `fdi identify`)")
-    parser.add_argument("--fault-window", required=True, metavar="T0:T1",
-                        help="time window (s) in which the fault is present")
-    parser.add_argument("-o", "--output", required=True, metavar="MODEL.yaml",
-                        help="model file to write (may equal --model)")
-    parser.add_argument("--plot", metavar="FILE.png",
-                        help="residual vs filtered friction signal (Fig. 8) and the γ profile")
-    parser.add_argument("--gamma-grid", default="0:10:0.2", metavar="LO:HI:STEP",
-                        help="γ grid (default %(default)s, the paper's 51 points)")
-    parser.add_argument("--orders", default="4:3:0", metavar="NB:NF:NK",
-                        help="G_e orders as MATLAB oe (default %(default)s)")
-    parser.add_argument("--highpass-hz", type=float,
-                        help="velocity estimator high-pass cut-off (default: the model's "
-                             "velocity settings, else 1 Hz; with model_observer, 0.5 Hz on "
-                             "the residual path)")
-    parser.add_argument("--velocity-method",
-                        choices=("auto", "highpass", "model_observer", "position_observer"),
-                        help="velocity estimate: the accelerometer through a high-pass and an "
-                             "integrator, the model-based observer (right in phase at 1-3 Hz), "
-                             "or position and acceleration fused (needs a position column; "
-                             "docs/detector.md); auto: highpass, or model_observer where the "
-                             "high-pass signature explains less than half of the fault "
-                             "residual and the observer's more (docs/identification.md). "
-                             "Default: the model's velocity settings, else auto. The "
-                             "monitor uses the same")
-    parser.add_argument("--flat-fraction", type=float, default=0.2,
-                        help="flag the profile flat when the 99 %% interval of γ covers more "
-                             "than this fraction of the grid (default %(default)s)")
-    parser.add_argument("--prefilter-hz", type=float,
-                        help="high-pass (3rd-order Butterworth) applied alike to the residual "
-                             "and the friction signal before the fit (default: none)")
-    parser.add_argument("--reference-window", metavar="R0:R1",
-                        help="fault-free pass of the SAME excitation (same length as the fault "
-                             "window, earlier in the recording): fit the differential residual "
-                             "r(t) - r(t - lag), so the plant model's error cancels")
-    parser.add_argument("--lowpass-hz", type=float,
-                        help="choose gamma on the excitation's fundamentals: an 8th-order "
-                             "Butterworth low-pass applied alike to the residual and the "
-                             "friction signal (e.g. 1.5x the excitation frequency); G_e is then "
-                             "refitted on the full band at gamma_f (default: none)")
-    parser.add_argument("--max-pole-radius", type=float,
-                        help="bound on G_e's poles (default: sqrt of the plant's largest pole "
-                             "radius, i.e. G_e's memory at most twice the plant's slowest mode)")
-    parser.add_argument("--min-depth", type=float, default=0.01,
-                        help="flag the profile flat when max/min cost over the grid is below "
-                             "1 + this (default %(default)s)")
+    parser.add_argument(
+        "--model",
+        required=True,
+        metavar="MODEL.yaml",
+        help="model file holding the plant (from `fdi identify`)",
+    )
+    parser.add_argument(
+        "--fault-window",
+        required=True,
+        metavar="T0:T1",
+        help="time window (s) in which the fault is present",
+    )
+    parser.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="MODEL.yaml",
+        help="model file to write (may equal --model)",
+    )
+    parser.add_argument(
+        "--plot",
+        metavar="FILE.png",
+        help="residual vs filtered friction signal (Fig. 8) and the γ profile",
+    )
+    parser.add_argument(
+        "--gamma-grid",
+        default="0:10:0.2",
+        metavar="LO:HI:STEP",
+        help="γ grid (default %(default)s, the paper's 51 points)",
+    )
+    parser.add_argument(
+        "--orders",
+        default="4:3:0",
+        metavar="NB:NF:NK",
+        help="G_e orders as MATLAB oe (default %(default)s)",
+    )
+    parser.add_argument(
+        "--highpass-hz",
+        type=float,
+        help="velocity estimator high-pass cut-off (default: the model's "
+        "velocity settings, else 1 Hz; with model_observer, 0.5 Hz on "
+        "the residual path)",
+    )
+    parser.add_argument(
+        "--velocity-method",
+        choices=("auto", "highpass", "model_observer", "position_observer"),
+        help="velocity estimate: the accelerometer through a high-pass and an "
+        "integrator, the model-based observer (right in phase at 1-3 Hz), "
+        "or position and acceleration fused (needs a position column; "
+        "docs/detector.md); auto: highpass, or model_observer where the "
+        "high-pass signature explains less than half of the fault "
+        "residual and the observer's more (docs/identification.md). "
+        "Default: the model's velocity settings, else auto. The "
+        "monitor uses the same",
+    )
+    parser.add_argument(
+        "--flat-fraction",
+        type=float,
+        default=0.2,
+        help="flag the profile flat when the 99 %% interval of γ covers more "
+        "than this fraction of the grid (default %(default)s)",
+    )
+    parser.add_argument(
+        "--prefilter-hz",
+        type=float,
+        help="high-pass (3rd-order Butterworth) applied alike to the residual "
+        "and the friction signal before the fit (default: none)",
+    )
+    parser.add_argument(
+        "--reference-window",
+        metavar="R0:R1",
+        help="fault-free pass of the SAME excitation (same length as the fault "
+        "window, earlier in the recording): fit the differential residual "
+        "r(t) - r(t - lag), so the plant model's error cancels",
+    )
+    parser.add_argument(
+        "--lowpass-hz",
+        type=float,
+        help="choose gamma on the excitation's fundamentals: an 8th-order "
+        "Butterworth low-pass applied alike to the residual and the "
+        "friction signal (e.g. 1.5x the excitation frequency); G_e is then "
+        "refitted on the full band at gamma_f (default: none)",
+    )
+    parser.add_argument(
+        "--max-pole-radius",
+        type=float,
+        help="bound on G_e's poles (default: sqrt of the plant's largest pole "
+        "radius, i.e. G_e's memory at most twice the plant's slowest mode)",
+    )
+    parser.add_argument(
+        "--min-depth",
+        type=float,
+        default=0.01,
+        help="flag the profile flat when max/min cost over the grid is below "
+        "1 + this (default %(default)s)",
+    )
     add_columns_option(parser)
 
 
@@ -74,10 +123,16 @@ def _orders(text: str) -> tuple[int, int, int]:
 
     values = parse_range(text, "--orders", 3)
     nb, nf, nk = (int(v) for v in values)
-    if (any(v != int(v) for v in values) or not 1 <= nb <= MAX_ORDER
-            or not 0 <= nf <= MAX_ORDER or nk < 0):
-        raise UserError(f"--orders must be whole numbers 1<=NB<={MAX_ORDER}:0<=NF<={MAX_ORDER}"
-                        f":NK>=0, got {text!r}")
+    if (
+        any(v != int(v) for v in values)
+        or not 1 <= nb <= MAX_ORDER
+        or not 0 <= nf <= MAX_ORDER
+        or nk < 0
+    ):
+        raise UserError(
+            f"--orders must be whole numbers 1<=NB<={MAX_ORDER}:0<=NF<={MAX_ORDER}"
+            f":NK>=0, got {text!r}"
+        )
     return nb, nf, nk
 
 
@@ -112,29 +167,39 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--flat-fraction must lie in (0, 1]")
     if not args.min_depth >= 0:
         raise UserError("--min-depth must be >= 0")
-    check_outputs({"--output": args.output, "--plot": args.plot}, (args.recording, args.model),
-                  plots=("--plot",), rewrites={"--output": args.model})
+    check_outputs(
+        {"--output": args.output, "--plot": args.plot},
+        (args.recording, args.model),
+        plots=("--plot",),
+        rewrites={"--output": args.model},
+    )
 
     model = load_model(args.model)
     check_stable(model.plant_a, "plant.a")  # an unstable Ĝ gives no residual to fit
     rec, v_in, accel = load_io(args.recording, args.columns)
     if not same_rate(rec.fs, model.fs):
-        raise UserError(f"{args.recording}: fs = {rec.fs:g} Hz but the model has "
-                        f"fs = {model.fs:g} Hz")
+        raise UserError(
+            f"{args.recording}: fs = {rec.fs:g} Hz but the model has fs = {model.fs:g} Hz"
+        )
     t = rec.t
     if t0 < t[0] or t1 > t[-1] + 1.0 / rec.fs:
-        raise UserError(f"--fault-window {args.fault_window} lies outside the recording "
-                        f"({t[0]:g} to {t[-1]:g} s)")
+        raise UserError(
+            f"--fault-window {args.fault_window} lies outside the recording "
+            f"({t[0]:g} to {t[-1]:g} s)"
+        )
     inside = (t >= t0) & (t < t1)
     needed = 2 * (sum(orders) + 10)
     if inside.sum() < needed:
-        raise UserError(f"--fault-window {args.fault_window} holds {int(inside.sum())} "
-                        f"samples; at least {needed} are needed")
+        raise UserError(
+            f"--fault-window {args.fault_window} holds {int(inside.sum())} "
+            f"samples; at least {needed} are needed"
+        )
 
     # a plant-only model (`fdi identify`'s) has no velocity yet: auto; a model with velocity
     # settings keeps them (without a method: the high-pass estimator, as every model before)
-    method = args.velocity_method or (model.velocity.get("method", "highpass")
-                                      if model.velocity else "auto")
+    method = args.velocity_method or (
+        model.velocity.get("method", "highpass") if model.velocity else "auto"
+    )
     candidates = AUTO_METHODS if method == "auto" else (method,)
     prefilter = _prefilter(args, model.fs)
     radius = args.max_pole_radius
@@ -167,34 +232,57 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise ConfigError(f"{args.model}: velocity: {exc}") from None
         velocity = _velocity(estimator, rec, args.recording, accel, plant_residual)
-        result = _estimate(sig, residual[start:end], velocity[start:end], first - start, grid,
-                           orders, prefilter, args.flat_fraction, args.min_depth, radius,
-                           candidate)
+        result = _estimate(
+            sig,
+            residual[start:end],
+            velocity[start:end],
+            first - start,
+            grid,
+            orders,
+            prefilter,
+            args.flat_fraction,
+            args.min_depth,
+            radius,
+            candidate,
+        )
         fault_fit = result.fit
         if args.lowpass_hz is not None:  # G_e for the monitor: full band, at gamma_f
-            fault_fit = sig.fit_fault_filter(residual[start:end], velocity[start:end],
-                                             result.gamma_f, orders, first - start, radius)
+            fault_fit = sig.fit_fault_filter(
+                residual[start:end],
+                velocity[start:end],
+                result.gamma_f,
+                orders,
+                first - start,
+                radius,
+            )
         full_band_pct = sig.fit_percent(residual[first:end], fault_fit.y_sim)
         full_band_vaf = sig.variance_accounted_for(residual[first:end], fault_fit.y_sim)
         fits.append((full_band_vaf, full_band_pct, candidate, estimator, result, fault_fit))
     # of those tried, the velocity under which the signature explains most of the residual
     full_band_vaf, full_band_pct, _, estimator, result, fault_fit = max(
-        fits, key=lambda fit: fit[0])
+        fits, key=lambda fit: fit[0]
+    )
     explained = {fit[2]: round(float(fit[0]), 2) for fit in fits}
 
     nb, nf, nk = orders
     # at the grid's edge γ_f is no value: null in the model (the monitor's G_e, fitted at the
     # edge γ, is kept; the band method, which tracks (1, γ_f), refuses such a model)
-    model.fault_filter = FaultFilter(b=fault_fit.b, f=fault_fit.f, nk=nk,
-                                     gamma_f=None if result.at_edge else result.gamma_f)
+    model.fault_filter = FaultFilter(
+        b=fault_fit.b, f=fault_fit.f, nk=nk, gamma_f=None if result.at_edge else result.gamma_f
+    )
     model.velocity = estimator.settings()
     prov = dict(model.provenance)
     prov["signature"] = {
         **provenance.source_entry(args.recording, provenance.command_line("signature", args)),
-        "fault_window_s": [t0, t1], "samples": int(inside.sum()),
-        "reference_window_s": (None if args.reference_window is None else
-                               list(parse_range(args.reference_window, "--reference-window"))),
-        "prefilter_hz": args.prefilter_hz, "lowpass_hz": args.lowpass_hz,
+        "fault_window_s": [t0, t1],
+        "samples": int(inside.sum()),
+        "reference_window_s": (
+            None
+            if args.reference_window is None
+            else list(parse_range(args.reference_window, "--reference-window"))
+        ),
+        "prefilter_hz": args.prefilter_hz,
+        "lowpass_hz": args.lowpass_hz,
         "max_pole_radius": float(radius),
         "velocity_method": method,
         "vaf_percent_by_velocity": explained,
@@ -211,11 +299,23 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from fdi_daemon.ident.plots import plot_signature
 
-        plot_signature(args.plot, t_win, result.residual, result,
-                       residual_label=_fitted_residual_label(args),
-                       velocity=estimator.settings().get("method", "highpass"))
-    _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf,
-            explained if method == "auto" else None)
+        plot_signature(
+            args.plot,
+            t_win,
+            result.residual,
+            result,
+            residual_label=_fitted_residual_label(args),
+            velocity=estimator.settings().get("method", "highpass"),
+        )
+    _report(
+        args,
+        result,
+        estimator,
+        fault_fit,
+        full_band_pct,
+        full_band_vaf,
+        explained if method == "auto" else None,
+    )
     return 0
 
 
@@ -229,8 +329,7 @@ def _velocity(estimator, rec, path, accel, residual):
         return estimator.run(accel, accel - residual)
     if estimator.needs_position:
         if "position" not in rec.columns:
-            raise UserError(f"{path}: velocity method position_observer needs a position "
-                            "column")
+            raise UserError(f"{path}: velocity method position_observer needs a position column")
         return estimator.run(accel, np.asarray(rec.columns["position"], dtype=float))
     return estimator.run(accel)
 
@@ -238,8 +337,11 @@ def _velocity(estimator, rec, path, accel, residual):
 def _fitted_residual_label(args) -> str:
     """What the fit saw: the residual r (eq. 3), less the fault-free reference, filtered."""
     label = "residual r" + (" − fault-free reference" if args.reference_window else "")
-    filters = [f"{kind}-passed {hz:g} Hz" for kind, hz in
-               (("high", args.prefilter_hz), ("low", args.lowpass_hz)) if hz is not None]
+    filters = [
+        f"{kind}-passed {hz:g} Hz"
+        for kind, hz in (("high", args.prefilter_hz), ("low", args.lowpass_hz))
+        if hz is not None
+    ]
     return ", ".join([label, *filters])
 
 
@@ -276,64 +378,100 @@ def _reference_lag(args, t, v_in, first, end, fs) -> int:
     r0, r1 = parse_range(args.reference_window, "--reference-window")
     length = (end - first) / fs
     if abs((r1 - r0) - length) > 1.5 / fs:
-        raise UserError(f"--reference-window {args.reference_window} must be as long as the "
-                        f"fault window ({length:g} s)")
+        raise UserError(
+            f"--reference-window {args.reference_window} must be as long as the "
+            f"fault window ({length:g} s)"
+        )
     ref_first = int(np.searchsorted(t, r0 - 0.5 / fs))
     lag = first - ref_first
     if r0 < t[0] or lag < end - first:
-        raise UserError(f"--reference-window {args.reference_window} must lie in the recording "
-                        "and end before the fault window starts")
-    ref, win = v_in[first - lag:end - lag], v_in[first:end]
-    mismatch = float(np.sqrt(np.mean((win - ref) ** 2) / max(np.mean(win ** 2), 1e-300)))
+        raise UserError(
+            f"--reference-window {args.reference_window} must lie in the recording "
+            "and end before the fault window starts"
+        )
+    ref, win = v_in[first - lag : end - lag], v_in[first:end]
+    mismatch = float(np.sqrt(np.mean((win - ref) ** 2) / max(np.mean(win**2), 1e-300)))
     if mismatch > 0.1:
-        raise UserError(f"--reference-window {args.reference_window}: the valve voltage differs "
-                        f"from the fault window's by {100 * mismatch:.0f} % rms; play the same "
-                        "excitation in both")
+        raise UserError(
+            f"--reference-window {args.reference_window}: the valve voltage differs "
+            f"from the fault window's by {100 * mismatch:.0f} % rms; play the same "
+            "excitation in both"
+        )
     return lag
 
 
-def _estimate(sig, residual, velocity, fit_from, grid, orders, prefilter, flat_fraction,
-              min_depth, radius, method):
+def _estimate(
+    sig,
+    residual,
+    velocity,
+    fit_from,
+    grid,
+    orders,
+    prefilter,
+    flat_fraction,
+    min_depth,
+    radius,
+    method,
+):
     from rich.console import Console
     from rich.progress import Progress
 
     from fdi_daemon.errors import UserError
 
     with Progress(console=Console(stderr=True), transient=True) as progress:
-        task = progress.add_task(f"γ grid, {method} velocity (OE fit per point, 3 sweeps)",
-                                 total=sig.sweep_fits(len(grid)))
+        task = progress.add_task(
+            f"γ grid, {method} velocity (OE fit per point, 3 sweeps)",
+            total=sig.sweep_fits(len(grid)),
+        )
         try:
-            return sig.estimate_signature(residual, velocity, grid, orders,
-                                          flat_fraction=flat_fraction, min_depth=min_depth,
-                                          prefilter=prefilter, fit_from=fit_from,
-                                          max_pole_radius=radius,
-                                          on_step=lambda: progress.advance(task))
+            return sig.estimate_signature(
+                residual,
+                velocity,
+                grid,
+                orders,
+                flat_fraction=flat_fraction,
+                min_depth=min_depth,
+                prefilter=prefilter,
+                fit_from=fit_from,
+                max_pole_radius=radius,
+                on_step=lambda: progress.advance(task),
+            )
         except ValueError as exc:
             raise UserError(f"signature: {exc}") from None
 
 
-def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf,
-            explained) -> None:
+def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf, explained) -> None:
     """The summary; ``explained``: VAF % per velocity that auto tried, or None."""
     import sys
 
     from fdi_daemon.ident.signature import LOW_VAF_PERCENT
 
     rel = result.relative_cost()
-    gamma = (f"not identified (edge): least cost at γ = {result.gamma_f:.4g}, the end of the "
-             "grid; stored as null" if result.at_edge else f"{result.gamma_f:.4g}")
+    gamma = (
+        f"not identified (edge): least cost at γ = {result.gamma_f:.4g}, the end of the "
+        "grid; stored as null"
+        if result.at_edge
+        else f"{result.gamma_f:.4g}"
+    )
     velocity = estimator.settings()
     if velocity.get("method") == "position_observer":
-        described = (f"position_observer, crossover {velocity['crossover_hz']:g} Hz, damping "
-                     f"{velocity['damping']:g}")
+        described = (
+            f"position_observer, crossover {velocity['crossover_hz']:g} Hz, damping "
+            f"{velocity['damping']:g}"
+        )
     else:
-        described = (f"{velocity.get('method', 'highpass')}, high-pass "
-                     f"{velocity['highpass_hz']:g} Hz order {velocity['highpass_order']}"
-                     + (f", leak {velocity['leak_hz']:g} Hz" if "leak_hz" in velocity else "")
-                     + f", {velocity['integrator']} integrator")
+        described = (
+            f"{velocity.get('method', 'highpass')}, high-pass "
+            f"{velocity['highpass_hz']:g} Hz order {velocity['highpass_order']}"
+            + (f", leak {velocity['leak_hz']:g} Hz" if "leak_hz" in velocity else "")
+            + f", {velocity['integrator']} integrator"
+        )
     if explained is not None:
-        described += " (auto: G_e explains " + ", ".join(
-            f"{vaf:.1f} % with {name}" for name, vaf in explained.items()) + ")"
+        described += (
+            " (auto: G_e explains "
+            + ", ".join(f"{vaf:.1f} % with {name}" for name, vaf in explained.items())
+            + ")"
+        )
     lines = [
         f"gamma_f           : {gamma} (grid {result.grid[0]:g}..{result.grid[-1]:g}"
         f" step {result.grid[1] - result.grid[0]:g}, refined)",
@@ -352,13 +490,23 @@ def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf,
     ]
     print("\n".join(lines))
     if full_band_vaf < LOW_VAF_PERCENT:
-        print(f"fdi signature: warning: G_e x_f explains only {full_band_vaf:.1f} % of the fault "
-              f"residual's variance (< {LOW_VAF_PERCENT:g} %): the friction level will not be "
-              "physical. Use " + ("" if velocity.get("method") == "model_observer" else
-                                  "--velocity-method auto or model_observer and ")
-              + "a calibration run with the rig's operating frequencies "
-              "(docs/identification.md)", file=sys.stderr)
+        print(
+            f"fdi signature: warning: G_e x_f explains only {full_band_vaf:.1f} % of the fault "
+            f"residual's variance (< {LOW_VAF_PERCENT:g} %): the friction level will not be "
+            "physical. Use "
+            + (
+                ""
+                if velocity.get("method") == "model_observer"
+                else "--velocity-method auto or model_observer and "
+            )
+            + "a calibration run with the rig's operating frequencies "
+            "(docs/identification.md)",
+            file=sys.stderr,
+        )
     if result.flat:
-        print(f"fdi signature: warning: {result.recommendation} (G_e x_f explains "
-              f"{result.info['vaf_percent']:.1f} % of the residual's variance; 99 % interval "
-              f"of gamma {result.interval[0]:.3g}..{result.interval[1]:.3g})", file=sys.stderr)
+        print(
+            f"fdi signature: warning: {result.recommendation} (G_e x_f explains "
+            f"{result.info['vaf_percent']:.1f} % of the residual's variance; 99 % interval "
+            f"of gamma {result.interval[0]:.3g}..{result.interval[1]:.3g})",
+            file=sys.stderr,
+        )

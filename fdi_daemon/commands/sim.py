@@ -19,17 +19,33 @@ def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="sim_command", metavar="SUBCOMMAND")
     sub.required = True
     rec = sub.add_parser(
-        "record", help="simulate a scenario and write a recording (with ground truth)",
+        "record",
+        help="simulate a scenario and write a recording (with ground truth)",
         description="Simulate a scenario (configs/scenarios/*.yaml) on the nonlinear rig and "
-                    "write a recording: t, v_in, accel, position, seq plus ground-truth "
-                    "columns (friction_force, seal_friction_force, fault_active, ...).")
+        "write a recording: t, v_in, accel, position, seq plus ground-truth "
+        "columns (friction_force, seal_friction_force, fault_active, ...).",
+    )
     rec.add_argument("scenario", metavar="SCENARIO.yaml", help="scenario file")
-    rec.add_argument("-o", "--output", required=True, metavar="REC",
-                     help="recording to write (.csv, .csv.gz, .npz or .mat)")
-    rec.add_argument("--seed", type=int, default=None,
-                     help="seed of rig noise and random excitation (default: the scenario's)")
-    rec.add_argument("--duration", type=float, default=None, metavar="S",
-                     help="simulated seconds (default: the scenario's duration_s)")
+    rec.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="REC",
+        help="recording to write (.csv, .csv.gz, .npz or .mat)",
+    )
+    rec.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="seed of rig noise and random excitation (default: the scenario's)",
+    )
+    rec.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="simulated seconds (default: the scenario's duration_s)",
+    )
     rec.add_argument("--quiet", action="store_true", help="no progress bar or summary line")
     rec.set_defaults(_sim_run=run_record)
     configure_serve(sub)
@@ -60,48 +76,80 @@ def run_record(args: argparse.Namespace) -> int:
     if args.quiet or duration < PROGRESS_MIN_S:
         recording = simulate(scenario, seed=args.seed, duration_s=args.duration)
     else:
-        from rich.progress import (BarColumn, Progress, TextColumn, TimeElapsedColumn,
-                                   TimeRemainingColumn)
+        from rich.progress import (
+            BarColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
 
-        with Progress(TextColumn(f"simulating {scenario.name}"), BarColumn(),
-                      TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(),
-                      TimeRemainingColumn(), transient=True) as bar:
+        with Progress(
+            TextColumn(f"simulating {scenario.name}"),
+            BarColumn(),
+            TextColumn("{task.percentage:>3.0f}%"),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            transient=True,
+        ) as bar:
             task = bar.add_task("sim", total=1.0)
-            recording = simulate(scenario, seed=args.seed, duration_s=args.duration,
-                                 progress=lambda done, total: bar.update(task,
-                                                                         completed=done / total))
+            recording = simulate(
+                scenario,
+                seed=args.seed,
+                duration_s=args.duration,
+                progress=lambda done, total: bar.update(task, completed=done / total),
+            )
     wall = time.perf_counter() - start
     path = write_recording(args.output, recording)
     if not args.quiet:
-        print(f"wrote {path}: {len(recording)} samples, {duration:g} s simulated in "
-              f"{wall:.2f} s ({duration / max(wall, 1e-9):.0f}x real time), "
-              f"seed {recording.meta['seed']}", file=sys.stderr)
+        print(
+            f"wrote {path}: {len(recording)} samples, {duration:g} s simulated in "
+            f"{wall:.2f} s ({duration / max(wall, 1e-9):.0f}x real time), "
+            f"seed {recording.meta['seed']}",
+            file=sys.stderr,
+        )
     return 0
 
 
 def configure_serve(sub) -> None:
     srv = sub.add_parser(
-        "serve", help="serve the rig in real time as a Modbus or serial device",
+        "serve",
+        help="serve the rig in real time as a Modbus or serial device",
         description="Run the simulated rig at 256 Hz and serve it as a DAQ device (protocols: "
-                    "docs/protocols.md). The first stdout line says where to connect "
-                    "(HOST:PORT or the pty path); then JSON-lines commands on stdin change "
-                    "faults, e.g. {\"set\": {\"bearing_supply\": 0.35}}. Serves until "
-                    "SIGTERM or SIGINT.")
+        "docs/protocols.md). The first stdout line says where to connect "
+        "(HOST:PORT or the pty path); then JSON-lines commands on stdin change "
+        "faults, e.g. {\"set\": {\"bearing_supply\": 0.35}}. Serves until "
+        "SIGTERM or SIGINT.",
+    )
     how = srv.add_mutually_exclusive_group(required=True)
-    how.add_argument("--modbus-tcp", metavar="HOST:PORT",
-                     help="Modbus TCP server (port 0 picks a free port)")
+    how.add_argument(
+        "--modbus-tcp", metavar="HOST:PORT", help="Modbus TCP server (port 0 picks a free port)"
+    )
     how.add_argument("--modbus-rtu", action="store_true", help="Modbus RTU on a new pty")
     how.add_argument("--serial", action="store_true", help="binary frames on a new pty")
-    srv.add_argument("--scenario", metavar="FILE", default=None,
-                     help="scenario YAML (default: 1.4 V 8 Hz sine, the paper's case 1)")
+    srv.add_argument(
+        "--scenario",
+        metavar="FILE",
+        default=None,
+        help="scenario YAML (default: 1.4 V 8 Hz sine, the paper's case 1)",
+    )
     srv.add_argument("--seed", type=int, default=None, help="rig noise seed")
-    srv.add_argument("--link", metavar="PATH", default=None,
-                     help="also keep a symlink PATH to the pty (stable across restarts)")
+    srv.add_argument(
+        "--link",
+        metavar="PATH",
+        default=None,
+        help="also keep a symlink PATH to the pty (stable across restarts)",
+    )
     srv.add_argument("--device-id", type=int, default=1, help="Modbus device id (default 1)")
-    srv.add_argument("--word-order", choices=("big", "little"), default="big",
-                     help="word order of 32-bit values (default big)")
-    srv.add_argument("--fifo-depth", type=int, default=256,
-                     help="samples kept in the Modbus FIFO (default 256)")
+    srv.add_argument(
+        "--word-order",
+        choices=("big", "little"),
+        default="big",
+        help="word order of 32-bit values (default big)",
+    )
+    srv.add_argument(
+        "--fifo-depth", type=int, default=256, help="samples kept in the Modbus FIFO (default 256)"
+    )
     srv.set_defaults(_sim_run=run_serve)
 
 
@@ -124,10 +172,16 @@ def run_serve(args: argparse.Namespace) -> int:
             raise UserError(f"--modbus-tcp: {exc}") from None
     transport = "modbus-tcp" if args.modbus_tcp else "modbus-rtu" if args.modbus_rtu else "serial"
     try:
-        device = SimulatedDevice(transport, realtime_rig(args.scenario, seed=args.seed),
-                                 host=host, port=port, link_path=args.link,
-                                 device_id=args.device_id, word_order=args.word_order,
-                                 fifo_depth=args.fifo_depth)
+        device = SimulatedDevice(
+            transport,
+            realtime_rig(args.scenario, seed=args.seed),
+            host=host,
+            port=port,
+            link_path=args.link,
+            device_id=args.device_id,
+            word_order=args.word_order,
+            fifo_depth=args.fifo_depth,
+        )
         serve_until_signalled(device, sys.stdin, sys.stdout)
     except (ValueError, OSError, RuntimeError) as exc:
         raise UserError(f"cannot serve the {transport} device: {exc}") from None

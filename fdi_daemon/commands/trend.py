@@ -8,19 +8,28 @@ HELP = "show the friction trend the daemon keeps: level against baseline and ala
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--state-dir", metavar="D",
-                        help="the daemon's state directory (default: $STATE_DIRECTORY, else "
-                             "$XDG_STATE_HOME/fdi, i.e. ~/.local/state/fdi); the trend is "
-                             "D/trend.sqlite")
-    parser.add_argument("--db", metavar="TREND.sqlite",
-                        help="the trend file itself (instead of --state-dir)")
-    parser.add_argument("--since", metavar="DATE",
-                        help="from this UTC date or date-time on (2026-11-01, "
-                             "2026-11-01T06:00)")
+    parser.add_argument(
+        "--state-dir",
+        metavar="D",
+        help="the daemon's state directory (default: $STATE_DIRECTORY, else "
+        "$XDG_STATE_HOME/fdi, i.e. ~/.local/state/fdi); the trend is "
+        "D/trend.sqlite",
+    )
+    parser.add_argument(
+        "--db", metavar="TREND.sqlite", help="the trend file itself (instead of --state-dir)"
+    )
+    parser.add_argument(
+        "--since",
+        metavar="DATE",
+        help="from this UTC date or date-time on (2026-11-01, 2026-11-01T06:00)",
+    )
     parser.add_argument("--csv", metavar="F", help="write the rows as CSV")
-    parser.add_argument("--plot", metavar="F.png",
-                        help="level (mean, min-max) against the baseline and the alarm steps, "
-                             "and the alarm priority, over time")
+    parser.add_argument(
+        "--plot",
+        metavar="F.png",
+        help="level (mean, min-max) against the baseline and the alarm steps, "
+        "and the alarm priority, over time",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -34,8 +43,10 @@ def run(args: argparse.Namespace) -> int:
 
     path = Path(args.db) if args.db else Path(args.state_dir or default_state_dir()) / TREND_FILE
     if not path.is_file():
-        raise UserError(f"{path}: no trend file (`fdi run` writes one row a minute to "
-                        f"alarms.trend in its state directory)")
+        raise UserError(
+            f"{path}: no trend file (`fdi run` writes one row a minute to "
+            f"alarms.trend in its state directory)"
+        )
     check_outputs({"--csv": args.csv, "--plot": args.plot}, (path,), plots=("--plot",))
     since = _since(args.since)
     try:
@@ -66,8 +77,7 @@ def _since(text: str | None) -> float | None:
     try:
         when = datetime.fromisoformat(text)
     except ValueError:
-        raise UserError(f"--since {text!r}: not a date (2026-11-01 or 2026-11-01T06:00)") \
-            from None
+        raise UserError(f"--since {text!r}: not a date (2026-11-01 or 2026-11-01T06:00)") from None
     if when.tzinfo is None:
         when = when.replace(tzinfo=timezone.utc)
     return when.timestamp()
@@ -81,26 +91,29 @@ def daily_lines(data) -> list[str]:
     if not t.size:
         return []
     day = (t // 86400).astype(np.int64)
-    lines = [f"{'day (UTC)':10}  {'minutes':>7}  {'level mean':>10}  {'max':>6}  "
-             f"{'baseline':>8}  {'priority max':>12}  {'command RMS V':>13}"]
+    lines = [
+        f"{'day (UTC)':10}  {'minutes':>7}  {'level mean':>10}  {'max':>6}  "
+        f"{'baseline':>8}  {'priority max':>12}  {'command RMS V':>13}"
+    ]
     from datetime import datetime, timezone
 
     for d in np.unique(day):
         sel = day == d
         level = data["level_mean"][sel]
         has = np.isfinite(level)
-        mean = np.average(level[has], weights=data["readings"][sel][has]) if has.any() \
-            else np.nan
+        mean = np.average(level[has], weights=data["readings"][sel][has]) if has.any() else np.nan
         high = np.nanmax(data["level_max"][sel]) if has.any() else np.nan
         base = data["baseline"][sel]
         base = base[np.isfinite(base)]
         cmd = data["command_rms_v"][sel]
         cmd = cmd[np.isfinite(cmd)]
         date = datetime.fromtimestamp(int(d) * 86400, timezone.utc).strftime("%Y-%m-%d")
-        lines.append(f"{date:10}  {int(sel.sum()):7d}  {mean:10.3f}  {high:6.3f}  "
-                     f"{(base[-1] if base.size else np.nan):8.3f}  "
-                     f"{int(np.max(data['priority'][sel])):12d}  "
-                     f"{(np.median(cmd) if cmd.size else np.nan):13.3f}")
+        lines.append(
+            f"{date:10}  {int(sel.sum()):7d}  {mean:10.3f}  {high:6.3f}  "
+            f"{(base[-1] if base.size else np.nan):8.3f}  "
+            f"{int(np.max(data['priority'][sel])):12d}  "
+            f"{(np.median(cmd) if cmd.size else np.nan):13.3f}"
+        )
     return lines
 
 
@@ -117,8 +130,9 @@ def write_csv(path, data) -> None:
             writer.writerow(["time_utc"] + names)
             for i in range(len(data["time_unix"])):
                 when = datetime.fromtimestamp(data["time_unix"][i], timezone.utc)
-                writer.writerow([when.strftime("%Y-%m-%dT%H:%M:%SZ")]
-                                + ["" if data[n][i] != data[n][i] else f"{data[n][i]:.6g}"
-                                   for n in names])
+                writer.writerow(
+                    [when.strftime("%Y-%m-%dT%H:%M:%SZ")]
+                    + ["" if data[n][i] != data[n][i] else f"{data[n][i]:.6g}" for n in names]
+                )
     except OSError as exc:
         raise UserError(f"{path}: cannot write: {exc.strerror or exc}") from None

@@ -55,6 +55,7 @@ def jit(func=None, *, inline: bool = False, nrt: bool = False):
     """``numba.njit(cache=True, nogil=True)``, cached per version of the package's sources;
     ``inline``: inlined into its callers; ``nrt``: with numba's runtime (needed to allocate
     arrays; see the module docstring)."""
+
     def wrap(f):
         if not JIT_ENABLED or _njit is None:
             return f
@@ -67,6 +68,7 @@ def jit(func=None, *, inline: bool = False, nrt: bool = False):
             return _compiling_indices_as_given(_njit(**options)(f))
         with _numba_cache_dir(cache_dir):
             return _compiling_indices_as_given(_njit(cache=True, **options)(f))
+
     return wrap(func) if func is not None else wrap
 
 
@@ -126,7 +128,7 @@ def _package_of(func) -> Path | None:
     return Path(folders[0]).resolve() if folders else None
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _package_cache_dir(package: Path) -> str | None:
     """The writable folder for the compiled kernels of ``package``, named after its install
     and the hash of its sources. When it is new, the folders of the install's earlier
@@ -145,8 +147,10 @@ def _package_cache_dir(package: Path) -> str | None:
                 for old in package.rglob("__pycache__/*.nb[ic]"):
                     old.unlink(missing_ok=True)
             return str(root / name)
-    log.warning("no writable folder to cache the compiled kernels of %s: they are compiled "
-                "at every start", package)
+    log.warning(
+        "no writable folder to cache the compiled kernels of %s: they are compiled at every start",
+        package,
+    )
     return None
 
 
@@ -164,8 +168,14 @@ def _cache_roots(package: Path):
 def _sources_digest(package: Path) -> str:
     """A hash of the names and contents of every ``.py`` file in ``package``."""
     files = sorted(package.rglob("*.py"))
-    return _digest(b"".join(f.relative_to(package).as_posix().encode() + b"\0"
-                            + hashlib.sha256(f.read_bytes()).digest() for f in files))
+    return _digest(
+        b"".join(
+            f.relative_to(package).as_posix().encode()
+            + b"\0"
+            + hashlib.sha256(f.read_bytes()).digest()
+            for f in files
+        )
+    )
 
 
 def _digest(data: bytes) -> str:

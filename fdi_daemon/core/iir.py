@@ -27,8 +27,9 @@ class IIRFilter:
 
     __slots__ = ("_b", "_a", "_b_arr", "_a_arr", "_z", "_n", "_taps", "_b0", "_bn", "_an")
 
-    def __init__(self, b: Sequence[float], a: Sequence[float] = (1.0,),
-                 state: Sequence[float] | None = None) -> None:
+    def __init__(
+        self, b: Sequence[float], a: Sequence[float] = (1.0,), state: Sequence[float] | None = None
+    ) -> None:
         b_arr = np.atleast_1d(np.asarray(b, dtype=float))
         a_arr = np.atleast_1d(np.asarray(a, dtype=float))
         if b_arr.ndim != 1 or a_arr.ndim != 1 or b_arr.size == 0 or a_arr.size == 0:

@@ -24,8 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fdi_daemon.core.compiled import Arena, jit
-from fdi_daemon.core.kernels import (ITEST_INTS, itest_floats, itest_groups, itest_tick,
-                                     sums_floats)
+from fdi_daemon.core.kernels import ITEST_INTS, itest_floats, itest_groups, itest_tick, sums_floats
 from fdi_daemon.core.normal_equations import packed_width
 
 __all__ = ["InnovationTest", "packed_row"]
@@ -44,12 +43,31 @@ def packed_row(phi: Sequence[float], y: float) -> tuple[float, ...]:
 class InnovationTest:
     """Lagged reference fit + windowed mean of squared standardised innovations."""
 
-    __slots__ = ("p", "window_samples", "lag_samples", "test_samples", "every", "phase",
-                 "min_sigma2", "arena", "fo", "io", "_width")
+    __slots__ = (
+        "p",
+        "window_samples",
+        "lag_samples",
+        "test_samples",
+        "every",
+        "phase",
+        "min_sigma2",
+        "arena",
+        "fo",
+        "io",
+        "_width",
+    )
 
-    def __init__(self, p: int, window_samples: int, lag_samples: int, test_samples: int,
-                 every: int = 1, min_sigma: float = 0.0, phase: int = 0,
-                 arena: Arena | None = None) -> None:
+    def __init__(
+        self,
+        p: int,
+        window_samples: int,
+        lag_samples: int,
+        test_samples: int,
+        every: int = 1,
+        min_sigma: float = 0.0,
+        phase: int = 0,
+        arena: Arena | None = None,
+    ) -> None:
         if window_samples <= p:
             raise ValueError("window_samples must exceed the number of regressors")
         self.p = int(p)
@@ -63,8 +81,9 @@ class InnovationTest:
         p, n, lag, m = self.p, self.window_samples, self.lag_samples, self.test_samples
         self.arena = arena if arena is not None else Arena()
         groups = itest_groups(n, self.every)
-        self.fo, self.io = fo, io = self.arena.alloc(itest_floats(p, n, lag, m, self.every),
-                                                  ITEST_INTS)
+        self.fo, self.io = fo, io = self.arena.alloc(
+            itest_floats(p, n, lag, m, self.every), ITEST_INTS
+        )
         ph = fo
         row = ph + p + 1
         fifo = row + w + 1
@@ -73,10 +92,33 @@ class InnovationTest:
         th = tst + sums_floats(m, 1)
         scr = th + p
         sc = scr + 2 * p * p + p
-        self.arena.i[io:io + ITEST_INTS] = (p, groups, lag, m, self.every, self.phase, w,
-                                            0, 0, 0, 0, 0, 0, 0, 0,
-                                            ph, row, fifo, ref, tst, th, scr, sc,
-                                            lag + self.every, groups * self.every)
+        self.arena.i[io : io + ITEST_INTS] = (
+            p,
+            groups,
+            lag,
+            m,
+            self.every,
+            self.phase,
+            w,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            ph,
+            row,
+            fifo,
+            ref,
+            tst,
+            th,
+            scr,
+            sc,
+            lag + self.every,
+            groups * self.every,
+        )
         self.reset()
 
     def _o(self, k: int) -> int:
@@ -84,16 +126,16 @@ class InnovationTest:
 
     def reset(self) -> None:
         f, ii, io = self.arena.f, self.arena.i, self.io
-        f[self.fo:self._o(22) + 6] = 0.0
-        ii[io + 7:io + 15] = 0
+        f[self.fo : self._o(22) + 6] = 0.0
+        ii[io + 7 : io + 15] = 0
         ii[io + 7] = self.phase
         sc = self._o(22)
-        f[sc:sc + 6] = (self.min_sigma2, math.inf, math.nan, 0.0, 0.0, 1.0 / self.test_samples)
+        f[sc : sc + 6] = (self.min_sigma2, math.inf, math.nan, 0.0, 0.0, 1.0 / self.test_samples)
 
     @property
     def theta(self) -> list[float]:
         th = self._o(20)
-        return self.arena.f[th:th + self.p].tolist()
+        return self.arena.f[th : th + self.p].tolist()
 
     @property
     def sigma2(self) -> float:
@@ -108,19 +150,19 @@ class InnovationTest:
         return bool(self.arena.i[self.io + 8])
 
     # ------------------------------------------------------------------ per tick
-    def step(self, phi: Sequence[float], y: float, row: tuple[float, ...] | None = None
-             ) -> float:
+    def step(self, phi: Sequence[float], y: float, row: tuple[float, ...] | None = None) -> float:
         """One tick; returns the statistic T (``row`` is accepted for compatibility and
         not needed: the kernel forms the packed row)."""
         ph = self._o(15)
         f = self.arena.f
-        f[ph:ph + self.p] = phi
+        f[ph : ph + self.p] = phi
         f[ph + self.p] = y
         return float(itest_tick(f, self.arena.i, self.io))
 
     # ------------------------------------------------------------------ batch
-    def run(self, phi: np.ndarray, y: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    def run(
+        self, phi: np.ndarray, y: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
         """Batch ``step``: statistic, reference ok and the reference θ (one array per
         regressor) after every row of phi (n, p)."""
         phi = np.ascontiguousarray(phi, dtype=float).reshape(-1, self.p)

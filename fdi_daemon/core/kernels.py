@@ -24,10 +24,22 @@ import numpy as np
 
 from fdi_daemon.core.compiled import jit
 
-__all__ = ["iir_step", "sums_push", "sums_floats", "solve_packed",
-           "packed_row_into", "itest_tick", "itest_flush_p", "itest_insert_p", "itest_solve_p",
-           "itest_statistic_p",
-           "ITEST_INTS", "itest_floats", "itest_groups", "group_products"]
+__all__ = [
+    "iir_step",
+    "sums_push",
+    "sums_floats",
+    "solve_packed",
+    "packed_row_into",
+    "itest_tick",
+    "itest_flush_p",
+    "itest_insert_p",
+    "itest_solve_p",
+    "itest_statistic_p",
+    "ITEST_INTS",
+    "itest_floats",
+    "itest_groups",
+    "group_products",
+]
 
 
 #: an offset as an unsigned integer: indexing with it skips the test for a negative index
@@ -143,9 +155,16 @@ def itest_floats(p: int, n: int, lag: int, m: int, every: int) -> int:
     the reference sums (one row per group), the test sums, θ, scratch, scalars (σ² floor,
     σ², T, z², 1/σ², 1/M)."""
     w = p * (p + 1) // 2 + p + 1
-    return (p + 1) + (w + 1) + (lag + every) * (p + 1) + sums_floats(itest_groups(n, every),
-                                                                     w + 1) \
-        + sums_floats(m, 1) + p + (2 * p * p + p) + 6
+    return (
+        (p + 1)
+        + (w + 1)
+        + (lag + every) * (p + 1)
+        + sums_floats(itest_groups(n, every), w + 1)
+        + sums_floats(m, 1)
+        + p
+        + (2 * p * p + p)
+        + 6
+    )
 
 
 @jit(inline=True)

@@ -14,6 +14,7 @@ deficient or nearly so: the rig at rest, collinear regressors).
 from __future__ import annotations
 
 import numpy as np
+
 from fdi_daemon.core.compiled import jit
 
 __all__ = ["packed_width", "packed_products", "solve_packed"]

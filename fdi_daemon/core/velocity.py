@@ -53,27 +53,46 @@ DEFAULT_SETTINGS: dict[str, Any] = {
 class VelocityEstimator:
     """v̂ = I(q) HP(q) ẍ as one frozen IIR block with ``step``/``run``/``reset``/``state``."""
 
-    __slots__ = ("fs_hz", "highpass_hz", "highpass_order", "integrator",
-                 "lead_compensation_hz", "_filter", "step", "run")
+    __slots__ = (
+        "fs_hz",
+        "highpass_hz",
+        "highpass_order",
+        "integrator",
+        "lead_compensation_hz",
+        "_filter",
+        "step",
+        "run",
+    )
 
     needs_model = False  # step/run take ẍ only (core.velocity_observer's take x̂̈ too)
     needs_position = False
 
-    def __init__(self, fs_hz: float, highpass_hz: float = 1.0, highpass_order: int = 3,
-                 integrator: str = "trapezoid", lead_compensation_hz: float | None = None):
+    def __init__(
+        self,
+        fs_hz: float,
+        highpass_hz: float = 1.0,
+        highpass_order: int = 3,
+        integrator: str = "trapezoid",
+        lead_compensation_hz: float | None = None,
+    ):
         fs_hz = float(fs_hz)
         if not (math.isfinite(fs_hz) and fs_hz > 0):
             raise ValueError(f"fs_hz must be a positive number, got {fs_hz!r}")
-        if isinstance(highpass_order, bool) or not isinstance(highpass_order, (int, np.integer)) \
-                or not 1 <= int(highpass_order) <= 8:
+        if (
+            isinstance(highpass_order, bool)
+            or not isinstance(highpass_order, (int, np.integer))
+            or not 1 <= int(highpass_order) <= 8
+        ):
             raise ValueError(f"highpass_order must be a whole number 1..8, got {highpass_order!r}")
         highpass_hz = float(highpass_hz)
         if not (math.isfinite(highpass_hz) and 0 < highpass_hz < fs_hz / 2):
-            raise ValueError(f"highpass_hz must lie in (0, fs/2) = (0, {fs_hz / 2:g}), "
-                             f"got {highpass_hz!r}")
+            raise ValueError(
+                f"highpass_hz must lie in (0, fs/2) = (0, {fs_hz / 2:g}), got {highpass_hz!r}"
+            )
         if integrator not in INTEGRATORS:
-            raise ValueError(f"integrator must be one of {', '.join(INTEGRATORS)}, "
-                             f"got {integrator!r}")
+            raise ValueError(
+                f"integrator must be one of {', '.join(INTEGRATORS)}, got {integrator!r}"
+            )
         self.fs_hz = fs_hz
         self.highpass_hz = highpass_hz
         self.highpass_order = int(highpass_order)
@@ -86,8 +105,10 @@ class VelocityEstimator:
                 raise ValueError(f"lead_compensation_hz must lie in (0, fs/2), got {f0!r}")
             lead_rad = math.radians(_phase_lead_deg(b, a, fs_hz, f0))
             if not 0 < lead_rad < math.pi:
-                raise ValueError(f"cannot compensate a lead of {math.degrees(lead_rad):.1f}° "
-                                 f"at {f0:g} Hz with a first-order all-pass")
+                raise ValueError(
+                    f"cannot compensate a lead of {math.degrees(lead_rad):.1f}° "
+                    f"at {f0:g} Hz with a first-order all-pass"
+                )
             k = math.tan(lead_rad / 2) / math.tan(math.pi * f0 / fs_hz)
             c = (1 - k) / (1 + k)
             b = np.convolve(b, [c, 1.0])
@@ -99,8 +120,9 @@ class VelocityEstimator:
         self.run = self._filter.run
 
     @classmethod
-    def from_settings(cls, settings: Mapping[str, Any] | None, fs_hz: float | None = None
-                      ) -> "VelocityEstimator":
+    def from_settings(
+        cls, settings: Mapping[str, Any] | None, fs_hz: float | None = None
+    ) -> VelocityEstimator:
         """Build from a model file's ``velocity`` mapping (missing keys take the defaults).
 
         ``fs_hz`` comes from the argument or from the mapping's ``fs_hz`` key; when both
@@ -120,9 +142,13 @@ class VelocityEstimator:
 
     def settings(self) -> dict[str, Any]:
         """The mapping stored in the model file's ``velocity`` key (round-trips)."""
-        return {"fs_hz": self.fs_hz, "highpass_hz": self.highpass_hz,
-                "highpass_order": self.highpass_order, "integrator": self.integrator,
-                "lead_compensation_hz": self.lead_compensation_hz}
+        return {
+            "fs_hz": self.fs_hz,
+            "highpass_hz": self.highpass_hz,
+            "highpass_order": self.highpass_order,
+            "integrator": self.integrator,
+            "lead_compensation_hz": self.lead_compensation_hz,
+        }
 
     @property
     def b(self) -> np.ndarray:
@@ -146,8 +172,9 @@ class VelocityEstimator:
     def response(self, f_hz):
         """V(e^jω)·jω at ``f_hz`` (Hz; a number or an array): v̂ over the true velocity, 1 for
         an exact integral."""
-        return frequency_response(self.b, self.a, f_hz, self.fs_hz) * (2j * np.pi
-                                                                      * np.asarray(f_hz))
+        return frequency_response(self.b, self.a, f_hz, self.fs_hz) * (
+            2j * np.pi * np.asarray(f_hz)
+        )
 
     def phase_lead_deg(self, f_hz: float) -> float:
         """Phase of the estimator minus that of an ideal integrator (-90°) at ``f_hz``."""
@@ -158,8 +185,9 @@ class VelocityEstimator:
         return abs(self.response(f_hz))
 
 
-def _design(fs_hz: float, highpass_hz: float, order: int, integrator: str
-            ) -> tuple[np.ndarray, np.ndarray]:
+def _design(
+    fs_hz: float, highpass_hz: float, order: int, integrator: str
+) -> tuple[np.ndarray, np.ndarray]:
     b_hp, a_hp = butter(order, highpass_hz, btype="high", fs=fs_hz)
     gain = b_hp[0]  # b_hp = gain · (1 - q⁻¹)^order for the bilinear Butterworth
     zeros = np.array([1.0])

@@ -39,8 +39,15 @@ from fdi_daemon.core.velocity import DEFAULT_SETTINGS as HIGHPASS_SETTINGS
 from fdi_daemon.core.velocity import VelocityEstimator
 from fdi_daemon.core.velocity_position import POSITION_DEFAULTS, PositionVelocityObserver
 
-__all__ = ["ModelVelocityObserver", "OBSERVER_DEFAULTS", "METHODS", "VelocityBlock",
-           "velocity_from_settings", "velocity_setting_names", "trusted_from_hz"]
+__all__ = [
+    "ModelVelocityObserver",
+    "OBSERVER_DEFAULTS",
+    "METHODS",
+    "VelocityBlock",
+    "velocity_from_settings",
+    "velocity_setting_names",
+    "trusted_from_hz",
+]
 
 #: ``velocity.method`` values; a mapping without ``method`` is ``highpass`` (today's models)
 METHODS = ("highpass", "model_observer", "position_observer")
@@ -62,23 +69,33 @@ class ModelVelocityObserver:
     needs_model = True  # step/run take the plant model's x̂̈ as well
     needs_position = False
 
-    def __init__(self, fs_hz: float, leak_hz: float = 0.02, highpass_hz: float = 0.5,
-                 highpass_order: int = 2, integrator: str = "trapezoid",
-                 lead_compensation_hz: float | None = None):
+    def __init__(
+        self,
+        fs_hz: float,
+        leak_hz: float = 0.02,
+        highpass_hz: float = 0.5,
+        highpass_order: int = 2,
+        integrator: str = "trapezoid",
+        lead_compensation_hz: float | None = None,
+    ):
         leak_hz = float(leak_hz)
         if not (math.isfinite(leak_hz) and 0 < leak_hz < float(highpass_hz)):
-            raise ValueError(f"leak_hz must lie in (0, highpass_hz = {highpass_hz!r}), "
-                             f"got {leak_hz!r}")
-        self.residual_path = VelocityEstimator(fs_hz, highpass_hz, highpass_order, integrator,
-                                               lead_compensation_hz)
+            raise ValueError(
+                f"leak_hz must lie in (0, highpass_hz = {highpass_hz!r}), got {leak_hz!r}"
+            )
+        self.residual_path = VelocityEstimator(
+            fs_hz, highpass_hz, highpass_order, integrator, lead_compensation_hz
+        )
         self.model_path = VelocityEstimator(fs_hz, leak_hz, 1, integrator)
         self.fs_hz = self.residual_path.fs_hz
         self.leak_hz = leak_hz
 
     @classmethod
-    def from_settings(cls, settings: Mapping[str, Any], fs_hz: float) -> "ModelVelocityObserver":
-        merged = {**OBSERVER_DEFAULTS, **{k: v for k, v in settings.items()
-                                          if k not in ("method", "fs_hz")}}
+    def from_settings(cls, settings: Mapping[str, Any], fs_hz: float) -> ModelVelocityObserver:
+        merged = {
+            **OBSERVER_DEFAULTS,
+            **{k: v for k, v in settings.items() if k not in ("method", "fs_hz")},
+        }
         unknown = set(merged) - set(OBSERVER_DEFAULTS)
         if unknown:
             raise ValueError(f"unknown velocity setting(s): {', '.join(sorted(unknown))}")
@@ -87,9 +104,15 @@ class ModelVelocityObserver:
     def settings(self) -> dict[str, Any]:
         """The mapping stored in the model file's ``velocity`` key (round-trips)."""
         res = self.residual_path
-        return {"method": "model_observer", "fs_hz": self.fs_hz, "leak_hz": self.leak_hz,
-                "highpass_hz": res.highpass_hz, "highpass_order": res.highpass_order,
-                "integrator": res.integrator, "lead_compensation_hz": res.lead_compensation_hz}
+        return {
+            "method": "model_observer",
+            "fs_hz": self.fs_hz,
+            "leak_hz": self.leak_hz,
+            "highpass_hz": res.highpass_hz,
+            "highpass_order": res.highpass_order,
+            "integrator": res.integrator,
+            "lead_compensation_hz": res.lead_compensation_hz,
+        }
 
     def step(self, accel: float, xhat: float) -> float:
         return self.model_path.step(xhat) + self.residual_path.step(accel - xhat)
@@ -123,8 +146,11 @@ class ModelVelocityObserver:
 
 def velocity_setting_names() -> tuple[str, ...]:
     """Every key the ``velocity`` mapping may hold (either method)."""
-    return tuple(dict.fromkeys(("method", "fs_hz", *HIGHPASS_SETTINGS, *OBSERVER_DEFAULTS,
-                                *POSITION_DEFAULTS)))
+    return tuple(
+        dict.fromkeys(
+            ("method", "fs_hz", *HIGHPASS_SETTINGS, *OBSERVER_DEFAULTS, *POSITION_DEFAULTS)
+        )
+    )
 
 
 VelocityBlock = VelocityEstimator | ModelVelocityObserver | PositionVelocityObserver

@@ -41,8 +41,14 @@ POSITION_DEFAULTS: dict[str, Any] = {"crossover_hz": 15.0, "damping": 0.7071}
 class PositionVelocityObserver:
     """v̂ from position and acceleration with ``step(accel, position)`` / ``run(...)``."""
 
-    __slots__ = ("fs_hz", "crossover_hz", "damping", "position_path", "accel_path",
-                 "_last_position")
+    __slots__ = (
+        "fs_hz",
+        "crossover_hz",
+        "damping",
+        "position_path",
+        "accel_path",
+        "_last_position",
+    )
 
     needs_model = False
     needs_position = True
@@ -54,8 +60,9 @@ class PositionVelocityObserver:
         if not (math.isfinite(fs_hz) and fs_hz > 0):
             raise ValueError(f"fs_hz must be a positive number, got {fs_hz!r}")
         if not (math.isfinite(crossover_hz) and 0 < crossover_hz < fs_hz / 4):
-            raise ValueError(f"crossover_hz must lie in (0, fs/4) = (0, {fs_hz / 4:g}), "
-                             f"got {crossover_hz!r}")
+            raise ValueError(
+                f"crossover_hz must lie in (0, fs/4) = (0, {fs_hz / 4:g}), got {crossover_hz!r}"
+            )
         if not (math.isfinite(damping) and 0.3 <= damping <= 2.0):
             raise ValueError(f"damping must lie in [0.3, 2], got {damping!r}")
         self.fs_hz, self.crossover_hz, self.damping = fs_hz, crossover_hz, damping
@@ -66,19 +73,25 @@ class PositionVelocityObserver:
         self._last_position = math.nan
 
     @classmethod
-    def from_settings(cls, settings: Mapping[str, Any], fs_hz: float
-                      ) -> "PositionVelocityObserver":
-        merged = {**POSITION_DEFAULTS, **{k: v for k, v in settings.items()
-                                          if k not in ("method", "fs_hz")}}
+    def from_settings(cls, settings: Mapping[str, Any], fs_hz: float) -> PositionVelocityObserver:
+        merged = {
+            **POSITION_DEFAULTS,
+            **{k: v for k, v in settings.items() if k not in ("method", "fs_hz")},
+        }
         unknown = set(merged) - set(POSITION_DEFAULTS)
         if unknown:
-            raise ValueError(f"unknown velocity setting(s) for position_observer: "
-                             f"{', '.join(sorted(unknown))}")
+            raise ValueError(
+                f"unknown velocity setting(s) for position_observer: {', '.join(sorted(unknown))}"
+            )
         return cls(fs_hz, **merged)
 
     def settings(self) -> dict[str, Any]:
-        return {"method": "position_observer", "fs_hz": self.fs_hz,
-                "crossover_hz": self.crossover_hz, "damping": self.damping}
+        return {
+            "method": "position_observer",
+            "fs_hz": self.fs_hz,
+            "crossover_hz": self.crossover_hz,
+            "damping": self.damping,
+        }
 
     def step(self, accel: float, position: float) -> float:
         if math.isfinite(position):

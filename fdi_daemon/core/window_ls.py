@@ -44,15 +44,22 @@ class WindowSolution:
     det: np.ndarray  # S11 S22 - S12²
 
 
-def solve_sums(sums: np.ndarray, counts: np.ndarray, window_samples: int,
-               min_rcond: float, min_mean_square: tuple[float, float]) -> WindowSolution:
+def solve_sums(
+    sums: np.ndarray,
+    counts: np.ndarray,
+    window_samples: int,
+    min_rcond: float,
+    min_mean_square: tuple[float, float],
+) -> WindowSolution:
     """Eq. (17) for every row of ``sums`` (same arithmetic as `detect.kernel.chain_tick`)."""
     s11, s12, s22, s1y, s2y, syy = (sums[:, i] for i in range(N_SUMS))
     det = s11 * s22 - s12 * s12
-    ok = ((np.asarray(counts) == window_samples)
-          & (s11 > min_mean_square[0] * window_samples)
-          & (s22 > min_mean_square[1] * window_samples)
-          & (det > min_rcond * (s11 * s22)))
+    ok = (
+        (np.asarray(counts) == window_samples)
+        & (s11 > min_mean_square[0] * window_samples)
+        & (s22 > min_mean_square[1] * window_samples)
+        & (det > min_rcond * (s11 * s22))
+    )
     with np.errstate(divide="ignore", invalid="ignore"):
         t1 = (s22 * s1y - s12 * s2y) / det
         t2 = (s11 * s2y - s12 * s1y) / det

@@ -26,9 +26,10 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 from rich.console import Console
 from rich.live import Live
@@ -99,7 +100,7 @@ class KeyReader:
         self._fd: int | None = None
         self._saved: list | None = None
 
-    def __enter__(self) -> "KeyReader":
+    def __enter__(self) -> KeyReader:
         try:
             fd = self._stream.fileno()
         except (AttributeError, OSError, ValueError):
@@ -145,22 +146,33 @@ class KeyReader:
         return data.decode("utf-8", errors="replace")
 
 
-def run_dashboard(provider: SnapshotProvider, *, refresh_hz: float = DEFAULT_REFRESH_HZ,
-                  console: Console | None = None, stop: threading.Event | None = None,
-                  keys: KeyReader | None = None) -> str:
+def run_dashboard(
+    provider: SnapshotProvider,
+    *,
+    refresh_hz: float = DEFAULT_REFRESH_HZ,
+    console: Console | None = None,
+    stop: threading.Event | None = None,
+    keys: KeyReader | None = None,
+) -> str:
     """Redraw at `refresh_hz` until `q`, Ctrl-C or `stop` is set; returns why it ended:
     "quit" (q), "interrupt" (Ctrl-C), "hangup" (the terminal went away: end of its input, or
     a write to it failed) or "stopped". `keys`, if given, is already entered by the caller;
     otherwise stdin is read while the loop runs."""
     if keys is None:
         with KeyReader() as own_keys:
-            return run_dashboard(provider, refresh_hz=refresh_hz, console=console, stop=stop,
-                                 keys=own_keys)
+            return run_dashboard(
+                provider, refresh_hz=refresh_hz, console=console, stop=stop, keys=own_keys
+            )
     console = console or DashboardConsole()
     period_s = 1.0 / refresh_hz
     try:
-        with Live(console=console, screen=console.is_terminal, auto_refresh=False,
-                  redirect_stdout=False, redirect_stderr=False) as live:
+        with Live(
+            console=console,
+            screen=console.is_terminal,
+            auto_refresh=False,
+            redirect_stdout=False,
+            redirect_stderr=False,
+        ) as live:
             next_frame = time.monotonic()
             while not (stop is not None and stop.is_set()):
                 frame = provider()
@@ -181,10 +193,16 @@ def run_dashboard(provider: SnapshotProvider, *, refresh_hz: float = DEFAULT_REF
     return "stopped"
 
 
-def run_alongside(work: Callable[[], int], provider: SnapshotProvider, *,
-                  request_stop: Callable[[], None] | None = None, linger: bool = False,
-                  refresh_hz: float = DEFAULT_REFRESH_HZ,
-                  console: Console | None = None, held_output: Path | None = None) -> int:
+def run_alongside(
+    work: Callable[[], int],
+    provider: SnapshotProvider,
+    *,
+    request_stop: Callable[[], None] | None = None,
+    linger: bool = False,
+    refresh_hz: float = DEFAULT_REFRESH_HZ,
+    console: Console | None = None,
+    held_output: Path | None = None,
+) -> int:
     """Run `work` in this (main) thread with the dashboard drawn from a background thread.
 
     `work` keeps the main thread so its signal handlers (SIGTERM, SIGINT) work as without a
@@ -210,8 +228,9 @@ def run_alongside(work: Callable[[], int], provider: SnapshotProvider, *,
             console = stack.enter_context(captured_output(keep=held_output))
 
         def show() -> None:
-            ended = run_dashboard(frames, refresh_hz=refresh_hz, console=console, stop=stop,
-                                  keys=keys)
+            ended = run_dashboard(
+                frames, refresh_hz=refresh_hz, console=console, stop=stop, keys=keys
+            )
             if ended in ("quit", "hangup") and not done.is_set():
                 (request_stop or (lambda: signal.raise_signal(signal.SIGINT)))()
 
@@ -251,8 +270,10 @@ def captured_output(tail_lines: int = 40, keep: Path | None = None) -> Iterator[
             keep.parent.mkdir(parents=True, exist_ok=True)
         held_file = open(keep, "w+b") if keep is not None else tempfile.TemporaryFile()
     except OSError as exc:
-        raise UserError(f"{keep}: cannot hold the output there while the dashboard is on "
-                        f"screen: {exc.strerror or exc}") from None
+        raise UserError(
+            f"{keep}: cannot hold the output there while the dashboard is on "
+            f"screen: {exc.strerror or exc}"
+        ) from None
     sys.stdout.flush()
     sys.stderr.flush()
     saved = [os.dup(1), os.dup(2)]
@@ -277,10 +298,14 @@ def captured_output(tail_lines: int = 40, keep: Path | None = None) -> Iterator[
             if size > 200 * tail_lines:
                 lines = lines[1:]  # the first one may be cut
             if len(lines) > tail_lines or size > 200 * tail_lines:
-                lines.insert(-tail_lines, f"[earlier output in {keep}]" if keep is not None
-                             else "[earlier output not shown]")
+                lines.insert(
+                    -tail_lines,
+                    f"[earlier output in {keep}]"
+                    if keep is not None
+                    else "[earlier output not shown]",
+                )
             try:
-                sys.stdout.write("".join(line + "\n" for line in lines[-tail_lines - 1:]))
+                sys.stdout.write("".join(line + "\n" for line in lines[-tail_lines - 1 :]))
                 sys.stdout.flush()
             except OSError:  # the terminal hung up: nobody to tell, and nothing may fail later
                 devnull = os.open(os.devnull, os.O_WRONLY)

@@ -15,8 +15,9 @@ import json
 import math
 import socket
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from fdi_daemon.dashboard.app import Frame
 from fdi_daemon.dashboard.render import number
@@ -39,7 +40,7 @@ class StatusConnection:
         self._sock: socket.socket | None = None
         self._buffer = b""
 
-    def __enter__(self) -> "StatusConnection":
+    def __enter__(self) -> StatusConnection:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -68,7 +69,7 @@ class StatusConnection:
         except ConnectionRefusedError:
             self.close()
             raise DaemonUnreachable(f"nothing listening on {self.path}") from None
-        except socket.timeout:
+        except TimeoutError:
             self.close()
             raise DaemonUnreachable(f"no answer within {self.timeout_s:g} s") from None
         except OSError as exc:
@@ -123,10 +124,17 @@ class SocketProvider:
     the first good answer resets the delay.
     """
 
-    def __init__(self, path: str | Path, *, timeout_s: float = 0.5, stale_after_s: float = 3.0,
-                 retry_initial_s: float = 0.2, retry_max_s: float = 2.0,
-                 wall_clock: Callable[[], float] = time.time,
-                 monotonic: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        timeout_s: float = 0.5,
+        stale_after_s: float = 3.0,
+        retry_initial_s: float = 0.2,
+        retry_max_s: float = 2.0,
+        wall_clock: Callable[[], float] = time.time,
+        monotonic: Callable[[], float] = time.monotonic,
+    ):
         self.path = Path(path)
         self._connection = StatusConnection(path, timeout_s)
         self.stale_after_s = stale_after_s

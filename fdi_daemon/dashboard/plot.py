@@ -9,8 +9,8 @@ width and height rich gives it; y labels sit in a left gutter.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 from rich.console import Console, ConsoleOptions, RenderResult
@@ -68,8 +68,12 @@ class BraillePlot:
 
 def data_range(series: Sequence[Series]) -> tuple[float, float] | None:
     """The finite min and max of y over every layer, or None when there is no finite value."""
-    values = [v for s in series for v in (s.y if s.level is None else (s.level,))
-              if v is not None and math.isfinite(v)]
+    values = [
+        v
+        for s in series
+        for v in (s.y if s.level is None else (s.level,))
+        if v is not None and math.isfinite(v)
+    ]
     if not values:
         return None
     return min(values), max(values)
@@ -135,8 +139,12 @@ def plot_runs(plot: BraillePlot, width: int, height: int) -> list[list[Run]]:
     for r in range(height):
         row: list[Run] = []
         if gutter:
-            row.append((labels[r].rjust(gutter - 1) + "┤" if r in labels
-                        else " " * (gutter - 1) + "│", plot.label_style))
+            row.append(
+                (
+                    labels[r].rjust(gutter - 1) + "┤" if r in labels else " " * (gutter - 1) + "│",
+                    plot.label_style,
+                )
+            )
         chars = _CELL_CHARS[grid[r]]
         edges = np.flatnonzero(np.diff(top[r])) + 1
         for a, b in zip(np.r_[0, edges], np.r_[edges, cols]):
@@ -146,8 +154,9 @@ def plot_runs(plot: BraillePlot, width: int, height: int) -> list[list[Run]]:
     return rows
 
 
-def _rasterise(series: Series, t_range: tuple[float, float], y_range: tuple[float, float],
-               cols: int, rows: int) -> np.ndarray:
+def _rasterise(
+    series: Series, t_range: tuple[float, float], y_range: tuple[float, float], cols: int, rows: int
+) -> np.ndarray:
     """Braille bits per cell (rows x cols) of one layer."""
     dots_x, dots_y = cols * 2, rows * 4
     (t_lo, t_hi), (y_lo, y_hi) = t_range, y_range
@@ -157,7 +166,7 @@ def _rasterise(series: Series, t_range: tuple[float, float], y_range: tuple[floa
         if math.isfinite(series.level) and y_lo <= series.level <= y_hi:
             y = int(round((y_hi - series.level) * y_scale))
             bits = _DOT_BITS[0, y & 3] | _DOT_BITS[1, y & 3]
-            grid[y >> 2, ::2 if series.dashed else 1] = bits
+            grid[y >> 2, :: 2 if series.dashed else 1] = bits
         return grid
     t = np.asarray(series.t, dtype=float)
     y = np.asarray(series.y, dtype=float)

@@ -19,7 +19,8 @@ from __future__ import annotations
 import math
 import numbers
 import time as _time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 from rich.console import Console, ConsoleOptions, Group, RenderResult
 from rich.layout import Layout
@@ -96,7 +97,7 @@ ALARM_LABELS: dict[str, tuple[str, str]] = {
 }
 
 
-def render(snapshot: dict[str, Any] | None, notice: str | None = None) -> "DashboardView":
+def render(snapshot: dict[str, Any] | None, notice: str | None = None) -> DashboardView:
     """The dashboard for one snapshot; `notice` (e.g. "daemon not reachable") tops the screen."""
     return DashboardView(snapshot, notice)
 
@@ -121,6 +122,7 @@ class DashboardView:
 
 
 # ---------------------------------------------------------------- small helpers
+
 
 def number(value: Any) -> float:
     """`value` as a float (numpy scalars too); NaN for None, strings and anything else that
@@ -228,6 +230,7 @@ def _clock(unix_s: Any) -> str:
 
 # ---------------------------------------------------------------- sections
 
+
 def header(snapshot: dict[str, Any], notice: str | None, width: int) -> Group:
     """The notice line (if any) above one line with the state badge, sample time, link
     summary, event count and wall clock."""
@@ -272,24 +275,39 @@ def link_lines(link: dict[str, Any], width: int, detail: bool = False) -> list[T
     up = bool(link.get("connected"))
     latency = _section(link, "tick_latency_us")
     lines = [
-        _kv(str(link.get("kind", "?")), "● up" if up else "○ DOWN", width,
-            "bold green" if up else "bold red"),
+        _kv(
+            str(link.get("kind", "?")),
+            "● up" if up else "○ DOWN",
+            width,
+            "bold green" if up else "bold red",
+        ),
         _kv("rate", f"{fmt(link.get('rate_hz'), '.1f')} Hz", width),
-        _kv("samples", fmt_count(link.get("samples")) + (
-            f"/{fmt_count(link['total_samples'])}" if "total_samples" in link else ""), width),
+        _kv(
+            "samples",
+            fmt_count(link.get("samples"))
+            + (f"/{fmt_count(link['total_samples'])}" if "total_samples" in link else ""),
+            width,
+        ),
         _counters_line(link, (("gaps", "gaps"), ("CRC", "crc_errors"), ("bad", "bad_samples"))),
-        _kv("tick p50/99",
+        _kv(
+            "tick p50/99",
             f"{fmt_duration_us(latency.get('p50'))}/{fmt_duration_us(latency.get('p99'))}",
-            width),
-        _kv("deadline miss", fmt_count(link.get("deadline_misses")), width,
-            _counter_style(link.get("deadline_misses"))),
+            width,
+        ),
+        _kv(
+            "deadline miss",
+            fmt_count(link.get("deadline_misses")),
+            width,
+            _counter_style(link.get("deadline_misses")),
+        ),
     ]
     if detail:
         if "where" in link:
             lines.insert(1, _line((str(link["where"]), "dim")))
         if "duplicates" in link or "missing_samples" in link:
-            lines.append(_counters_line(link, (("duplicates", "duplicates"),
-                                               ("missing", "missing_samples"))))
+            lines.append(
+                _counters_line(link, (("duplicates", "duplicates"), ("missing", "missing_samples")))
+            )
         lateness = _section(link, "lateness_us")
         if lateness:
             lines.append(_kv("lateness p99", fmt_duration_us(lateness.get("p99")), width))
@@ -300,8 +318,11 @@ def _counters_line(link: dict[str, Any], names: tuple[tuple[str, str], ...]) -> 
     """Several counters on one line, non-zero ones highlighted."""
     parts: list[tuple[str, str | None]] = []
     for label, key in names:
-        parts += [(f"{label} ", "dim"), (fmt_count(link.get(key)), _counter_style(link.get(key))),
-                  ("  ", None)]
+        parts += [
+            (f"{label} ", "dim"),
+            (fmt_count(link.get(key)), _counter_style(link.get(key))),
+            ("  ", None),
+        ]
     return _line(*parts[:-1])
 
 
@@ -321,8 +342,12 @@ def monitor_lines(monitor: dict[str, Any], width: int) -> list[Text]:
         _kv("signature", sig_text, width, SIGNATURE_STYLE),
         _kv("friction level", fmt(monitor.get("friction_level"), ".3g"), width),
         _kv("residual RMS", fmt(monitor.get("residual_rms"), ".3e"), width),
-        _kv("stat/thr", f"{fmt(statistic, '.3g')}/{fmt(threshold, '.3g')}", width,
-            "bold red" if over else None),
+        _kv(
+            "stat/thr",
+            f"{fmt(statistic, '.3g')}/{fmt(threshold, '.3g')}",
+            width,
+            "bold red" if over else None,
+        ),
     ]
 
 
@@ -338,7 +363,7 @@ def flatten(mapping: dict[str, Any], prefix: str = "") -> Iterable[tuple[str, An
 
 def shorten_path(path: str, width: int) -> str:
     """`path` cut from the left to `width` cells, keeping the file name."""
-    return path if len(path) <= width else "…" + path[-(width - 1):]
+    return path if len(path) <= width else "…" + path[-(width - 1) :]
 
 
 def _plain_value(value: Any) -> str:
@@ -392,17 +417,23 @@ def model_lines(model: dict[str, Any], width: int, rows: int) -> list[Text]:
     entries: list[tuple[str, str]] = []
     summaries: list[tuple[str, str]] = []
     for key, value in provenance.items():
-        summary = (_section_summary(value, width - len(str(key)) - 2)
-                   if isinstance(value, dict) else "")
+        summary = (
+            _section_summary(value, width - len(str(key)) - 2) if isinstance(value, dict) else ""
+        )
         if summary:
             summaries.append((str(key), summary))
         else:
             entries += [(path, _plain_value(v)) for path, v in flatten({key: value})]
-    details = [(path, _plain_value(v)) for key, _ in summaries
-               for path, v in flatten({key: provenance[key]})]
-    entries = ([entry for entry in entries if "." not in entry[0]] + summaries
-               + sorted([entry for entry in entries if "." in entry[0]] + details,
-                        key=_is_path_or_hash))
+    details = [
+        (path, _plain_value(v))
+        for key, _ in summaries
+        for path, v in flatten({key: provenance[key]})
+    ]
+    entries = (
+        [entry for entry in entries if "." not in entry[0]]
+        + summaries
+        + sorted([entry for entry in entries if "." in entry[0]] + details, key=_is_path_or_hash)
+    )
     room = max(rows - 1, 0)
     shown = entries if len(entries) <= room else entries[: max(room - 1, 0)]
     for key, value in shown:
@@ -445,13 +476,17 @@ def alarm_lines(alarms: list[Any], width: int, rows: int) -> list[Text]:
                     value = f"{fmt(value, '.3g')}/{fmt(event['threshold'], 'g')}"
                 parts.append((_field_text(label, value), None))
         if "theta1" in event or "theta2" in event:
-            parts.append((f"θ {fmt(event.get('theta1'), '+.3g')} "
-                          f"{fmt(event.get('theta2'), '+.3g')}", None))
+            parts.append(
+                (f"θ {fmt(event.get('theta1'), '+.3g')} {fmt(event.get('theta2'), '+.3g')}", None)
+            )
         skip = {*_EVENT_SHOWN_KEYS, *(key for key, _ in key_fields)}
         if kind == "fault_detected":
             skip.add("threshold")
-        parts += [(f"{k}={format(v, '.4g') if isinstance(v, float) else v}", "dim")
-                  for k, v in event.items() if k not in skip and not isinstance(v, dict)]
+        parts += [
+            (f"{k}={format(v, '.4g') if isinstance(v, float) else v}", "dim")
+            for k, v in event.items()
+            if k not in skip and not isinstance(v, dict)
+        ]
         for i, (content, style) in enumerate(parts):  # whole fields only, never cut
             gap = "  " if i == 0 else " "
             if len(text) + len(gap) + len(content) > width:
@@ -472,8 +507,10 @@ def _theta_layers(monitor: dict[str, Any], index: int) -> tuple[Series, list[Ser
     if not math.isfinite(signature):
         return trace, layers, ""
     base = data_range([trace] + layers)
-    if base is None or (max(base[1], signature) - min(base[0], signature)
-                        <= SIGNATURE_ZOOM_LIMIT * max(base[1] - base[0], 1e-12)):
+    if base is None or (
+        max(base[1], signature) - min(base[0], signature)
+        <= SIGNATURE_ZOOM_LIMIT * max(base[1] - base[0], 1e-12)
+    ):
         return trace, layers + [Series(style=SIGNATURE_STYLE, level=signature)], "drawn"
     return trace, layers, "above" if signature > base[1] else "below"
 
@@ -485,26 +522,27 @@ def theta_plot(monitor: dict[str, Any], trace: Series, layers: list[Series]) -> 
     if data_range([trace]) is None:
         return BraillePlot(series=[], empty_text=empty)
     layers.append(trace)
-    return BraillePlot(series=layers, y_range=padded_range(*data_range(layers)),
-                       empty_text=empty)
+    return BraillePlot(series=layers, y_range=padded_range(*data_range(layers)), empty_text=empty)
 
 
 def theta_title(monitor: dict[str, Any], index: int, width: int, where: str) -> Text:
-    """"━ θ1 Coulomb +0.98 ━ sig 1 ╍ band [lo, hi]", each part in the colour of what it
+    """ "━ θ1 Coulomb +0.98 ━ sig 1 ╍ band [lo, hi]", each part in the colour of what it
     names in the plot, so the title is the legend; the name shortens on narrow plots and an
     arrow marks a signature level outside the plotted range (`where` from `_theta_layers`)."""
     label = THETA_LABELS[index] if width >= 100 else THETA_LABELS[index].split()[0]
     title = Text()
-    title.append(f"{TRACE_MARK} {label} {fmt(monitor.get(THETA_NAMES[index]))}",
-                 style=TRACE_STYLE)
+    title.append(f"{TRACE_MARK} {label} {fmt(monitor.get(THETA_NAMES[index]))}", style=TRACE_STYLE)
     if where:
         arrow = {"above": "↑", "below": "↓"}.get(where, "")
-        title.append(f" {SIGNATURE_MARK} sig {fmt(_signature(monitor, index), '.3g')}{arrow}",
-                     style=SIGNATURE_STYLE)
+        title.append(
+            f" {SIGNATURE_MARK} sig {fmt(_signature(monitor, index), '.3g')}{arrow}",
+            style=SIGNATURE_STYLE,
+        )
     band = _band(monitor, index)
     if band is not None:
-        title.append(f" {BAND_MARK} band [{fmt(band[0], '.3g')}, {fmt(band[1], '.3g')}]",
-                     style=BAND_STYLE)
+        title.append(
+            f" {BAND_MARK} band [{fmt(band[0], '.3g')}, {fmt(band[1], '.3g')}]", style=BAND_STYLE
+        )
     else:
         title.append(f" {BAND_MARK} band —", style=BAND_STYLE)
     return title
@@ -519,13 +557,16 @@ def theta_plane(monitor: dict[str, Any]) -> tuple[BraillePlot, str]:
     layers = []
     band1, band2 = _band(monitor, 0), _band(monitor, 1)
     if band1 and band2:
-        layers.append(Series(style=BAND_STYLE, t=[band1[0], band1[1], band1[1], band1[0],
-                                                  band1[0]],
-                             y=[band2[0], band2[0], band2[1], band2[1], band2[0]]))
+        layers.append(
+            Series(
+                style=BAND_STYLE,
+                t=[band1[0], band1[1], band1[1], band1[0], band1[0]],
+                y=[band2[0], band2[0], band2[1], band2[1], band2[0]],
+            )
+        )
     signature = (_signature(monitor, 0), _signature(monitor, 1))
     if all(math.isfinite(v) for v in signature):
-        layers.append(Series(style=SIGNATURE_STYLE, t=[0.0, signature[0]],
-                             y=[0.0, signature[1]]))
+        layers.append(Series(style=SIGNATURE_STYLE, t=[0.0, signature[0]], y=[0.0, signature[1]]))
     trace = Series(style=TRACE_STYLE, t=theta1, y=theta2)
     finite = [(x, y) for x, y in zip(theta1, theta2) if math.isfinite(x) and math.isfinite(y)]
     if not finite:
@@ -534,8 +575,7 @@ def theta_plane(monitor: dict[str, Any]) -> tuple[BraillePlot, str]:
     layers += [trace, latest]
     xs = [x for s in layers for x in s.t if math.isfinite(x)]
     x_range = padded_range(min(xs), max(xs))
-    plot = BraillePlot(series=layers, y_range=padded_range(*data_range(layers)),
-                       x_range=x_range)
+    plot = BraillePlot(series=layers, y_range=padded_range(*data_range(layers)), x_range=x_range)
     return plot, f"θ1 {x_range[0]:.3g} … {x_range[1]:.3g}"
 
 
@@ -560,8 +600,11 @@ def _trend_layers(alarm: dict[str, Any]) -> tuple[list[Series], tuple[float, flo
     # alone is a short line, not a dot; a bucket without data (NaN) breaks the line
     hours = [(i + k - n) * bucket_h for i in range(n) for k in (0, 1)]
     mean = Series(style=TREND_MEAN_STYLE, t=hours, y=[number(v) for v in means for _ in "ab"])
-    high = Series(style=TREND_MAX_STYLE, t=hours,
-                  y=[number(v) for v in (highs + [None] * n)[:n] for _ in "ab"])
+    high = Series(
+        style=TREND_MAX_STYLE,
+        t=hours,
+        y=[number(v) for v in (highs + [None] * n)[:n] for _ in "ab"],
+    )
     data = data_range([mean, high])
     if data is None:
         return [], None
@@ -578,12 +621,13 @@ def _trend_layers(alarm: dict[str, Any]) -> tuple[list[Series], tuple[float, flo
 
 
 def trend_title(alarm: dict[str, Any]) -> Text:
-    """"━ level ━ max ━ base 0.08 ╍ steps +0.25/0.5/1", each part in its colour."""
+    """ "━ level ━ max ━ base 0.08 ╍ steps +0.25/0.5/1", each part in its colour."""
     title = Text()
     title.append(f"{TRACE_MARK} level", style=TREND_MEAN_STYLE)
     title.append(f" {TRACE_MARK} max", style=TREND_MAX_STYLE)
-    title.append(f" {TRACE_MARK} base {fmt(alarm.get('baseline_level'), '.3g')}",
-                 style=BASELINE_STYLE)
+    title.append(
+        f" {TRACE_MARK} base {fmt(alarm.get('baseline_level'), '.3g')}", style=BASELINE_STYLE
+    )
     steps = "/".join(fmt(v, ".3g") for v in _sequence(alarm.get("steps")))
     if steps:
         title.append(f" {BAND_MARK} steps +{steps}", style=STEP_STYLE)
@@ -607,32 +651,60 @@ def trend_panel(alarm: dict[str, Any]) -> Panel:
     trend = _section(alarm, "trend")
     hours = len(_sequence(trend.get("mean"))) * number(trend.get("bucket_s")) / 3600
     span = f"-{hours:.3g} h … now " if layers else ""
-    plot = BraillePlot(series=layers, y_range=y_range, x_range=(-hours, 0.0) if layers else None,
-                       empty_text="no trend yet")
+    plot = BraillePlot(
+        series=layers,
+        y_range=y_range,
+        x_range=(-hours, 0.0) if layers else None,
+        empty_text="no trend yet",
+    )
     subtitle = Text(span, style="dim")
     subtitle.append_text(alarm_status(alarm))
-    return Panel(plot, title=trend_title(alarm), title_align="left", border_style="cyan",
-                 subtitle=subtitle, subtitle_align="right", padding=(0, 0))
+    return Panel(
+        plot,
+        title=trend_title(alarm),
+        title_align="left",
+        border_style="cyan",
+        subtitle=subtitle,
+        subtitle_align="right",
+        padding=(0, 0),
+    )
 
 
 # ---------------------------------------------------------------- layouts
 
-def _panel(body, title: str | Text, border: str = "blue", subtitle: str | None = None,
-           padding: tuple[int, int] = (0, 1)) -> Panel:
-    return Panel(body, title=title, title_align="left", border_style=border,
-                 subtitle=subtitle or None, subtitle_align="right", padding=padding)
+
+def _panel(
+    body,
+    title: str | Text,
+    border: str = "blue",
+    subtitle: str | None = None,
+    padding: tuple[int, int] = (0, 1),
+) -> Panel:
+    return Panel(
+        body,
+        title=title,
+        title_align="left",
+        border_style=border,
+        subtitle=subtitle or None,
+        subtitle_align="right",
+        padding=padding,
+    )
 
 
 def _plot_panel(monitor: dict[str, Any], index: int, width: int) -> Panel:
     trace, layers, where = _theta_layers(monitor, index)
-    return _panel(theta_plot(monitor, trace, layers),
-                  theta_title(monitor, index, width, where),
-                  border="cyan", subtitle=time_span_caption(monitor) if index == 1 else None,
-                  padding=(0, 0))
+    return _panel(
+        theta_plot(monitor, trace, layers),
+        theta_title(monitor, index, width, where),
+        border="cyan",
+        subtitle=time_span_caption(monitor) if index == 1 else None,
+        padding=(0, 0),
+    )
 
 
-def _standard_layout(snapshot: dict[str, Any], notice: str | None, width: int,
-                     height: int) -> Layout:
+def _standard_layout(
+    snapshot: dict[str, Any], notice: str | None, width: int, height: int
+) -> Layout:
     link, monitor, model = (_section(snapshot, k) for k in ("link", "monitor", "model"))
     alarms = _sequence(snapshot.get("alarms"))
     left_width = max(30, min(60, width // 4))
@@ -648,31 +720,45 @@ def _standard_layout(snapshot: dict[str, Any], notice: str | None, width: int,
     alarm = snapshot.get("alarm")
     trend_size = (5 if body_height < 40 else 8) if isinstance(alarm, dict) else 0
     least = 4 if trend_size else 5  # the trend takes one event row from the smallest list
-    alarm_rows = min(max(least, (body_height - 2) // 3 - (trend_size > 0)), 20,
-                     max(len(alarms), least))
+    alarm_rows = min(
+        max(least, (body_height - 2) // 3 - (trend_size > 0)), 20, max(len(alarms), least)
+    )
     layout = Layout()
-    layout.split_column(Layout(header(snapshot, notice, width), name="header",
-                               size=header_size(notice)),
-                        Layout(name="body"))
+    layout.split_column(
+        Layout(header(snapshot, notice, width), name="header", size=header_size(notice)),
+        Layout(name="body"),
+    )
     layout["body"].split_row(Layout(name="left", size=left_width), Layout(name="right"))
     layout["left"].split_column(
-        Layout(_panel(Group(*link_lines(link, inner, detail)), "link"), name="link",
-               size=link_size),
-        Layout(_panel(Group(*monitor_lines(monitor, inner)), "monitor"), name="monitor",
-               size=monitor_size),
-        Layout(_panel(Group(*model_lines(model, inner, model_rows)), "model"), name="model",
-               size=model_size),
+        Layout(
+            _panel(Group(*link_lines(link, inner, detail)), "link"), name="link", size=link_size
+        ),
+        Layout(
+            _panel(Group(*monitor_lines(monitor, inner)), "monitor"),
+            name="monitor",
+            size=monitor_size,
+        ),
+        Layout(
+            _panel(Group(*model_lines(model, inner, model_rows)), "model"),
+            name="model",
+            size=model_size,
+        ),
     )
     if model_size is not None:
         plane, caption = theta_plane(monitor)
-        layout["left"].add_split(Layout(_panel(plane, "θ2 vs θ1", border="cyan",
-                                               subtitle=caption, padding=(0, 0)),
-                                        name="plane"))
+        layout["left"].add_split(
+            Layout(
+                _panel(plane, "θ2 vs θ1", border="cyan", subtitle=caption, padding=(0, 0)),
+                name="plane",
+            )
+        )
     right_width = width - left_width
     alarm_title = f"alarms & events ({len(alarms)})"
     if notice and not snapshot:
-        plots = Layout(Panel(Text(notice, style="bold red", justify="center"),
-                             border_style="red"), name="plots")
+        plots = Layout(
+            Panel(Text(notice, style="bold red", justify="center"), border_style="red"),
+            name="plots",
+        )
     else:
         plots = Layout(name="plots")
         plots.split_column(
@@ -683,43 +769,66 @@ def _standard_layout(snapshot: dict[str, Any], notice: str | None, width: int,
     if trend_size:
         layout["right"].add_split(Layout(trend_panel(alarm), name="trend", size=trend_size))
     layout["right"].add_split(
-        Layout(_panel(Group(*alarm_lines(alarms, right_width - 4, alarm_rows)), alarm_title),
-               name="alarms", size=alarm_rows + 2))
+        Layout(
+            _panel(Group(*alarm_lines(alarms, right_width - 4, alarm_rows)), alarm_title),
+            name="alarms",
+            size=alarm_rows + 2,
+        )
+    )
     return layout
 
 
-def _compact_layout(snapshot: dict[str, Any], notice: str | None, width: int,
-                    height: int) -> Layout:
+def _compact_layout(
+    snapshot: dict[str, Any], notice: str | None, width: int, height: int
+) -> Layout:
     """Small terminals: header, three summary lines, small plots if they fit, last alarms."""
     link, monitor = _section(snapshot, "link"), _section(snapshot, "monitor")
     alarms = _sequence(snapshot.get("alarms"))
     latency = link.get("tick_latency_us") if isinstance(link.get("tick_latency_us"), dict) else {}
     summary = [
-        _line(("θ1 ", "dim"), (fmt(monitor.get("theta1")), "bold"), ("  θ2 ", "dim"),
-              (fmt(monitor.get("theta2")), "bold"), ("  rms ", "dim"),
-              (fmt(monitor.get("residual_rms"), ".2e"), None)),
-        _line(("link ", "dim"), (str(link.get("kind", "—")), None),
-              (" up" if link.get("connected") else " DOWN",
-               "green" if link.get("connected") else "red"),
-              (f" {fmt(link.get('rate_hz'), '.1f')} Hz gaps {fmt_count(link.get('gaps'))}"
-               f" crc {fmt_count(link.get('crc_errors'))} bad {fmt_count(link.get('bad_samples'))}"
-               f" p99 {fmt_duration_us(latency.get('p99'))}"
-               f" miss {fmt_count(link.get('deadline_misses'))}", None)),
+        _line(
+            ("θ1 ", "dim"),
+            (fmt(monitor.get("theta1")), "bold"),
+            ("  θ2 ", "dim"),
+            (fmt(monitor.get("theta2")), "bold"),
+            ("  rms ", "dim"),
+            (fmt(monitor.get("residual_rms"), ".2e"), None),
+        ),
+        _line(
+            ("link ", "dim"),
+            (str(link.get("kind", "—")), None),
+            (
+                " up" if link.get("connected") else " DOWN",
+                "green" if link.get("connected") else "red",
+            ),
+            (
+                f" {fmt(link.get('rate_hz'), '.1f')} Hz gaps {fmt_count(link.get('gaps'))}"
+                f" crc {fmt_count(link.get('crc_errors'))} bad {fmt_count(link.get('bad_samples'))}"
+                f" p99 {fmt_duration_us(latency.get('p99'))}"
+                f" miss {fmt_count(link.get('deadline_misses'))}",
+                None,
+            ),
+        ),
     ]
     alarm = snapshot.get("alarm")
     if isinstance(alarm, dict):  # the alarm an operator handles, no room for its trend
         summary.append(_line(("alarm", "dim")).append_text(alarm_status(alarm)))
     alarm_rows = 2 if height >= 12 else 1
     layout = Layout()
-    parts = [Layout(header(snapshot, notice, width), name="header", size=header_size(notice)),
-             Layout(Group(*summary), name="summary", size=len(summary))]
+    parts = [
+        Layout(header(snapshot, notice, width), name="header", size=header_size(notice)),
+        Layout(Group(*summary), name="summary", size=len(summary)),
+    ]
     plot_height = height - header_size(notice) - len(summary) - alarm_rows
     if plot_height >= 4:
         plots = Layout(name="plots")
-        plots.split_row(Layout(_plot_panel(monitor, 0, width // 2), name="theta1"),
-                        Layout(_plot_panel(monitor, 1, width // 2), name="theta2"))
+        plots.split_row(
+            Layout(_plot_panel(monitor, 0, width // 2), name="theta1"),
+            Layout(_plot_panel(monitor, 1, width // 2), name="theta2"),
+        )
         parts.append(plots)
-    parts.append(Layout(Group(*alarm_lines(alarms, width, alarm_rows)), name="alarms",
-                        size=alarm_rows))
+    parts.append(
+        Layout(Group(*alarm_lines(alarms, width, alarm_rows)), name="alarms", size=alarm_rows)
+    )
     layout.split_column(*parts)
     return layout

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import collections
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -30,10 +31,19 @@ ALARM_ROWS = 20
 class ReplayStatus:
     """Snapshots of a paced replay, published into `board` (see module doc)."""
 
-    def __init__(self, recording: str, model_path: str, provenance: dict[str, Any],
-                 total_samples: int, fs_hz: float, board: LatestSnapshot, *,
-                 period_s: float = 0.1, deadline_s: float = 0.05,
-                 clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        recording: str,
+        model_path: str,
+        provenance: dict[str, Any],
+        total_samples: int,
+        fs_hz: float,
+        board: LatestSnapshot,
+        *,
+        period_s: float = 0.1,
+        deadline_s: float = 0.05,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self.recording = recording
         self.model = {"path": model_path, "provenance": provenance}
         self.total_samples = total_samples
@@ -90,29 +100,47 @@ class ReplayStatus:
     def snapshot(self, monitor_snapshot: dict[str, Any]) -> dict[str, Any]:
         """The status snapshot (TEAM.md schema) of the replay so far."""
         lateness_us = np.asarray(self._lateness_s) * 1e6
-        p50, p99 = (np.percentile(lateness_us, [50, 99]) if lateness_us.size
-                    else (float("nan"), float("nan")))
+        p50, p99 = (
+            np.percentile(lateness_us, [50, 99])
+            if lateness_us.size
+            else (float("nan"), float("nan"))
+        )
         return {
-            "time": time.time(), "t": self._last_t, "state": monitor_snapshot.get("state"),
-            "link": {"kind": "replay", "where": self.recording, "connected": True,
-                     "rate_hz": self.rate_hz(), "samples": self.samples,
-                     "total_samples": self.total_samples, "gaps": self.gaps,
-                     "crc_errors": 0, "bad_samples": self.bad_samples,
-                     "tick_latency_us": {"p50": float(p50), "p99": float(p99)},
-                     "deadline_misses": self.deadline_misses},
+            "time": time.time(),
+            "t": self._last_t,
+            "state": monitor_snapshot.get("state"),
+            "link": {
+                "kind": "replay",
+                "where": self.recording,
+                "connected": True,
+                "rate_hz": self.rate_hz(),
+                "samples": self.samples,
+                "total_samples": self.total_samples,
+                "gaps": self.gaps,
+                "crc_errors": 0,
+                "bad_samples": self.bad_samples,
+                "tick_latency_us": {"p50": float(p50), "p99": float(p99)},
+                "deadline_misses": self.deadline_misses,
+            },
             "monitor": monitor_snapshot,
             "alarms": list(self._alarms),
             "model": self.model,
         }
 
 
-def replay_with_dashboard(paced: Callable[[Callable], Any], monitor: Any, recording: str,
-                          model_path: str, total_samples: int) -> Any:
+def replay_with_dashboard(
+    paced: Callable[[Callable], Any],
+    monitor: Any,
+    recording: str,
+    model_path: str,
+    total_samples: int,
+) -> Any:
     """Run `paced(on_tick)` (the paced replay) with the dashboard on screen; returns what
     `paced` returns. The final state stays on screen until `q` when stdin is a terminal."""
     board = LatestSnapshot()
-    status = ReplayStatus(recording, model_path, dict(monitor.model.provenance), total_samples,
-                          monitor.fs_hz, board)
+    status = ReplayStatus(
+        recording, model_path, dict(monitor.model.provenance), total_samples, monitor.fs_hz, board
+    )
     result: list[Any] = []
 
     def work() -> int:

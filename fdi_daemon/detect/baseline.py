@@ -28,11 +28,12 @@ __all__ = ["Baseline", "fit_baseline", "QUANTITIES", "MAD_TO_SIGMA"]
 
 MAD_TO_SIGMA = 1.4826  # σ of a normal distribution from its median absolute deviation
 #: what a baseline's two quantities are (its ``quantities`` key)
-QUANTITIES = {"coulomb": "theta1 of eq. (17) over the sliding window (1 = the calibrated "
-                         "fault)",
-              "level": "the friction level over the sliding window: the residual's "
-                       "least-squares multiple of the calibrated signature's regressor "
-                       "g1 + gamma g2 (1 = the calibrated fault)"}
+QUANTITIES = {
+    "coulomb": "theta1 of eq. (17) over the sliding window (1 = the calibrated fault)",
+    "level": "the friction level over the sliding window: the residual's "
+    "least-squares multiple of the calibrated signature's regressor "
+    "g1 + gamma g2 (1 = the calibrated fault)",
+}
 
 
 @dataclass(frozen=True)
@@ -47,30 +48,45 @@ class Baseline:
 
     def bin_index(self, v_rms_mps: np.ndarray | float) -> np.ndarray:
         """The bin of each velocity RMS (the nearest bin outside the stored range)."""
-        return np.clip(np.searchsorted(self.edges_mps, v_rms_mps, side="right") - 1,
-                       0, len(self.level_median) - 1)
+        return np.clip(
+            np.searchsorted(self.edges_mps, v_rms_mps, side="right") - 1,
+            0,
+            len(self.level_median) - 1,
+        )
 
     @classmethod
-    def from_mapping(cls, mapping: Mapping[str, Any], source: str = "model") -> "Baseline":
+    def from_mapping(cls, mapping: Mapping[str, Any], source: str = "model") -> Baseline:
         try:
             bins = list(mapping["bins"])
             edges = [float(b["v_rms_mps"][0]) for b in bins] + [float(bins[-1]["v_rms_mps"][1])]
-            columns = [[float(b[key]) for b in bins]
-                       for key in ("coulomb_median", "coulomb_sigma", "level_median")]
+            columns = [
+                [float(b[key]) for b in bins]
+                for key in ("coulomb_median", "coulomb_sigma", "level_median")
+            ]
         except (KeyError, TypeError, IndexError, ValueError):
-            raise ConfigError(f"{source}: baseline must hold bins with v_rms_mps [lo, hi], "
-                              "coulomb_median, coulomb_sigma and level_median (written by "
-                              "`fdi baseline`; run it again on a baseline of an older fdi)"
-                              ) from None
+            raise ConfigError(
+                f"{source}: baseline must hold bins with v_rms_mps [lo, hi], "
+                "coulomb_median, coulomb_sigma and level_median (written by "
+                "`fdi baseline`; run it again on a baseline of an older fdi)"
+            ) from None
         values = np.array(edges + [v for column in columns for v in column])
-        if not bins or not np.all(np.isfinite(values)) or np.any(np.diff(edges) <= 0) \
-                or min(columns[1]) < 0:
+        if (
+            not bins
+            or not np.all(np.isfinite(values))
+            or np.any(np.diff(edges) <= 0)
+            or min(columns[1]) < 0
+        ):
             raise ConfigError(f"{source}: baseline bins must be finite, ordered, with σ >= 0")
         return cls(np.array(edges), *(np.array(column) for column in columns))
 
 
-def fit_baseline(quantities: Mapping[str, np.ndarray], v_rms_mps: np.ndarray, fs_hz: float,
-                 min_seconds: float = 20.0, max_bins: int = 8) -> list[dict[str, Any]]:
+def fit_baseline(
+    quantities: Mapping[str, np.ndarray],
+    v_rms_mps: np.ndarray,
+    fs_hz: float,
+    min_seconds: float = 20.0,
+    max_bins: int = 8,
+) -> list[dict[str, Any]]:
     """Bins of the fault-free ``quantities`` (name: per-sample values; the samples where all
     are finite): per bin ``{name}_median``, ``{name}_sigma``, ``{name}_p5_p95``; ValueError
     when fewer than ``min_seconds`` of valid windows exist."""
@@ -81,8 +97,10 @@ def fit_baseline(quantities: Mapping[str, np.ndarray], v_rms_mps: np.ndarray, fs
     per_bin = int(math.ceil(min_seconds * fs_hz))
     count = min(max_bins, v_rms.size // per_bin)
     if count < 1:
-        raise ValueError(f"the recording holds {v_rms.size / fs_hz:.1f} s of valid windows "
-                         f"(the rig moving); at least {min_seconds:g} s are needed")
+        raise ValueError(
+            f"the recording holds {v_rms.size / fs_hz:.1f} s of valid windows "
+            f"(the rig moving); at least {min_seconds:g} s are needed"
+        )
     edges = np.unique(np.quantile(v_rms, np.linspace(0.0, 1.0, count + 1)))
     bins = []
     for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):

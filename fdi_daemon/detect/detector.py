@@ -55,8 +55,14 @@ from fdi_daemon.detect.settings import DetectorSettings
 
 __all__ = ["Detector", "STATES", "N_REGRESSORS"]
 
-STATES = ("starting", "calibrating", "monitoring", "fault_detected", "friction_isolated",
-          "other_fault")
+STATES = (
+    "starting",
+    "calibrating",
+    "monitoring",
+    "fault_detected",
+    "friction_isolated",
+    "other_fault",
+)
 _STATE_CODE = {name: i for i, name in enumerate(STATES)}
 #: what showed the friction (`episode_kernel` KIND_*): event field ``friction_evidence``
 _KINDS = (None, "harmonics", "load_stopped", "level")
@@ -72,9 +78,15 @@ assert N_REGRESSORS == COMMAND_ORDER == 4
 class Detector:
     """Decides on every tick from the pipeline's signals; see the module docstring."""
 
-    def __init__(self, settings: DetectorSettings, fs_hz: float, gamma_f: float,
-                 baseline: bool = False, arena: Arena | None = None,
-                 baseline_bins: tuple | None = None) -> None:
+    def __init__(
+        self,
+        settings: DetectorSettings,
+        fs_hz: float,
+        gamma_f: float,
+        baseline: bool = False,
+        arena: Arena | None = None,
+        baseline_bins: tuple | None = None,
+    ) -> None:
         """``baseline``: the level's excess is taken over a commissioning baseline (else
         the calibration's level is the fault-free one); ``baseline_bins``: its (edges,
         median, margin) per velocity-RMS bin, for the kernel."""
@@ -88,8 +100,11 @@ class Detector:
         self.test_samples = s.samples(s.test_window_s, fs_hz)
         self.calibration_samples = s.samples(s.calibration_s, fs_hz)
         self.warmup_samples = self.window_samples + self.lag_samples + self.test_samples
-        hold = s.guard_hold_s if s.guard_hold_s is not None else (
-            s.window_s + s.reference_lag_s + s.test_window_s)
+        hold = (
+            s.guard_hold_s
+            if s.guard_hold_s is not None
+            else (s.window_s + s.reference_lag_s + s.test_window_s)
+        )
         self.hold_samples = s.samples(hold, fs_hz)
         self.iso_samples = s.samples(s.isolation_window_s, fs_hz)
         self.timeout_samples = max(self.iso_samples, s.samples(s.isolation_timeout_s, fs_hz))
@@ -98,16 +113,28 @@ class Detector:
         self.level_samples = s.samples(s.slow_persistence_s, fs_hz)
         self.arena = arena = arena if arena is not None else Arena()
         # the residual test (φ = g1, g2, x̂̈, 1) and the command test (AR(4) of v_in)
-        self.residual_test = InnovationTest(N_REGRESSORS, self.window_samples, self.lag_samples,
-                                            self.test_samples, s.reference_every_samples,
-                                            s.min_sigma_mps2, arena=arena)
-        self.command_test = InnovationTest(COMMAND_ORDER, self.window_samples,
-                                           self.lag_samples, self.test_samples,
-                                           s.reference_every_samples, s.guard_min_sigma_v,
-                                           arena=arena)
+        self.residual_test = InnovationTest(
+            N_REGRESSORS,
+            self.window_samples,
+            self.lag_samples,
+            self.test_samples,
+            s.reference_every_samples,
+            s.min_sigma_mps2,
+            arena=arena,
+        )
+        self.command_test = InnovationTest(
+            COMMAND_ORDER,
+            self.window_samples,
+            self.lag_samples,
+            self.test_samples,
+            s.reference_every_samples,
+            s.guard_min_sigma_v,
+            arena=arena,
+        )
         bins = 0 if baseline_bins is None else len(baseline_bins[1])
         self.fo, self.io = fo, io = arena.alloc(
-            K.E_CAL + 2 * self.calibration_samples + 3 * bins + 1, K.DET_INTS)
+            K.E_CAL + 2 * self.calibration_samples + 3 * bins + 1, K.DET_INTS
+        )
         n, m = self.window_samples, self.test_samples
         self.epo, self.epi = epo, epi = arena.alloc(E.episode_floats(n, m), E.EPISODE_INTS)
         ii, f = arena.i, arena.f
@@ -118,7 +145,7 @@ class Detector:
         ii[epi + E.P_TRACK_SAMPLES] = s.track_samples
         ii[epi + E.P_BAND] = int(s.method == "band")
         ii[epi + E.P_WARMUP] = self.warmup_samples
-        ii[epi + E.P_O_POST:epi + E.P_O_G + 1] = E.episode_layout(epo, n, m)
+        ii[epi + E.P_O_POST : epi + E.P_O_G + 1] = E.episode_layout(epo, n, m)
         sc = int(ii[epi + E.P_O_SCAL])
         f[sc + E.S_FMIN] = s.friction_min_level
         f[sc + E.S_THRESHOLD] = s.threshold
@@ -141,12 +168,14 @@ class Detector:
         f[fo + K.E_FRICTION_MIN] = s.friction_min_level
         if baseline_bins is not None:
             o = fo + K.E_CAL + 2 * self.calibration_samples
-            f[o:o + 3 * bins + 1] = np.concatenate([np.asarray(v, dtype=float)
-                                                   for v in baseline_bins])
+            f[o : o + 3 * bins + 1] = np.concatenate(
+                [np.asarray(v, dtype=float) for v in baseline_bins]
+            )
         #: the friction level as reported (`detect.friction_level`), restarted by the kernel
         #: when an episode begins or ends; events carry its value at their tick
-        self.level = FrictionLevel(s.level_median_s, fs_hz, arena,
-                                   settle_samples=self.window_samples)
+        self.level = FrictionLevel(
+            s.level_median_s, fs_hz, arena, settle_samples=self.window_samples
+        )
         arena.i[io + K.D_LEVEL] = self.level.io
         self.band: dict[str, list[float]] | None = None
         #: θ as reported for the newest tick: eq. (17) over the sliding window, or during an
@@ -159,12 +188,16 @@ class Detector:
 
     # ------------------------------------------------------------------ state in the arena
     def _int(k):  # noqa: N805 - a property factory for the ints of the kernel's block
-        return property(lambda self: int(self.arena.i[self.io + k]),
-                        lambda self, v: self.arena.i.__setitem__(self.io + k, int(v)))
+        return property(
+            lambda self: int(self.arena.i[self.io + k]),
+            lambda self, v: self.arena.i.__setitem__(self.io + k, int(v)),
+        )
 
     def _float(k):  # noqa: N805
-        return property(lambda self: float(self.arena.f[self.fo + k]),
-                        lambda self, v: self.arena.f.__setitem__(self.fo + k, float(v)))
+        return property(
+            lambda self: float(self.arena.f[self.fo + k]),
+            lambda self, v: self.arena.f.__setitem__(self.fo + k, float(v)),
+        )
 
     _tick = _int(K.D_TICK)
     _guard_until = _int(K.D_GUARD_UNTIL)
@@ -235,39 +268,53 @@ class Detector:
         if code == K.OTHER_FAULT:
             # a clipping accelerometer is no friction evidence (`episode_tick`): say so
             clipping = {"accel_clipping": True} if ii[self.epi + E.P_CLIPPED] else {}
-            return [self._event(t, "other_fault", theta1, theta2, coulomb_change=change,
-                                **clipping)]
+            return [
+                self._event(t, "other_fault", theta1, theta2, coulomb_change=change, **clipping)
+            ]
         kind = _KINDS[int(ii[self.epi + E.P_KIND])]
-        extra = {"friction_evidence": self.level_path if kind == "level" else kind} if kind \
-            else {}
-        return [self._event(t, "friction_isolated", theta1, theta2, coulomb_change=change,
-                            **extra)]
+        extra = {"friction_evidence": self.level_path if kind == "level" else kind} if kind else {}
+        return [self._event(t, "friction_isolated", theta1, theta2, coulomb_change=change, **extra)]
 
     def _calibrate(self, t, theta1, theta2) -> list[dict[str, Any]]:
         o = self.fo + K.E_CAL
         n = self.calibration_samples
-        cal = self.arena.f[o:o + 2 * n].reshape(n, 2)
+        cal = self.arena.f[o : o + 2 * n].reshape(n, 2)
         valid = cal[np.all(np.isfinite(cal), axis=1)]
         if valid.shape[0] < max(2, n // 4):
             # the rig was mostly at rest: keep calibrating on the newest samples
-            cal[:n - 1] = cal[1:].copy()
+            cal[: n - 1] = cal[1:].copy()
             self._cal_count = n - 1
             return []
         mean = valid.mean(axis=0)
         std = valid.std(axis=0, ddof=1)
         k = self.settings.band_k
-        self.band = {"theta1": [float(mean[0] - k * std[0]), float(mean[0] + k * std[0])],
-                     "theta2": [float(mean[1] - k * std[1]), float(mean[1] + k * std[1])]}
-        self.arena.f[self.fo + K.E_LO1:self.fo + K.E_HI2 + 1] = (
-            *self.band["theta1"], *self.band["theta2"])
+        self.band = {
+            "theta1": [float(mean[0] - k * std[0]), float(mean[0] + k * std[0])],
+            "theta2": [float(mean[1] - k * std[1]), float(mean[1] + k * std[1])],
+        }
+        self.arena.f[self.fo + K.E_LO1 : self.fo + K.E_HI2 + 1] = (
+            *self.band["theta1"],
+            *self.band["theta2"],
+        )
         self.arena.i[self.io + K.D_HAS_BAND] = 1
         self.level_base = float(np.median(valid[:, 0]))
         self._cal_count = 0
         self.state = "monitoring"
-        return [self._event(t, "calibrated", theta1, theta2, band=self.band,
-                            samples=int(valid.shape[0]))]
+        return [
+            self._event(
+                t, "calibrated", theta1, theta2, band=self.band, samples=int(valid.shape[0])
+            )
+        ]
 
     def _event(self, t, kind, theta1, theta2, **extra) -> dict[str, Any]:
-        return make_event(t, kind, theta1, theta2, statistic=float(self.statistic),
-                          threshold=float(self.threshold), friction_level=self.level.level,
-                          method=self.settings.method, **extra)
+        return make_event(
+            t,
+            kind,
+            theta1,
+            theta2,
+            statistic=float(self.statistic),
+            threshold=float(self.threshold),
+            friction_level=self.level.level,
+            method=self.settings.method,
+            **extra,
+        )

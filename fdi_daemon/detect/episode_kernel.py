@@ -24,9 +24,21 @@ import math
 from fdi_daemon.core.compiled import jit
 from fdi_daemon.core.kernels import packed_row_into, solve_packed, sums_floats, sums_push
 
-__all__ = ["episode_start", "episode_restart", "episode_tick", "EPISODE_INTS",
-           "episode_floats", "NO_CHANGE", "TO_ISOLATED", "TO_OTHER", "TO_CLEARED",
-           "KIND_NONE", "KIND_HARMONICS", "KIND_LOAD_STOPPED", "KIND_LEVEL"]
+__all__ = [
+    "episode_start",
+    "episode_restart",
+    "episode_tick",
+    "EPISODE_INTS",
+    "episode_floats",
+    "NO_CHANGE",
+    "TO_ISOLATED",
+    "TO_OTHER",
+    "TO_CLEARED",
+    "KIND_NONE",
+    "KIND_HARMONICS",
+    "KIND_LOAD_STOPPED",
+    "KIND_LEVEL",
+]
 
 NO_CHANGE, TO_ISOLATED, TO_OTHER, TO_CLEARED = range(4)
 KIND_NONE, KIND_HARMONICS, KIND_LOAD_STOPPED, KIND_LEVEL = range(4)
@@ -39,24 +51,106 @@ FLAT_ENERGY_FRACTION = 1e-6
 MIN_RCOND = 1e-6
 
 # ints
-(P_TICKS, P_QUIET, P_TRACK, P_HOLD_UNTIL, P_PERSISTED, P_LEVEL, P_KIND, P_N, P_M, P_ISO,
- P_TIMEOUT, P_CLEAR, P_FRICTION_CLEAR, P_TRACK_SAMPLES, P_BAND, P_POST, P_SETTLED,
- P_BEYOND, P_FROZEN, P_MOTION, P_O_POST, P_O_SETTLED, P_O_BEYOND, P_O_FROZEN, P_O_MOTION,
- P_O_SCAL, P_O_ROW, P_O_SCR, P_O_TH, P_O_G, P_WARMUP, P_CLIPPED) = (
-    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 17, 19, 21, 23, 25, 26, 27, 28,
-    29, 30, 31, 32, 33, 34, 35, 36)
+(
+    P_TICKS,
+    P_QUIET,
+    P_TRACK,
+    P_HOLD_UNTIL,
+    P_PERSISTED,
+    P_LEVEL,
+    P_KIND,
+    P_N,
+    P_M,
+    P_ISO,
+    P_TIMEOUT,
+    P_CLEAR,
+    P_FRICTION_CLEAR,
+    P_TRACK_SAMPLES,
+    P_BAND,
+    P_POST,
+    P_SETTLED,
+    P_BEYOND,
+    P_FROZEN,
+    P_MOTION,
+    P_O_POST,
+    P_O_SETTLED,
+    P_O_BEYOND,
+    P_O_FROZEN,
+    P_O_MOTION,
+    P_O_SCAL,
+    P_O_ROW,
+    P_O_SCR,
+    P_O_TH,
+    P_O_G,
+    P_WARMUP,
+    P_CLIPPED,
+) = (
+    0,
+    1,
+    2,
+    3,
+    4,
+    5,
+    6,
+    7,
+    8,
+    9,
+    10,
+    11,
+    12,
+    13,
+    14,
+    15,
+    17,
+    19,
+    21,
+    23,
+    25,
+    26,
+    27,
+    28,
+    29,
+    30,
+    31,
+    32,
+    33,
+    34,
+    35,
+    36,
+)
 EPISODE_INTS = 37
 # floats at P_O_SCAL
-(S_THETA_REF, S_COULOMB_BASE, S_SIGMA2_REF, S_XHAT_PAST, S_ACCEL_PAST, S_LEVEL_CHANGE,
- S_EVIDENCE, S_FMIN, S_THRESHOLD, S_TOL1, S_TOL2, S_GAMMA_F, S_Z, S_MOTION) = (
-    0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16)
+(
+    S_THETA_REF,
+    S_COULOMB_BASE,
+    S_SIGMA2_REF,
+    S_XHAT_PAST,
+    S_ACCEL_PAST,
+    S_LEVEL_CHANGE,
+    S_EVIDENCE,
+    S_FMIN,
+    S_THRESHOLD,
+    S_TOL1,
+    S_TOL2,
+    S_GAMMA_F,
+    S_Z,
+    S_MOTION,
+) = (0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16)
 SCAL_FLOATS = 19
 
 
 def episode_floats(n: int, m: int) -> int:
     """Floats of an episode block (windows of n and m samples)."""
-    return (3 * sums_floats(n, W) + sums_floats(m, 1) + sums_floats(m, 3) + SCAL_FLOATS + W
-            + (2 * 16 + 4) + 4 + 6)
+    return (
+        3 * sums_floats(n, W)
+        + sums_floats(m, 1)
+        + sums_floats(m, 3)
+        + SCAL_FLOATS
+        + W
+        + (2 * 16 + 4)
+        + 4
+        + 6
+    )
 
 
 def episode_layout(fo: int, n: int, m: int) -> tuple[int, ...]:
@@ -168,15 +262,36 @@ def _friction_kind(f, ii, eo, fmin):  # pragma: no cover - jit
     s_step = f[s]
     s_accel = f[s + 1]
     s_xhat = f[s + 2]
-    if (s_xhat > 0.0 and s_accel <= STOPPED_ENERGY_FRACTION * s_xhat
-            and s_step > FLAT_ENERGY_FRACTION * s_xhat):
+    if (
+        s_xhat > 0.0
+        and s_accel <= STOPPED_ENERGY_FRACTION * s_xhat
+        and s_step > FLAT_ENERGY_FRACTION * s_xhat
+    ):
         return KIND_LOAD_STOPPED
     return KIND_NONE
 
 
 @jit
-def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, trusted,
-                 sliding, clipped, row, band, out):  # pragma: no cover - jit
+def episode_tick(
+    f,
+    ii,
+    eo,
+    tick,
+    state,
+    r,
+    g1,
+    g2,
+    xhat,
+    theta1,
+    theta2,
+    over,
+    trusted,
+    sliding,
+    clipped,
+    row,
+    band,
+    out,
+):  # pragma: no cover - jit
     """One episode tick; θ as reported in out[0], out[1]; returns the transition.
 
     ``state``: 3 fault_detected, 4 friction_isolated, 5 other_fault (`detector.STATES`);
@@ -264,8 +379,7 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
     kind = KIND_NONE
     if evidence and ii[eo + P_POST + 1] >= iso:
         th = ii[eo + P_O_TH]
-        _, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR],
-                             th)
+        _, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th)
         if ok:
             f[sc + S_LEVEL_CHANGE] = f[th] - f[sc + S_COULOMB_BASE]
             if f[sc + S_LEVEL_CHANGE] >= fmin or over > 1.0:
@@ -297,8 +411,7 @@ def episode_tick(f, ii, eo, tick, state, r, g1, g2, xhat, theta1, theta2, over, 
         # episode the residual test raised also needs its innovations against the frozen
         # pre-fault reference back below h (a level episode's reference may hold the
         # fault: the level alone)
-        normal = (over < 0.5 and sliding
-                  and (ii[eo + P_LEVEL] != 0 or frozen_stat <= threshold))
+        normal = over < 0.5 and sliding and (ii[eo + P_LEVEL] != 0 or frozen_stat <= threshold)
         needed = ii[eo + P_FRICTION_CLEAR]
     else:
         normal = frozen_stat <= threshold
@@ -314,8 +427,10 @@ def _band_decision(f, ii, eo, state, ticks, theta1, theta2, band):  # pragma: no
     """The paper's band method: track the signature (1, γ_f), clear inside the band."""
     sc = ii[eo + P_O_SCAL]
     if state == 3:
-        tracking = (abs(theta1 - 1.0) <= f[sc + S_TOL1]
-                    and abs(theta2 - f[sc + S_GAMMA_F]) <= f[sc + S_TOL2])
+        tracking = (
+            abs(theta1 - 1.0) <= f[sc + S_TOL1]
+            and abs(theta2 - f[sc + S_GAMMA_F]) <= f[sc + S_TOL2]
+        )
         ii[eo + P_TRACK] = ii[eo + P_TRACK] + 1 if tracking else 0
         if ii[eo + P_TRACK] >= ii[eo + P_TRACK_SAMPLES]:
             ii[eo + P_QUIET] = 0
@@ -323,9 +438,12 @@ def _band_decision(f, ii, eo, state, ticks, theta1, theta2, band):  # pragma: no
         if ticks >= ii[eo + P_TIMEOUT]:
             ii[eo + P_QUIET] = 0
             return TO_OTHER
-    inside = math.isfinite(theta1) and not (band >= 0 and (
-        theta1 < f[band] or theta1 > f[band + 1] or theta2 < f[band + 2]
-        or theta2 > f[band + 3]))
+    inside = math.isfinite(theta1) and not (
+        band >= 0
+        and (
+            theta1 < f[band] or theta1 > f[band + 1] or theta2 < f[band + 2] or theta2 > f[band + 3]
+        )
+    )
     ii[eo + P_QUIET] = ii[eo + P_QUIET] + 1 if inside else 0
     if ii[eo + P_QUIET] >= ii[eo + P_CLEAR]:
         return TO_CLEARED

@@ -27,14 +27,29 @@ from typing import Any
 
 from fdi_daemon.errors import UserError
 
-__all__ = ["EVENT_KINDS", "ALARM_KINDS", "EVENT_SCHEMA", "make_event", "write_events",
-           "read_events"]
+__all__ = [
+    "EVENT_KINDS",
+    "ALARM_KINDS",
+    "EVENT_SCHEMA",
+    "make_event",
+    "write_events",
+    "read_events",
+]
 
 #: version of the event line format; 2 added ``schema`` and (in the daemon) ``time``
 EVENT_SCHEMA = 2
 
-EVENT_KINDS = ("calibrated", "fault_detected", "friction_isolated", "other_fault", "cleared",
-               "data_gap", "link_lost", "link_restored", "bad_sample")
+EVENT_KINDS = (
+    "calibrated",
+    "fault_detected",
+    "friction_isolated",
+    "other_fault",
+    "cleared",
+    "data_gap",
+    "link_lost",
+    "link_restored",
+    "bad_sample",
+)
 
 #: the kinds that open or close an alarm episode
 ALARM_KINDS = ("fault_detected", "friction_isolated", "other_fault", "cleared")
@@ -47,13 +62,18 @@ def _number(value: float | None) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def make_event(t: float, kind: str, theta1: float | None = None, theta2: float | None = None,
-               **extra: Any) -> dict[str, Any]:
+def make_event(
+    t: float, kind: str, theta1: float | None = None, theta2: float | None = None, **extra: Any
+) -> dict[str, Any]:
     """One event dict; float extras are made JSON-safe (NaN/inf -> None)."""
     if kind not in EVENT_KINDS:
         raise ValueError(f"unknown event kind {kind!r}")
-    event: dict[str, Any] = {"t": _number(t), "kind": kind, "theta1": _number(theta1),
-                             "theta2": _number(theta2)}
+    event: dict[str, Any] = {
+        "t": _number(t),
+        "kind": kind,
+        "theta1": _number(theta1),
+        "theta2": _number(theta2),
+    }
     for key, value in extra.items():
         event[key] = _number(value) if isinstance(value, float) else value
     return event

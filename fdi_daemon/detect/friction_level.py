@@ -105,8 +105,9 @@ class FrictionLevel:
 
     __slots__ = ("arena", "fo", "io", "pick_samples", "capacity", "settle_samples")
 
-    def __init__(self, level_median_s: float, fs_hz: float, arena: Arena,
-                 settle_samples: int = 0) -> None:
+    def __init__(
+        self, level_median_s: float, fs_hz: float, arena: Arena, settle_samples: int = 0
+    ) -> None:
         """``settle_samples``: the first pick comes on the settle_samples-th tick after a
         restart (the next one for 0): with the sliding window's length, no pick mixes data
         from before the restart."""
@@ -130,7 +131,7 @@ class FrictionLevel:
     def reset(self) -> None:
         """No pick yet: the level is NaN."""
         level_restart(self.arena.f, self.arena.i, self.io)
-        self.arena.f[self.out:self.out + 2] = math.nan
+        self.arena.f[self.out : self.out + 2] = math.nan
 
     @property
     def level(self) -> float:

@@ -35,15 +35,15 @@ class History:
         first = (self._written + count - keep) % size  # the row of the first point kept
         split = min(keep, size - first)  # points before the ring wraps
         for col, values in enumerate((t, theta1, theta2)):
-            newest = values[count - keep:]
-            self._rows[first:first + split, col] = newest[:split]
-            self._rows[:keep - split, col] = newest[split:]
+            newest = values[count - keep :]
+            self._rows[first : first + split, col] = newest[:split]
+            self._rows[: keep - split, col] = newest[split:]
         self._written += count
 
     def points(self) -> np.ndarray:
         """The points held, oldest first: an array of rows (t, θ1, θ2)."""
         size = len(self._rows)
         if self._written <= size:
-            return self._rows[:self._written].copy()
+            return self._rows[: self._written].copy()
         start = self._written % size
         return np.concatenate([self._rows[start:], self._rows[:start]])

@@ -37,14 +37,33 @@ from __future__ import annotations
 import math
 
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.core.kernels import (iir_step, itest_flush_p, itest_insert_p, itest_solve_p,
-                                     itest_statistic_p, packed_row_into, sums_push)
+from fdi_daemon.core.kernels import (
+    iir_step,
+    itest_flush_p,
+    itest_insert_p,
+    itest_solve_p,
+    itest_statistic_p,
+    packed_row_into,
+    sums_push,
+)
 from fdi_daemon.detect import episode_kernel as E
 from fdi_daemon.detect.friction_level import L_CAPACITY, L_FLOATS, level_restart, level_tick
 
-__all__ = ["chain_tick", "chain_run", "detector_pre", "detector_tick", "monitor_tick",
-           "monitor_run", "QUIET", "LEVEL_ALARM", "CALIBRATED", "FAST_ALARM", "ISOLATED",
-           "OTHER_FAULT", "CLEARED"]
+__all__ = [
+    "chain_tick",
+    "chain_run",
+    "detector_pre",
+    "detector_tick",
+    "monitor_tick",
+    "monitor_run",
+    "QUIET",
+    "LEVEL_ALARM",
+    "CALIBRATED",
+    "FAST_ALARM",
+    "ISOLATED",
+    "OTHER_FAULT",
+    "CLEARED",
+]
 
 #: codes of a tick: nothing to tell, or the event Python formats (the calibration's end is
 #: computed there too)
@@ -55,14 +74,45 @@ F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL, F_VEL_LOW = range(6)
 CHAIN_FILTERS = 6
 # --- chain ints (offsets from the chain's int base)
 C_METHOD, C_EXTERNAL, C_N, C_WIDTH, C_ORDER = 0, 1, 2, 3, 4  # C_ORDER .. +6: the filters
-C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = range(C_ORDER + CHAIN_FILTERS,
-                                                          C_ORDER + CHAIN_FILTERS + 8)
+C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = range(
+    C_ORDER + CHAIN_FILTERS, C_ORDER + CHAIN_FILTERS + 8
+)
 CHAIN_INTS = C_OUT + 1
 # --- chain floats at C_OUT
-(O_XHAT, O_R, O_V, O_G1, O_G2, O_T1, O_T2, O_WT1, O_WT2, O_WOK, O_WSSE, O_VRMS, O_MOVING,
- O_TRUSTED, O_SLIDING, O_LEVEL_VALID, O_CLIPPED, O_ACCEL_LAST, O_RUN, O_RAIL_POS, O_RAIL_NEG,
- O_RAIL_AGE_POS, O_RAIL_AGE_NEG, O_CLIP_AGE, O_LAST_POS, O_MIN_V2, O_MIN_RCOND, O_MIN_S11,
- O_MIN_S22, O_TRUST_SHARE, O_GAMMA, O_LEVEL) = range(32)
+(
+    O_XHAT,
+    O_R,
+    O_V,
+    O_G1,
+    O_G2,
+    O_T1,
+    O_T2,
+    O_WT1,
+    O_WT2,
+    O_WOK,
+    O_WSSE,
+    O_VRMS,
+    O_MOVING,
+    O_TRUSTED,
+    O_SLIDING,
+    O_LEVEL_VALID,
+    O_CLIPPED,
+    O_ACCEL_LAST,
+    O_RUN,
+    O_RAIL_POS,
+    O_RAIL_NEG,
+    O_RAIL_AGE_POS,
+    O_RAIL_AGE_NEG,
+    O_CLIP_AGE,
+    O_LAST_POS,
+    O_MIN_V2,
+    O_MIN_RCOND,
+    O_MIN_S11,
+    O_MIN_S22,
+    O_TRUST_SHARE,
+    O_GAMMA,
+    O_LEVEL,
+) = range(32)
 CHAIN_OUT = 32
 SUMS_WIDTH = 10  # S11, S12, S22, S1y, S2y, Syy, Σv̂², Σ(LP v̂)², Σẍ², Σx̂̈²
 #: a run of this many equal, non-zero ẍ samples is a flat top; two flat tops at one value
@@ -73,14 +123,46 @@ CLIP_RUN = 3
 SLIDING_SHARE = 0.5
 
 # --- detector ints
-(D_METHOD, D_HAS_BAND, D_HAS_BASELINE, D_STATE, D_TICK, D_GUARD_UNTIL, D_ABOVE,
- D_LEVEL_ABOVE, D_HOLD_UNTIL, D_HOLD, D_LEVEL_SAMPLES, D_PERSISTENCE, D_CAL_COUNT,
- D_CAL_SAMPLES, D_EPISODE, D_BINS, D_RES, D_CMD, D_CHAIN, D_FLOATS, D_CODE, D_EPI,
- D_LEVEL) = range(23)
+(
+    D_METHOD,
+    D_HAS_BAND,
+    D_HAS_BASELINE,
+    D_STATE,
+    D_TICK,
+    D_GUARD_UNTIL,
+    D_ABOVE,
+    D_LEVEL_ABOVE,
+    D_HOLD_UNTIL,
+    D_HOLD,
+    D_LEVEL_SAMPLES,
+    D_PERSISTENCE,
+    D_CAL_COUNT,
+    D_CAL_SAMPLES,
+    D_EPISODE,
+    D_BINS,
+    D_RES,
+    D_CMD,
+    D_CHAIN,
+    D_FLOATS,
+    D_CODE,
+    D_EPI,
+    D_LEVEL,
+) = range(23)
 DET_INTS = 23
 # --- detector floats
-(E_THRESHOLD, E_GUARD_THRESHOLD, E_LO1, E_HI1, E_LO2, E_HI2, E_LEVEL_BASE, E_FRICTION_MIN,
- E_THETA1, E_THETA2, E_OVER) = range(11)
+(
+    E_THRESHOLD,
+    E_GUARD_THRESHOLD,
+    E_LO1,
+    E_HI1,
+    E_LO2,
+    E_HI2,
+    E_LEVEL_BASE,
+    E_FRICTION_MIN,
+    E_THETA1,
+    E_THETA2,
+    E_OVER,
+) = range(11)
 E_CAL = 11  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
 STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER = range(1, 6)
 
@@ -106,8 +188,9 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     if method == 0:
         v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], accel)
     elif method == 1:
-        v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], xhat) \
-            + iir_step(f, bo + 2 * L, ao + 2 * L, zo + 2 * (L - 1), ii[od + 2], accel - xhat)
+        v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], xhat) + iir_step(
+            f, bo + 2 * L, ao + 2 * L, zo + 2 * (L - 1), ii[od + 2], accel - xhat
+        )
     else:
         if math.isfinite(position):
             f[out + O_LAST_POS] = position
@@ -115,8 +198,9 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
             position = f[out + O_LAST_POS]
         else:
             position = 0.0
-        v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], position) \
-            + iir_step(f, bo + 2 * L, ao + 2 * L, zo + 2 * (L - 1), ii[od + 2], accel)
+        v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], position) + iir_step(
+            f, bo + 2 * L, ao + 2 * L, zo + 2 * (L - 1), ii[od + 2], accel
+        )
     s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
     g1 = iir_step(f, bo + 3 * L, ao + 3 * L, zo + 3 * (L - 1), ii[od + 3], s)
     g2 = iir_step(f, bo + 4 * L, ao + 4 * L, zo + 4 * (L - 1), ii[od + 4], v)
@@ -143,8 +227,12 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
     s2y = f[sl + 4]
     syy = f[sl + 5]
     det = s11 * s22 - s12 * s12
-    if (ii[io + C_COUNT] == n and s11 > f[out + O_MIN_S11] and s22 > f[out + O_MIN_S22]
-            and det > f[out + O_MIN_RCOND] * (s11 * s22)):
+    if (
+        ii[io + C_COUNT] == n
+        and s11 > f[out + O_MIN_S11]
+        and s22 > f[out + O_MIN_S22]
+        and det > f[out + O_MIN_RCOND] * (s11 * s22)
+    ):
         t1 = (s22 * s1y - s12 * s2y) / det
         t2 = (s11 * s2y - s12 * s1y) / det
         sse = syy - t1 * s1y - t2 * s2y
@@ -209,8 +297,9 @@ def _clip_tick(f, out, accel, n):  # pragma: no cover - jit
 
 
 @jit
-def chain_run(f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums, counts,
-              moving, v_rms):  # pragma: no cover - jit
+def chain_run(
+    f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums, counts, moving, v_rms
+):  # pragma: no cover - jit
     """``chain_tick`` over arrays, every tick's signals and window sums kept."""
     out = ii[io + C_OUT]
     n = ii[io + C_N]
@@ -293,9 +382,24 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
         over = (theta1 - f[fo + E_LEVEL_BASE]) / f[fo + E_FRICTION_MIN]
     f[fo + E_OVER] = over
     if ii[io + D_EPISODE]:
-        return _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over,
-                        f[out + O_TRUSTED] != 0.0, f[out + O_SLIDING] != 0.0,
-                        f[out + O_CLIPPED] != 0.0)
+        return _episode(
+            f,
+            ii,
+            io,
+            fo,
+            res,
+            tick,
+            r,
+            g1,
+            g2,
+            xhat,
+            theta1,
+            theta2,
+            over,
+            f[out + O_TRUSTED] != 0.0,
+            f[out + O_SLIDING] != 0.0,
+            f[out + O_CLIPPED] != 0.0,
+        )
     if tick < ii[io + D_HOLD_UNTIL]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
@@ -316,11 +420,13 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
         return CALIBRATED if c >= ii[io + D_CAL_SAMPLES] else QUIET
     if ii[io + D_METHOD] == 1:
         alarm = ii[io + D_HAS_BAND] != 0 and (
-            theta1 < f[fo + E_LO1] or theta1 > f[fo + E_HI1]
-            or theta2 < f[fo + E_LO2] or theta2 > f[fo + E_HI2])
+            theta1 < f[fo + E_LO1]
+            or theta1 > f[fo + E_HI1]
+            or theta2 < f[fo + E_LO2]
+            or theta2 > f[fo + E_HI2]
+        )
     else:
-        alarm = (ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL]
-                 and stat > f[fo + E_THRESHOLD])
+        alarm = ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL] and stat > f[fo + E_THRESHOLD]
     ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if alarm else 0
     if ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE]:
         ii[io + D_ABOVE] = 0
@@ -341,15 +447,33 @@ def _start(f, ii, io, res, level):  # pragma: no cover - jit
 
 
 @jit
-def _episode(f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over, trusted,
-             sliding, clipped):  # pragma: no cover - jit
+def _episode(
+    f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over, trusted, sliding, clipped
+):  # pragma: no cover - jit
     """A tick of the running episode, and its transition applied to the detector."""
     ep = ii[io + D_EPI]
     band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
     packed_row_into(f, ii[res + 15], 4, ii[res + 16])  # this tick's row of the residual fit
-    change = E.episode_tick(f, ii, ep, tick, ii[io + D_STATE], r, g1, g2, xhat, theta1,
-                            theta2, over, trusted, sliding, clipped, ii[res + 16], band,
-                            f[fo + E_THETA1:fo + E_THETA2 + 1])
+    change = E.episode_tick(
+        f,
+        ii,
+        ep,
+        tick,
+        ii[io + D_STATE],
+        r,
+        g1,
+        g2,
+        xhat,
+        theta1,
+        theta2,
+        over,
+        trusted,
+        sliding,
+        clipped,
+        ii[res + 16],
+        band,
+        f[fo + E_THETA1 : fo + E_THETA2 + 1],
+    )
     if change == E.NO_CHANGE:
         return QUIET
     if change == E.TO_ISOLATED:
@@ -404,8 +528,23 @@ def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - 
 
 
 @jit
-def monitor_run(f, ii, io, v_in, accel, position, xext, start, stat, state, theta1, theta2,
-                residual, v_rms, level):  # pragma: no cover - jit
+def monitor_run(
+    f,
+    ii,
+    io,
+    v_in,
+    accel,
+    position,
+    xext,
+    start,
+    stat,
+    state,
+    theta1,
+    theta2,
+    residual,
+    v_rms,
+    level,
+):  # pragma: no cover - jit
     """``monitor_tick`` from index ``start`` on, traces kept; returns the index after the
     first tick whose code is not QUIET (its code in ii[io + D_CODE]), or the length."""
     chain = ii[io + D_CHAIN]

@@ -43,8 +43,17 @@ from fdi_daemon.io.sample import Sample
 __all__ = ["Monitor", "MonitorTrace"]
 
 #: the arrays of a `MonitorTrace`, in order
-TRACE_NAMES = ("t", "accel", "residual", "theta1", "theta2", "statistic", "state", "v_rms",
-               "friction_level")
+TRACE_NAMES = (
+    "t",
+    "accel",
+    "residual",
+    "theta1",
+    "theta2",
+    "statistic",
+    "state",
+    "v_rms",
+    "friction_level",
+)
 HISTORY_S = 30.0
 HISTORY_POINTS = 300
 _CHUNK = 16384
@@ -74,14 +83,14 @@ class Monitor:
 
     def __init__(self, model: FdiModel) -> None:
         if model.fault_filter is None:
-            raise ConfigError("the model has no fault_filter (G_e, γ_f): run `fdi signature` "
-                              "first")
+            raise ConfigError("the model has no fault_filter (G_e, γ_f): run `fdi signature` first")
         detector_map = dict(model.detector or {})
         self.accel_limit_mps2 = detector_map.pop("accel_limit_mps2", None)
         if self.accel_limit_mps2 is not None and (
-                isinstance(self.accel_limit_mps2, bool)
-                or not isinstance(self.accel_limit_mps2, (int, float))
-                or not self.accel_limit_mps2 > 0):
+            isinstance(self.accel_limit_mps2, bool)
+            or not isinstance(self.accel_limit_mps2, (int, float))
+            or not self.accel_limit_mps2 > 0
+        ):
             raise ConfigError("detector.accel_limit_mps2 must be a positive number")
         check_stable(model.fault_filter.f, "fault_filter.f")
         check_stable(model.plant_a, "plant.a")
@@ -90,33 +99,50 @@ class Monitor:
         self.fs_hz = float(model.fs)
         gamma_f = model.fault_filter.gamma_f
         if gamma_f is None and self.settings.method == "band":
-            raise ConfigError("detector.method band tracks the signature (1, gamma_f), but the "
-                              "model's gamma_f is not identified (null): use method sequential "
-                              "or calibrate the signature again (docs/identification.md)")
+            raise ConfigError(
+                "detector.method band tracks the signature (1, gamma_f), but the "
+                "model's gamma_f is not identified (null): use method sequential "
+                "or calibrate the signature again (docs/identification.md)"
+            )
         self.gamma_f = float("nan") if gamma_f is None else float(gamma_f)
         self.baseline = None
-        self.baseline_note = ("the model has no commissioning baseline: friction present "
-                              "when monitoring starts is not reported (run `fdi baseline`)")
+        self.baseline_note = (
+            "the model has no commissioning baseline: friction present "
+            "when monitoring starts is not reported (run `fdi baseline`)"
+        )
         if model.extra.get("baseline") is not None:
             if not isinstance(model.extra["baseline"], dict):
                 raise ConfigError("model: baseline must be a mapping (from `fdi baseline`)")
             self.baseline = Baseline.from_mapping(model.extra["baseline"])
             self.baseline_note = ""
-            self._margin = np.maximum(0.5 * self.settings.friction_min_level,
-                                      self.settings.band_k * self.baseline.coulomb_sigma)
+            self._margin = np.maximum(
+                0.5 * self.settings.friction_min_level,
+                self.settings.band_k * self.baseline.coulomb_sigma,
+            )
         else:
             log.info(self.baseline_note)
         self.arena = Arena()
-        bins = (None if self.baseline is None else
-                (self.baseline.edges_mps, self.baseline.coulomb_median, self._margin))
-        self.detector = Detector(self.settings, self.fs_hz, self.gamma_f,
-                                 baseline=self.baseline is not None, arena=self.arena,
-                                 baseline_bins=bins)
-        self.pipeline = Pipeline(model, self.detector.window_samples,
-                                 min_velocity_rms_mps=self.settings.min_velocity_rms_mps,
-                                 arena=self.arena,
-                                 trust_phase_deg=self.settings.velocity_trust_phase_deg,
-                                 trust_share=self.settings.velocity_trust_share)
+        bins = (
+            None
+            if self.baseline is None
+            else (self.baseline.edges_mps, self.baseline.coulomb_median, self._margin)
+        )
+        self.detector = Detector(
+            self.settings,
+            self.fs_hz,
+            self.gamma_f,
+            baseline=self.baseline is not None,
+            arena=self.arena,
+            baseline_bins=bins,
+        )
+        self.pipeline = Pipeline(
+            model,
+            self.detector.window_samples,
+            min_velocity_rms_mps=self.settings.min_velocity_rms_mps,
+            arena=self.arena,
+            trust_phase_deg=self.settings.velocity_trust_phase_deg,
+            trust_share=self.settings.velocity_trust_share,
+        )
         self.arena.i[self.detector.io + K.D_CHAIN] = self.pipeline.io
         self._io = self.detector.io
         self._history_every = max(1, int(math.ceil(HISTORY_S * self.fs_hz / HISTORY_POINTS)))
@@ -136,8 +162,19 @@ class Monitor:
         f, ii = self.arena.f.copy(), self.arena.i.copy()
         K.monitor_tick(f, ii, self._io, 0.0, 0.0, math.nan, 0.0)
         one = np.zeros(1)
-        K.monitor_run(f, ii, self._io, one, one, one, one, 0, one.copy(),
-                      np.zeros(1, dtype=np.int8), *(one.copy() for _ in range(5)))
+        K.monitor_run(
+            f,
+            ii,
+            self._io,
+            one,
+            one,
+            one,
+            one,
+            0,
+            one.copy(),
+            np.zeros(1, dtype=np.int8),
+            *(one.copy() for _ in range(5)),
+        )
         from fdi_daemon.detect.episode_kernel import episode_restart
 
         episode_restart(f, ii, self.detector.epi)
@@ -151,16 +188,24 @@ class Monitor:
         accel = sample.accel
         t = sample.t
         pl = self.pipeline
-        if (last is not None and seq == last + 1 and not self._bad_run
-                and math.isfinite(v_in) and math.isfinite(accel) and math.isfinite(t)
-                and self.accel_limit_mps2 is None and not pl.needs_position
-                and not pl.external_plant):
+        if (
+            last is not None
+            and seq == last + 1
+            and not self._bad_run
+            and math.isfinite(v_in)
+            and math.isfinite(accel)
+            and math.isfinite(t)
+            and self.accel_limit_mps2 is None
+            and not pl.needs_position
+            and not pl.external_plant
+        ):
             # the usual tick: nothing to check further, nothing to replace
             self._last_seq = seq
             self._v_in = v_in
             self._last_t = t
-            code = K.monitor_tick(self.arena.f, self.arena.i, self._io, float(v_in),
-                                  float(accel), math.nan, 0.0)
+            code = K.monitor_tick(
+                self.arena.f, self.arena.i, self._io, float(v_in), float(accel), math.nan, 0.0
+            )
             events = self.detector.decide(code, t) if code else []
             if self._samples % self._history_every == 0:
                 self._history.append(t, self.detector.theta1, self.detector.theta2)
@@ -195,8 +240,15 @@ class Monitor:
         self._v_in = v_in
         self._last_t = t
         xext = pl.plant.step(v_in) if pl.external_plant else 0.0
-        code = K.monitor_tick(self.arena.f, self.arena.i, self._io, float(v_in), float(accel),
-                              float(sample.position), xext)
+        code = K.monitor_tick(
+            self.arena.f,
+            self.arena.i,
+            self._io,
+            float(v_in),
+            float(accel),
+            float(sample.position),
+            xext,
+        )
         if code:
             events.extend(self.detector.decide(code, t))
         if self._samples % self._history_every == 0:
@@ -230,8 +282,9 @@ class Monitor:
         return self._flush_bad()
 
     # ------------------------------------------------------------------ batch
-    def run(self, rec: Recording, trace_every: int = 1, progress=None
-            ) -> tuple[list[dict[str, Any]], MonitorTrace]:
+    def run(
+        self, rec: Recording, trace_every: int = 1, progress=None
+    ) -> tuple[list[dict[str, Any]], MonitorTrace]:
         """Replay a recording through the batch path; same events as ``step`` per sample.
 
         trace_every: keep every n-th sample in the trace (1: all). progress(done, total) is
@@ -245,8 +298,7 @@ class Monitor:
         # per chunk (in cache): the sample numbers of a recording without seq, and NaN for
         # the position the velocity does not use
         needs_position = self.pipeline.needs_position
-        position = (self.position_column(rec) if needs_position
-                    else np.full(min(n, _CHUNK), np.nan))
+        position = self.position_column(rec) if needs_position else np.full(min(n, _CHUNK), np.nan)
         seq = np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols else None
         last = None  # the number of the sample before the chunk (no seq column)
         events: list[dict[str, Any]] = []
@@ -255,8 +307,12 @@ class Monitor:
         limit = math.inf if self.accel_limit_mps2 is None else float(self.accel_limit_mps2)
         while start < n:
             stop = min(n, start + _CHUNK)
-            chunk = (t[start:stop], v_in[start:stop], accel[start:stop],
-                     position[start:stop] if needs_position else position[:stop - start])
+            chunk = (
+                t[start:stop],
+                v_in[start:stop],
+                accel[start:stop],
+                position[start:stop] if needs_position else position[: stop - start],
+            )
             # the number of the chunk's first sample if it follows on
             if seq is not None:
                 first = int(seq[start])
@@ -264,10 +320,23 @@ class Monitor:
                 first = last + 1
             else:
                 first = 0 if self._last_seq is None else self._last_seq + 1
-            if (not self._bad_run and (self._last_seq is None or first == self._last_seq + 1)
-                    and _clean_chunk(t, v_in, accel, position, needs_position, start, stop,
-                                     limit, self.fs_hz,
-                                     _NO_SEQ if seq is None else seq, start > 0)):
+            if (
+                not self._bad_run
+                and (self._last_seq is None or first == self._last_seq + 1)
+                and _clean_chunk(
+                    t,
+                    v_in,
+                    accel,
+                    position,
+                    needs_position,
+                    start,
+                    stop,
+                    limit,
+                    self.fs_hz,
+                    _NO_SEQ if seq is None else seq,
+                    start > 0,
+                )
+            ):
                 # the usual chunk (one compiled pass says so): nothing to replace or split
                 events.extend(self._run_good(*chunk, parts, trace_every))
                 self._last_seq = last = first + stop - start - 1
@@ -276,15 +345,17 @@ class Monitor:
                     numbers = seq[start:stop]
                 else:
                     lo = max(start - 1, 0)
-                    numbers = self.sample_numbers(t[lo:stop], last)[start - lo:]
+                    numbers = self.sample_numbers(t[lo:stop], last)[start - lo :]
                     last = int(numbers[-1])
                 events.extend(self._run_chunk(*chunk, numbers, parts, trace_every))
             start = stop
             if progress is not None:
                 progress(stop, n)
         events.extend(self.finish())
-        trace = MonitorTrace(every=trace_every, **{
-            k: (np.concatenate(v) if v else np.empty(0)) for k, v in parts.items()})
+        trace = MonitorTrace(
+            every=trace_every,
+            **{k: (np.concatenate(v) if v else np.empty(0)) for k, v in parts.items()},
+        )
         return events, trace
 
     def baseline_level(self) -> float | None:
@@ -313,8 +384,10 @@ class Monitor:
         if not self.pipeline.needs_position:
             return np.full(n, np.nan)
         if "position" not in rec.columns:
-            raise UserError("the model's velocity fuses position (velocity.method "
-                            "position_observer) but the recording has no position column")
+            raise UserError(
+                "the model's velocity fuses position (velocity.method "
+                "position_observer) but the recording has no position column"
+            )
         return np.asarray(rec.columns["position"], dtype=float)
 
     def sample_numbers(self, t: np.ndarray, base: int | None = None) -> np.ndarray:
@@ -333,8 +406,7 @@ class Monitor:
         steps = np.where(np.isfinite(steps), steps, 1).astype(np.int64)
         return base + np.concatenate([[0], np.cumsum(steps)])
 
-    def _run_chunk(self, t, v_in, accel, position, seq, parts, trace_every
-                   ) -> list[dict[str, Any]]:
+    def _run_chunk(self, t, v_in, accel, position, seq, parts, trace_every) -> list[dict[str, Any]]:
         events: list[dict[str, Any]] = []
         # split where seq does not advance by exactly one: gaps and dropped samples
         step = np.empty_like(seq)
@@ -353,8 +425,17 @@ class Monitor:
                     # samples after them in this run are traced like any other
                     for k in range(a, b):
                         ticks = self._samples
-                        events.extend(self.step(Sample(int(seq[k]), float(t[k]), float(v_in[k]),
-                                                       float(accel[k]), float(position[k]))))
+                        events.extend(
+                            self.step(
+                                Sample(
+                                    int(seq[k]),
+                                    float(t[k]),
+                                    float(v_in[k]),
+                                    float(accel[k]),
+                                    float(position[k]),
+                                )
+                            )
+                        )
                         if self._samples > ticks:
                             self._trace_one(parts, trace_every)
                     continue
@@ -362,13 +443,15 @@ class Monitor:
                 events.append(self._gap(float(t[a]), int(seq[a] - self._last_seq - 1)))
             if step[a] != 1:
                 self._last_seq = int(seq[a]) - 1
-            events.extend(self._run_contiguous(t[a:b], v_in[a:b], accel[a:b], position[a:b],
-                                               parts, trace_every))
+            events.extend(
+                self._run_contiguous(
+                    t[a:b], v_in[a:b], accel[a:b], position[a:b], parts, trace_every
+                )
+            )
             self._last_seq = int(seq[b - 1])
         return events
 
-    def _run_contiguous(self, t, v_in, accel, position, parts, trace_every
-                        ) -> list[dict[str, Any]]:
+    def _run_contiguous(self, t, v_in, accel, position, parts, trace_every) -> list[dict[str, Any]]:
         """Samples with consecutive seq: good runs batched, bad samples through ``step``."""
         events: list[dict[str, Any]] = []
         good = np.isfinite(v_in)
@@ -380,8 +463,11 @@ class Monitor:
             with np.errstate(invalid="ignore"):
                 good &= np.abs(accel) < self.accel_limit_mps2
         bad = ~good
-        edges = (np.flatnonzero(np.diff(bad.astype(np.int8))) + 1 if not good.all()
-                 else np.zeros(0, dtype=np.intp))
+        edges = (
+            np.flatnonzero(np.diff(bad.astype(np.int8))) + 1
+            if not good.all()
+            else np.zeros(0, dtype=np.intp)
+        )
         bounds = np.concatenate([[0], edges, [len(t)]])
         for a, b in zip(bounds[:-1], bounds[1:]):
             if bad[a] or self._bad_run:
@@ -389,17 +475,26 @@ class Monitor:
                 last = b if bad[a] else a + 1
                 for k in range(a, last):
                     seq = self._last_seq + 1 if self._last_seq is not None else 0
-                    events.extend(self.step(Sample(seq, float(t[k]), float(v_in[k]),
-                                                   float(accel[k]), float(position[k]))))
+                    events.extend(
+                        self.step(
+                            Sample(
+                                seq,
+                                float(t[k]),
+                                float(v_in[k]),
+                                float(accel[k]),
+                                float(position[k]),
+                            )
+                        )
+                    )
                     self._trace_one(parts, trace_every)
                 a = last
             if a < b:
-                events.extend(self._run_good(t[a:b], v_in[a:b], accel[a:b], position[a:b],
-                                             parts, trace_every))
+                events.extend(
+                    self._run_good(t[a:b], v_in[a:b], accel[a:b], position[a:b], parts, trace_every)
+                )
         return events
 
-    def _run_good(self, t, v_in, accel, position, parts, trace_every
-                  ) -> list[dict[str, Any]]:
+    def _run_good(self, t, v_in, accel, position, parts, trace_every) -> list[dict[str, Any]]:
         """Good samples with consecutive seq: `monitor_run` over the arrays, handing the
         ticks that need Python (events, episodes) to `Detector.decide` as ``step`` does."""
         pl = self.pipeline
@@ -414,8 +509,23 @@ class Monitor:
         events: list[dict[str, Any]] = []
         pos = 0
         while pos < n:
-            pos = K.monitor_run(f, ii, io, v_in, accel, position, xext, pos, stat, state,
-                                theta1, theta2, residual, v_rms, level)
+            pos = K.monitor_run(
+                f,
+                ii,
+                io,
+                v_in,
+                accel,
+                position,
+                xext,
+                pos,
+                stat,
+                state,
+                theta1,
+                theta2,
+                residual,
+                v_rms,
+                level,
+            )
             code = int(ii[io + K.D_CODE])
             if code:
                 k = pos - 1
@@ -428,8 +538,9 @@ class Monitor:
         # every sample: the arrays themselves (new ones per chunk, `_outputs`); every n-th:
         # a copy (the arrays serve the next chunk)
         keep = slice((-self._samples) % trace_every, n, trace_every)
-        for name, values in zip(TRACE_NAMES, (t, accel, residual, theta1, theta2, stat, state,
-                                              v_rms, level)):
+        for name, values in zip(
+            TRACE_NAMES, (t, accel, residual, theta1, theta2, stat, state, v_rms, level)
+        ):
             parts[name].append(values if trace_every == 1 else values[keep].copy())
         self._samples += n
         self._v_in = float(v_in[-1])
@@ -448,8 +559,7 @@ class Monitor:
         if trace_every == 1 or n > _CHUNK:
             return (*(np.empty(n) for _ in range(6)), np.empty(n, dtype=np.int8))
         if self._scratch is None:
-            self._scratch = (*(np.empty(_CHUNK) for _ in range(6)),
-                             np.empty(_CHUNK, dtype=np.int8))
+            self._scratch = (*(np.empty(_CHUNK) for _ in range(6)), np.empty(_CHUNK, dtype=np.int8))
         return tuple(a[:n] for a in self._scratch)
 
     def _trace_one(self, parts, trace_every) -> None:
@@ -461,8 +571,17 @@ class Monitor:
     def trace_row(self, t: float) -> tuple:
         """The newest tick's values in the order of TRACE_NAMES, its time given as ``t``."""
         pl, det = self.pipeline, self.detector
-        return (t, pl.residual + pl.xhat, pl.residual, det.theta1, det.theta2, det.statistic,
-                STATES.index(det.state), pl.v_rms, det.level.level)
+        return (
+            t,
+            pl.residual + pl.xhat,
+            pl.residual,
+            det.theta1,
+            det.theta2,
+            det.statistic,
+            STATES.index(det.state),
+            pl.v_rms,
+            det.level.level,
+        )
 
     # ------------------------------------------------------------------ status
     def snapshot(self) -> dict[str, Any]:
@@ -484,8 +603,11 @@ class Monitor:
             "residual_rms": finite_or_none(math.sqrt(syy / count)) if count and syy >= 0 else None,
             "statistic": finite_or_none(det.statistic),
             "threshold": float(det.threshold),
-            "history": {"t": [h[0] for h in hist], "theta1": [finite_or_none(h[1]) for h in hist],
-                        "theta2": [finite_or_none(h[2]) for h in hist]},
+            "history": {
+                "t": [h[0] for h in hist],
+                "theta1": [finite_or_none(h[1]) for h in hist],
+                "theta2": [finite_or_none(h[2]) for h in hist],
+            },
         }
 
 
@@ -495,16 +617,19 @@ def check_stable(a: np.ndarray, name: str) -> None:
     if a.size > 1:
         radius = float(np.max(np.abs(np.roots(a))))
         if not radius < 1.0:
-            raise ConfigError(f"model {name} has a pole at |z| = {radius:.9g} (>= 1): the "
-                              f"filter is not stable; re-run the identification")
+            raise ConfigError(
+                f"model {name} has a pole at |z| = {radius:.9g} (>= 1): the "
+                f"filter is not stable; re-run the identification"
+            )
 
 
 _NO_SEQ = np.zeros(0, dtype=np.int64)
 
 
 @jit
-def _clean_chunk(t, v_in, accel, position, needs_position, start, stop, accel_limit, fs_hz,
-                 seq, after_previous):  # pragma: no cover - jit
+def _clean_chunk(
+    t, v_in, accel, position, needs_position, start, stop, accel_limit, fs_hz, seq, after_previous
+):  # pragma: no cover - jit
     """Whether samples [start, stop) need none of `Monitor.run`'s checks: every value
     finite (position only when the velocity uses it), |accel| below the limit, and numbered
     on without a gap: ``seq`` advancing by one, or without ``seq`` (empty) time steps that

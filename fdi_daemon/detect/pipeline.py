@@ -66,7 +66,7 @@ class WindowView:
 
     __slots__ = ("_pl", "window_samples", "min_rcond", "min_mean_square")
 
-    def __init__(self, pipeline: "Pipeline", window_samples: int, min_rcond: float) -> None:
+    def __init__(self, pipeline: Pipeline, window_samples: int, min_rcond: float) -> None:
         self._pl = pipeline
         self.window_samples = window_samples
         self.min_rcond = min_rcond
@@ -97,24 +97,48 @@ class WindowView:
         """Current (S11, S12, S22, S1y, S2y, Syy)."""
         pl = self._pl
         so = int(pl.arena.i[pl.io + K.C_SUMS]) + (self.window_samples + 2) * K.SUMS_WIDTH
-        return tuple(pl.arena.f[so:so + 6].tolist())
+        return tuple(pl.arena.f[so : so + 6].tolist())
 
 
 class Pipeline:
     """Ĝ, residual, velocity, G_e regressors and the window least squares of one rig."""
 
-    __slots__ = ("plant", "velocity", "model_velocity", "needs_position", "ge_sign",
-                 "ge_velocity", "wls", "window_samples", "external_plant", "arena", "fo",
-                 "io", "_zo", "_zn", "_out_o", "trusted_from_hz", "signature_gamma")
+    __slots__ = (
+        "plant",
+        "velocity",
+        "model_velocity",
+        "needs_position",
+        "ge_sign",
+        "ge_velocity",
+        "wls",
+        "window_samples",
+        "external_plant",
+        "arena",
+        "fo",
+        "io",
+        "_zo",
+        "_zn",
+        "_out_o",
+        "trusted_from_hz",
+        "signature_gamma",
+    )
 
-    def __init__(self, model: FdiModel, window_samples: int, min_rcond: float = MIN_RCOND,
-                 min_velocity_rms_mps: float = 0.0, arena: Arena | None = None,
-                 trust_phase_deg: float = DetectorSettings.velocity_trust_phase_deg,
-                 trust_share: float = DetectorSettings.velocity_trust_share) -> None:
+    def __init__(
+        self,
+        model: FdiModel,
+        window_samples: int,
+        min_rcond: float = MIN_RCOND,
+        min_velocity_rms_mps: float = 0.0,
+        arena: Arena | None = None,
+        trust_phase_deg: float = DetectorSettings.velocity_trust_phase_deg,
+        trust_share: float = DetectorSettings.velocity_trust_share,
+    ) -> None:
         ff = model.fault_filter
         if ff is None:
-            raise ConfigError("the model has no fault_filter (G_e, γ_f): run `fdi signature` "
-                              "on a recording with a friction fault first")
+            raise ConfigError(
+                "the model has no fault_filter (G_e, γ_f): run `fdi signature` "
+                "on a recording with a friction fault first"
+            )
         try:
             self.velocity = velocity_from_settings(velocity_settings(model.velocity), model.fs)
         except ValueError as exc:
@@ -142,14 +166,16 @@ class Pipeline:
             vel_a, vel_b, method = vel, None, 0
         plant = None if self.external_plant else self.plant
         self.trusted_from_hz = trusted_from_hz(vel, trust_phase_deg)
-        low = (IIRFilter(*butter(2, self.trusted_from_hz, fs=model.fs))
-               if self.trusted_from_hz > 0 else None)  # None: v̂ is trusted everywhere
+        low = (
+            IIRFilter(*butter(2, self.trusted_from_hz, fs=model.fs))
+            if self.trusted_from_hz > 0
+            else None
+        )  # None: v̂ is trusted everywhere
         filters = [plant, vel_a, vel_b, self.ge_sign, self.ge_velocity, low]
         width = max(f.b.size for f in filters if f is not None)
         self.arena = arena if arena is not None else Arena()
         nf = K.CHAIN_FILTERS
-        n_float = nf * (3 * width - 1) + sums_floats(n, K.SUMS_WIDTH) + K.SUMS_WIDTH \
-            + K.CHAIN_OUT
+        n_float = nf * (3 * width - 1) + sums_floats(n, K.SUMS_WIDTH) + K.SUMS_WIDTH + K.CHAIN_OUT
         self.fo, self.io = fo, io = self.arena.alloc(n_float, K.CHAIN_INTS)
         b_o, a_o = fo, fo + nf * width
         self._zo = z_o = a_o + nf * width
@@ -163,11 +189,24 @@ class Pipeline:
             if filt is None:
                 orders.append(0)
                 continue
-            f[b_o + r * width:b_o + r * width + filt.b.size] = filt.b
-            f[a_o + r * width:a_o + r * width + filt.a.size] = filt.a
+            f[b_o + r * width : b_o + r * width + filt.b.size] = filt.b
+            f[a_o + r * width : a_o + r * width + filt.a.size] = filt.a
             orders.append(filt.b.size - 1)
-        ii[io:io + K.CHAIN_INTS] = (method, int(self.external_plant), n, width, *orders,
-                                    0, 0, b_o, a_o, z_o, sums_o, row_o, out_o)
+        ii[io : io + K.CHAIN_INTS] = (
+            method,
+            int(self.external_plant),
+            n,
+            width,
+            *orders,
+            0,
+            0,
+            b_o,
+            a_o,
+            z_o,
+            sums_o,
+            row_o,
+            out_o,
+        )
         f[out_o + K.O_MIN_V2] = float(min_velocity_rms_mps) ** 2 * n
         f[out_o + K.O_MIN_RCOND] = float(min_rcond)
         f[out_o + K.O_TRUST_SHARE] = float(trust_share)
@@ -232,7 +271,7 @@ class Pipeline:
     def reset(self) -> None:
         """Zero every state (after a data gap)."""
         f, ii, io = self.arena.f, self.arena.i, self.io
-        f[self._zo:self._out_o + K.O_LAST_POS + 1] = 0.0  # filters, sums, row, signals
+        f[self._zo : self._out_o + K.O_LAST_POS + 1] = 0.0  # filters, sums, row, signals
         ii[io + K.C_POS] = ii[io + K.C_COUNT] = 0
         out = self._out_o
         f[out + K.O_T1] = f[out + K.O_T2] = f[out + K.O_WT1] = f[out + K.O_WT2] = math.nan
@@ -250,8 +289,15 @@ class Pipeline:
         ``position`` (m) is read only by the position observer (NaN: hold the last one).
         """
         xext = self.plant.step(v_in) if self.external_plant else 0.0
-        K.chain_tick(self.arena.f, self.arena.i, self.io, float(v_in),
-                     math.nan if accel is None else float(accel), float(position), xext)
+        K.chain_tick(
+            self.arena.f,
+            self.arena.i,
+            self.io,
+            float(v_in),
+            math.nan if accel is None else float(accel),
+            float(position),
+            xext,
+        )
 
     def external_xhat(self, v_in: np.ndarray) -> np.ndarray:
         """x̂̈ of a plant the kernel does not hold (effects); else ``v_in`` itself, a
@@ -260,8 +306,13 @@ class Pipeline:
             return np.ascontiguousarray(self.plant.run(v_in), dtype=float)
         return v_in
 
-    def run(self, v_in: np.ndarray, accel: np.ndarray, bad_accel: np.ndarray | None = None,
-            position: np.ndarray | None = None) -> PipelineBatch:
+    def run(
+        self,
+        v_in: np.ndarray,
+        accel: np.ndarray,
+        bad_accel: np.ndarray | None = None,
+        position: np.ndarray | None = None,
+    ) -> PipelineBatch:
         """Batch ``step`` over arrays (continuing from, and updating, the same state).
 
         ``bad_accel``: a mask of samples to replace by x̂̈ (``step(v, None)``); ``position``:
@@ -271,25 +322,54 @@ class Pipeline:
         if bad_accel is not None and bad_accel.any():
             accel = np.where(bad_accel, np.nan, accel)
         n = v_in.size
-        position = (np.full(n, np.nan) if position is None
-                    else np.ascontiguousarray(position, dtype=float))
+        position = (
+            np.full(n, np.nan) if position is None else np.ascontiguousarray(position, dtype=float)
+        )
         out = [np.empty(n) for _ in range(5)]
         sums = np.empty((n, 6))
         counts = np.empty(n, dtype=np.int64)
         moving = np.empty(n, dtype=np.bool_)
         v_rms = np.empty(n)
-        K.chain_run(self.arena.f, self.arena.i, self.io, v_in, accel, position,
-                    self.external_xhat(v_in), *out, sums, counts, moving, v_rms)
+        K.chain_run(
+            self.arena.f,
+            self.arena.i,
+            self.io,
+            v_in,
+            accel,
+            position,
+            self.external_xhat(v_in),
+            *out,
+            sums,
+            counts,
+            moving,
+            v_rms,
+        )
         xhat, r, v, g1, g2 = out
-        return PipelineBatch(xhat=xhat, residual=r, velocity=v, g1=g1, g2=g2, sums=sums,
-                             counts=counts, moving=moving, v_rms=v_rms)
+        return PipelineBatch(
+            xhat=xhat,
+            residual=r,
+            velocity=v,
+            g1=g1,
+            g2=g2,
+            sums=sums,
+            counts=counts,
+            moving=moving,
+            v_rms=v_rms,
+        )
 
     def thetas(self, batch: PipelineBatch) -> tuple[np.ndarray, np.ndarray]:
         """θ1, θ2 of a batch as ``step`` reports them (NaN: invalid window or at rest)."""
-        sol = solve_sums(batch.sums, batch.counts, self.wls.window_samples, self.wls.min_rcond,
-                         self.wls.min_mean_square)
-        return (np.where(batch.moving, sol.theta1, np.nan),
-                np.where(batch.moving, sol.theta2, np.nan))
+        sol = solve_sums(
+            batch.sums,
+            batch.counts,
+            self.wls.window_samples,
+            self.wls.min_rcond,
+            self.wls.min_mean_square,
+        )
+        return (
+            np.where(batch.moving, sol.theta1, np.nan),
+            np.where(batch.moving, sol.theta2, np.nan),
+        )
 
     def levels(self, batch: PipelineBatch) -> np.ndarray:
         """The friction level of a batch as ``step`` reports it (`level`; NaN: a window not

@@ -99,8 +99,9 @@ class DetectorSettings:
     much of each cycle and θ1 under-reads friction, so the clearing count holds."""
 
     @classmethod
-    def from_mapping(cls, mapping: Mapping[str, Any] | None,
-                     source: str = "detector") -> "DetectorSettings":
+    def from_mapping(
+        cls, mapping: Mapping[str, Any] | None, source: str = "detector"
+    ) -> DetectorSettings:
         """Validate a ``detector`` mapping; bad values and typos of known keys raise
         ConfigError, other unknown keys are ignored (`known_settings`)."""
         known = {f.name: f for f in fields(cls)}
@@ -117,15 +118,27 @@ class DetectorSettings:
                 if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                     raise ConfigError(f"{source}.{name} must be a whole number >= 1")
             else:
-                if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                        or not math.isfinite(value) or value < 0:
+                if (
+                    isinstance(value, bool)
+                    or not isinstance(value, (int, float))
+                    or not math.isfinite(value)
+                    or value < 0
+                ):
                     raise ConfigError(f"{source}.{name} must be a finite number >= 0")
                 value = float(value)
             values[name] = value
         settings = cls(**values)
-        for name in ("window_s", "test_window_s", "threshold", "isolation_window_s",
-                     "clear_s", "friction_clear_s", "band_k", "guard_threshold",
-                     "level_median_s"):
+        for name in (
+            "window_s",
+            "test_window_s",
+            "threshold",
+            "isolation_window_s",
+            "clear_s",
+            "friction_clear_s",
+            "band_k",
+            "guard_threshold",
+            "level_median_s",
+        ):
             if getattr(settings, name) <= 0:
                 raise ConfigError(f"{source}.{name} must be > 0")
         return settings

@@ -13,9 +13,14 @@ def _first(events: list[dict[str, Any]], kind: str) -> float | None:
     return next((e["t"] for e in events if e["kind"] == kind), None)
 
 
-def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, method: str,
-                   theta_final: tuple[float | None, float | None],
-                   level_final: float | None = None) -> dict[str, Any]:
+def replay_summary(
+    events: list[dict[str, Any]],
+    samples: int,
+    fs_hz: float,
+    method: str,
+    theta_final: tuple[float | None, float | None],
+    level_final: float | None = None,
+) -> dict[str, Any]:
     """``{"samples", "fs", "first_detection_t", "isolated_t", "classification",
     "theta_final", "alarm_episodes", ...}`` (DESIGN.md keys first).
 
@@ -45,15 +50,16 @@ def replay_summary(events: list[dict[str, Any]], samples: int, fs_hz: float, met
         "theta_final": theta_final,
         "alarm_episodes": kinds.count("fault_detected"),
         "alarms": kinds.count("alarm_raised"),
-        "alarm_peak_priority": max((int(e["priority"]) for e in events
-                                    if e["kind"] in ("alarm_raised", "alarm_priority")),
-                                   default=0),
+        "alarm_peak_priority": max(
+            (int(e["priority"]) for e in events if e["kind"] in ("alarm_raised", "alarm_priority")),
+            default=0,
+        ),
         "other_fault_t": other,
         "method": method,
         "friction_level_final": finite_or_none(level_final),
         "event_counts": counts,
         "bad_samples": sum(int(e.get("count", 1)) for e in events if e["kind"] == "bad_sample"),
-        "missing_samples": sum(int(e.get("missing_samples", 0)) for e in events
-                               if e["kind"] == "data_gap"),
+        "missing_samples": sum(
+            int(e.get("missing_samples", 0)) for e in events if e["kind"] == "data_gap"
+        ),
     }
-

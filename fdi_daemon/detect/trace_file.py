@@ -28,9 +28,14 @@ def trace_columns(trace, every: int = 1) -> dict[str, np.ndarray]:
     """The columns of a `MonitorTrace`, every ``every``-th of its rows."""
     rows = slice(None, None, int(every))
     names = np.asarray(STATES)
-    return {"t": trace.t[rows], "theta1": trace.theta1[rows], "theta2": trace.theta2[rows],
-            "friction_level": trace.friction_level[rows], "statistic": trace.statistic[rows],
-            "state": names[trace.state[rows].astype(int)]}
+    return {
+        "t": trace.t[rows],
+        "theta1": trace.theta1[rows],
+        "theta2": trace.theta2[rows],
+        "friction_level": trace.friction_level[rows],
+        "statistic": trace.statistic[rows],
+        "state": names[trace.state[rows].astype(int)],
+    }
 
 
 def write_trace(path: str | Path, trace, every: int = 1) -> Path:

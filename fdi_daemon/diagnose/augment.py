@@ -36,9 +36,17 @@ from fdi_daemon.errors import ConfigError
 class AugmentedPlant:
     """Streaming simulation of Ĝ plus effects (frozen parameters, explicit state)."""
 
-    def __init__(self, fs_hz: float, plant_b, plant_a, output_kind: str = "acceleration",
-                 highpass_hz: float = 1.0, effects: list[FittedEffect] | None = None,
-                 domain: tuple | None = None, force_loop: bool = True) -> None:
+    def __init__(
+        self,
+        fs_hz: float,
+        plant_b,
+        plant_a,
+        output_kind: str = "acceleration",
+        highpass_hz: float = 1.0,
+        effects: list[FittedEffect] | None = None,
+        domain: tuple | None = None,
+        force_loop: bool = True,
+    ) -> None:
         """plant_b/plant_a: Ĝ (acceleration); domain: (b, a) of the model in the measured
         quantity's domain when it was fitted there (default Lⁿ Ĝ). force_loop: force effects
         in feedback with the augmented motion (`force`); False: fed forward from the nominal
@@ -53,8 +61,11 @@ class AugmentedPlant:
         self.effects = list(effects or [])
         n = signals.OUTPUT_KINDS[output_kind]
         self._n = n
-        b_dom, a_dom = (domain if domain is not None and n else
-                        signals.domain_plant(plant_b, plant_a, n, highpass_hz, fs_hz))
+        b_dom, a_dom = (
+            domain
+            if domain is not None and n
+            else signals.domain_plant(plant_b, plant_a, n, highpass_hz, fs_hz)
+        )
         self.b_dom, self.a_dom = np.asarray(b_dom, float), np.asarray(a_dom, float)
         self._plant = IIRFilter(self.b_dom, self.a_dom)
         self._chain = signals.StateChain(n, fs_hz, highpass_hz)
@@ -145,16 +156,21 @@ class AugmentedPlant:
 
     def to_extra(self) -> dict[str, Any]:
         """The ``effects`` mapping of the model file."""
-        out = {"output_kind": self.output_kind, "highpass_hz": self.highpass_hz,
-               "force_loop": self.force_loop}
+        out = {
+            "output_kind": self.output_kind,
+            "highpass_hz": self.highpass_hz,
+            "force_loop": self.force_loop,
+        }
         if self._n:
-            out["domain_plant"] = {"b": [float(c) for c in self.b_dom],
-                                   "a": [float(c) for c in self.a_dom]}
+            out["domain_plant"] = {
+                "b": [float(c) for c in self.b_dom],
+                "a": [float(c) for c in self.a_dom],
+            }
         out["items"] = _items(self.effects, self.fs_hz)
         return out
 
     @classmethod
-    def from_model(cls, model) -> "AugmentedPlant":
+    def from_model(cls, model) -> AugmentedPlant:
         """Build from an `FdiModel` (plain Ĝ when the model has no ``effects``)."""
         section = model.extra.get("effects")
         if not section:
@@ -164,8 +180,9 @@ class AugmentedPlant:
             raise ConfigError(f"{where} must be a mapping with a list 'items'")
         kind = section.get("output_kind", "acceleration")
         if kind not in signals.OUTPUT_KINDS:
-            raise ConfigError(f"{where}.output_kind must be one of "
-                              f"{', '.join(signals.OUTPUT_KINDS)}")
+            raise ConfigError(
+                f"{where}.output_kind must be one of {', '.join(signals.OUTPUT_KINDS)}"
+            )
         try:
             hp = float(section.get("highpass_hz", 1.0))
         except (TypeError, ValueError):
@@ -196,15 +213,22 @@ def _items(effects: list[FittedEffect], fs_hz: float) -> list[dict[str, Any]]:
         spec = SPECS[eff.name]
         item: dict[str, Any] = {"name": eff.name}
         if eff.param is not None:
-            item["param"] = {"name": spec.param,
-                             "value": float(stored_param(spec, eff.param, fs_hz))}
+            item["param"] = {
+                "name": spec.param,
+                "value": float(stored_param(spec, eff.param, fs_hz)),
+            }
         if eff.centre != 0.0:
             item["centre"] = float(eff.centre)
         item["coefficients"] = [[float(c) for c in np.atleast_1d(co)] for co in eff.coefficients]
         if eff.physical:
-            item["physical"] = {k: (float(v) if isinstance(v, (int, float, np.floating))
-                                    and not isinstance(v, bool) else v)
-                                for k, v in eff.physical.items()}
+            item["physical"] = {
+                k: (
+                    float(v)
+                    if isinstance(v, (int, float, np.floating)) and not isinstance(v, bool)
+                    else v
+                )
+                for k, v in eff.physical.items()
+            }
         items.append(item)
     return items
 
@@ -230,14 +254,23 @@ def _parse_items(raw: Any, fs_hz: float, where: str) -> list[FittedEffect]:
         except (KeyError, TypeError, ValueError):
             raise ConfigError(f"{where}[{k}].coefficients must be lists of numbers") from None
         if name == "dead_time" and len(coefs) == 1 and coefs[0].size > 1:
-            raise ConfigError(f"{where}[{k}]: a dead_time written by an older fdi diagnose "
-                              f"(a filtered input term); run fdi diagnose again")
+            raise ConfigError(
+                f"{where}[{k}]: a dead_time written by an older fdi diagnose "
+                f"(a filtered input term); run fdi diagnose again"
+            )
         centre = item.get("centre", 0.0)
         if isinstance(centre, bool) or not isinstance(centre, (int, float)):
             raise ConfigError(f"{where}[{k}].centre must be a number")
-        effects.append(FittedEffect(name, param, coefs, n_linear=sum(c.size for c in coefs),
-                                    physical=dict(item.get("physical", {})),
-                                    centre=float(centre)))
+        effects.append(
+            FittedEffect(
+                name,
+                param,
+                coefs,
+                n_linear=sum(c.size for c in coefs),
+                physical=dict(item.get("physical", {})),
+                centre=float(centre),
+            )
+        )
     return effects
 
 
@@ -252,7 +285,9 @@ def nominal_plant(model):
         return IIRFilter(model.plant_b, model.plant_a)
     plant = AugmentedPlant.from_model(model)
     if plant.output_kind != "acceleration":
-        raise ConfigError(f"model effects were fitted on {plant.output_kind}; the monitor "
-                          f"needs effects fitted on acceleration (fdi diagnose "
-                          f"--output-kind acceleration)")
+        raise ConfigError(
+            f"model effects were fitted on {plant.output_kind}; the monitor "
+            f"needs effects fitted on acceleration (fdi diagnose "
+            f"--output-kind acceleration)"
+        )
     return plant

@@ -50,7 +50,7 @@ def choose_order(u: np.ndarray, y_dom: np.ndarray, n: int, split: signals.Split)
     errors = {}
     for order in ORDER_CHOICES:
         oe = _oe(u[:cut], y_dom[:cut], order, n)
-        y_sim = signal.lfilter(oe.b_delayed, oe.f, u[:split.train_end])
+        y_sim = signal.lfilter(oe.b_delayed, oe.f, u[: split.train_end])
         settle = signals.settle_samples(oe.f, (split.train_end - cut) // 2)
         val = slice(cut + settle, split.train_end)
         errors[order] = signals.nrmse(y_dom[val], y_sim[val])
@@ -58,10 +58,11 @@ def choose_order(u: np.ndarray, y_dom: np.ndarray, n: int, split: signals.Split)
     return min(o for o, e in errors.items() if e <= 1.02 * best)
 
 
-def fit_linear(u: np.ndarray, y_dom: np.ndarray, n: int, split: signals.Split,
-               order: int) -> tuple[np.ndarray, np.ndarray]:
+def fit_linear(
+    u: np.ndarray, y_dom: np.ndarray, n: int, split: signals.Split, order: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Output-error model (b, a in q⁻¹) of the measured quantity, from the training part."""
-    oe = _oe(u[:split.train_end], y_dom[:split.train_end], order, n)
+    oe = _oe(u[: split.train_end], y_dom[: split.train_end], order, n)
     return oe.b_delayed, oe.f
 
 
@@ -115,9 +116,16 @@ def slowest_time_constant(a: np.ndarray, fs_hz: float) -> float:
     return math.inf if radius >= 1.0 else -1.0 / (fs_hz * math.log(radius))
 
 
-def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
-            plant_b: np.ndarray | None, plant_a: np.ndarray | None,
-            order: int | None = None, form: str = "auto") -> tuple[Context, dict]:
+def prepare(
+    u: np.ndarray,
+    y: np.ndarray,
+    fs_hz: float,
+    output_kind: str,
+    plant_b: np.ndarray | None,
+    plant_a: np.ndarray | None,
+    order: int | None = None,
+    form: str = "auto",
+) -> tuple[Context, dict]:
     """The simulation form's context for the effect fits, and the baseline's info with the
     form of the test in ``info["form"]`` (`in_form` makes that form's context); plant None
     -> fit a linear baseline of ``order`` (None: `choose_order`). form: "simulation",
@@ -136,13 +144,16 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
         domain = fit_linear(u, y_dom, n_kind, provisional, chosen)
         plant_b, plant_a = signals.acceleration_plant(*domain, n_kind, hp, fs_hz)
         how = "" if order is not None else " (chosen from the data)"
-        info["baseline"] = (f"output-error fit, order {chosen}{how}, on t < "
-                            f"{provisional.train_end / fs_hz:.3g} s")
+        info["baseline"] = (
+            f"output-error fit, order {chosen}{how}, on t < {provisional.train_end / fs_hz:.3g} s"
+        )
     else:
         info["baseline"] = "model file"
     if len(plant_a) > 1 and np.max(np.abs(np.roots(plant_a))) >= 1.0:
-        raise UserError("the model's plant is unstable (a root of plant.a on or outside the "
-                        "unit circle): it cannot be simulated")
+        raise UserError(
+            "the model's plant is unstable (a root of plant.a on or outside the "
+            "unit circle): it cannot be simulated"
+        )
     nominal = AugmentedPlant(fs_hz, plant_b, plant_a, output_kind, hp, domain=domain)
     sig = nominal.run_signals(u)
     hp_settle = int(math.ceil(math.log(100.0) * fs_hz / (2 * math.pi * hp)))
@@ -152,21 +163,38 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
     # a DC block removes an offset; a constant force moves no steady acceleration of a
     # mechanism that holds its position; a baseline fitted here already holds the linear
     # effects
-    skip = ({"sensor_offset"} if n_kind else set()) | (
-        {"force_offset"} if not n_kind and zero_at_dc(nominal.b_dom, fs_hz, hp) else set()) | (
-        {"viscous_friction", "dead_time", "stiffness_change"}
-        if info["baseline"] != "model file" else set())
+    skip = (
+        ({"sensor_offset"} if n_kind else set())
+        | ({"force_offset"} if not n_kind and zero_at_dc(nominal.b_dom, fs_hz, hp) else set())
+        | (
+            {"viscous_friction", "dead_time", "stiffness_change"}
+            if info["baseline"] != "model file"
+            else set()
+        )
+    )
     candidates = tuple(e for e in EFFECT_NAMES if e not in skip and e not in NAMED_BY_MODE)
     ref_hz = band_centre_hz(u, fs_hz)
     # a dead time beyond a quarter period at the band centre (> 90° of phase there) is a
     # wrong model, not a dead time
     max_delay = int(max(1, min(round(0.25 * fs_hz / ref_hz), split.train_end // 20)))
-    ctx = Context(u=u, v=sig["v"], x=sig["x"], y0=sig["y0"], target=y_dom - sig["y0"],
-                  a_dom=nominal.a_dom, b_dom=nominal.b_dom, split=split, fs_hz=fs_hz,
-                  output_kind=output_kind, ref_hz=ref_hz,
-                  max_delay_samples=max_delay,
-                  u_centre=float(np.median(u[split.fit])), candidates=candidates,
-                  chain=signals.StateChain(n_kind, fs_hz, hp).coefficients, highpass_hz=hp)
+    ctx = Context(
+        u=u,
+        v=sig["v"],
+        x=sig["x"],
+        y0=sig["y0"],
+        target=y_dom - sig["y0"],
+        a_dom=nominal.a_dom,
+        b_dom=nominal.b_dom,
+        split=split,
+        fs_hz=fs_hz,
+        output_kind=output_kind,
+        ref_hz=ref_hz,
+        max_delay_samples=max_delay,
+        u_centre=float(np.median(u[split.fit])),
+        candidates=candidates,
+        chain=signals.StateChain(n_kind, fs_hz, hp).coefficients,
+        highpass_hz=hp,
+    )
     info["y_dom"] = y_dom
     info["plant_b"] = np.asarray(plant_b, float)
     info["plant_a"] = np.asarray(plant_a, float)
@@ -187,10 +215,18 @@ def prepare(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str,
             f"input band ({d['band_low_hz']:.3g} Hz); slowest model time constant "
             f"{d['slowest_time_constant_s']:.3g} s against the DC block's "
             f"{d['dc_block_time_constant_s']:.3g} s: "
-            + (("a free run drifts, so the force balance is tested" if drifting
-                else "a marginally stable model whose free run does not drift" if marginal
-                else "the free run does not drift") if n_kind
-               else "the model is simulated"))
+            + (
+                (
+                    "a free run drifts, so the force balance is tested"
+                    if drifting
+                    else "a marginally stable model whose free run does not drift"
+                    if marginal
+                    else "the free run does not drift"
+                )
+                if n_kind
+                else "the model is simulated"
+            )
+        )
     else:
         info["form_reason"] = "chosen by the user"
     if form == "inverse_dynamics" and not n_kind:
@@ -218,15 +254,30 @@ def inverse_context(u, y, fs_hz, output_kind, split, info) -> Context:
     lag = base["lag"]
     info["inverse_lag_s"] = lag / fs_hz
     delayed = f"(t − {lag / fs_hz:.3g} s)" if lag else ""
-    info["baseline"] += (f"; inverse dynamics: L u{delayed} = M L a + c L v"
-                         + (" + k L x" if output_kind == "position" else "")
-                         + (f" (the motion lags the input by {lag} sample"
-                            f"{'s' if lag > 1 else ''})" if lag else ""))
-    candidates = tuple(c for c in INVERSE_CANDIDATES
-                       if output_kind == "position" or c != "cubic_stiffness")
-    return Context(u=np.asarray(u, float), v=base["v"], x=base["x"], y0=base["y0"],
-                   target=base["target"] - base["y0"], a_dom=np.array([1.0]),
-                   b_dom=np.array([1.0]), split=split, fs_hz=fs_hz, output_kind=output_kind,
-                   ref_hz=0.0, max_delay_samples=1, candidates=candidates,
-                   form="inverse_dynamics", lowpass=base["lp"], base_columns=base["columns"],
-                   inverse_base=base["coefficients"])
+    info["baseline"] += (
+        f"; inverse dynamics: L u{delayed} = M L a + c L v"
+        + (" + k L x" if output_kind == "position" else "")
+        + (f" (the motion lags the input by {lag} sample{'s' if lag > 1 else ''})" if lag else "")
+    )
+    candidates = tuple(
+        c for c in INVERSE_CANDIDATES if output_kind == "position" or c != "cubic_stiffness"
+    )
+    return Context(
+        u=np.asarray(u, float),
+        v=base["v"],
+        x=base["x"],
+        y0=base["y0"],
+        target=base["target"] - base["y0"],
+        a_dom=np.array([1.0]),
+        b_dom=np.array([1.0]),
+        split=split,
+        fs_hz=fs_hz,
+        output_kind=output_kind,
+        ref_hz=0.0,
+        max_delay_samples=1,
+        candidates=candidates,
+        form="inverse_dynamics",
+        lowpass=base["lp"],
+        base_columns=base["columns"],
+        inverse_base=base["coefficients"],
+    )

@@ -44,8 +44,9 @@ inverse-dynamics form every φ is taken from the measured motion and low-passed
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from scipy import signal
@@ -56,9 +57,22 @@ from fdi_daemon.diagnose.mode_lines import LINES, ModeLineRegressor, mode_report
 from fdi_daemon.diagnose.output_effects import DelayedOutputRegressor, out_saturate
 from fdi_daemon.diagnose.regressors import Regressor, Static
 
-EFFECT_NAMES = ("coulomb_friction", "viscous_friction", "stribeck_friction", "cubic_stiffness",
-                "dead_time", "input_saturation", "output_saturation", "dead_zone", "backlash",
-                "sensor_offset", "force_offset", "gain_fault", "stiffness_change", "mass_change")
+EFFECT_NAMES = (
+    "coulomb_friction",
+    "viscous_friction",
+    "stribeck_friction",
+    "cubic_stiffness",
+    "dead_time",
+    "input_saturation",
+    "output_saturation",
+    "dead_zone",
+    "backlash",
+    "sensor_offset",
+    "force_offset",
+    "gain_fault",
+    "stiffness_change",
+    "mass_change",
+)
 #: effects named from another candidate's fit (`force.mechanics_name`), not candidates
 NAMED_BY_MODE = ("mass_change",)
 
@@ -68,7 +82,7 @@ NAMED_BY_MODE = ("mass_change",)
 
 
 def _stribeck(vs):
-    return lambda u, v, x, y0: [np.sign(v), np.sign(v) * np.exp(-(v / vs) ** 2)]
+    return lambda u, v, x, y0: [np.sign(v), np.sign(v) * np.exp(-((v / vs) ** 2))]
 
 
 # ----------------------------------------------------------------------------- effect specs
@@ -85,7 +99,7 @@ class EffectSpec:
     unit: str  # of the searched parameter
     #: (parameter, centre, Â of the domain) -> regressor
     build: Callable[[float | None, float, np.ndarray], Regressor]
-    grid: Callable[["Context"], np.ndarray] | None = None
+    grid: Callable[[Context], np.ndarray] | None = None
     integer_coarse: bool = False
     #: the value reported is searched again with the regressor's coefficient held at 1 (a
     #: pure shift: the free coefficient of the fit trades with the delay, and its size is
@@ -97,24 +111,31 @@ class EffectSpec:
     searched_at_unit_weight: bool = False
 
 
-def _ratios(c: "Context") -> np.ndarray:
+def _ratios(c: Context) -> np.ndarray:
     """Ratios of a mode line, 1/4 to 4 (log-spaced, 1 among them); none without a mode."""
     return np.geomspace(0.25, 4.0, 25) if nominal_pole(c.a_dom) is not None else np.array([])
 
 
-def _mode_line(line: str, param: str, unit: str) -> "EffectSpec":
+def _mode_line(line: str, param: str, unit: str) -> EffectSpec:
     """The spec of one line of `mode_lines` (``mode_<line>``), a linear explanation of the
     numerator refit (`select.linear_round`)."""
-    return EffectSpec(f"mode_{line}", "output", False, param, unit,
-                      lambda p, c, a: ModeLineRegressor(line, p, a), _ratios,
-                      searched_at_unit_weight=True)
+    return EffectSpec(
+        f"mode_{line}",
+        "output",
+        False,
+        param,
+        unit,
+        lambda p, c, a: ModeLineRegressor(line, p, a),
+        _ratios,
+        searched_at_unit_weight=True,
+    )
 
 
 def _q(values: np.ndarray, qs, centre: float = 0.0) -> np.ndarray:
     return np.unique(np.quantile(np.abs(values - centre), qs))
 
 
-def _delays(c: "Context") -> np.ndarray:
+def _delays(c: Context) -> np.ndarray:
     """Whole-sample dead times 1..max, log-spaced beyond 16 samples (at most ~40 fits)."""
     short = np.arange(1, min(16, c.max_delay_samples) + 1)
     long = np.geomspace(16, max(16, c.max_delay_samples), 24).round()
@@ -122,58 +143,123 @@ def _delays(c: "Context") -> np.ndarray:
 
 
 SPECS: dict[str, EffectSpec] = {
-    "coulomb_friction": EffectSpec("coulomb_friction", "state", True, None, "",
-                                   lambda p, c, a: Static(lambda u, v, x, y0: [np.sign(v)])),
-    "viscous_friction": EffectSpec("viscous_friction", "state", True, None, "",
-                                   lambda p, c, a: Static(lambda u, v, x, y0: [v])),
+    "coulomb_friction": EffectSpec(
+        "coulomb_friction",
+        "state",
+        True,
+        None,
+        "",
+        lambda p, c, a: Static(lambda u, v, x, y0: [np.sign(v)]),
+    ),
+    "viscous_friction": EffectSpec(
+        "viscous_friction", "state", True, None, "", lambda p, c, a: Static(lambda u, v, x, y0: [v])
+    ),
     "stribeck_friction": EffectSpec(
-        "stribeck_friction", "state", True, "stribeck_velocity", "velocity units",
+        "stribeck_friction",
+        "state",
+        True,
+        "stribeck_velocity",
+        "velocity units",
         lambda p, c, a: Static(_stribeck(p), 2),
-        lambda c: _q(c.v[c.split.fit], [0.02, 0.05, 0.1, 0.2, 0.3, 0.5])),
-    "cubic_stiffness": EffectSpec("cubic_stiffness", "state", True, None, "",
-                                  lambda p, c, a: Static(lambda u, v, x, y0: [x ** 3])),
+        lambda c: _q(c.v[c.split.fit], [0.02, 0.05, 0.1, 0.2, 0.3, 0.5]),
+    ),
+    "cubic_stiffness": EffectSpec(
+        "cubic_stiffness",
+        "state",
+        True,
+        None,
+        "",
+        lambda p, c, a: Static(lambda u, v, x, y0: [x**3]),
+    ),
     "dead_time": EffectSpec(
-        "dead_time", "output", False, "dead_time_s", "s",
-        lambda p, c, a: DelayedOutputRegressor(p), _delays, integer_coarse=True,
-        reported_at_unit_weight=True),
-    "gain_fault": EffectSpec("gain_fault", "output", False, None, "",
-                             lambda p, c, a: Static(lambda u, v, x, y0: [y0])),
+        "dead_time",
+        "output",
+        False,
+        "dead_time_s",
+        "s",
+        lambda p, c, a: DelayedOutputRegressor(p),
+        _delays,
+        integer_coarse=True,
+        reported_at_unit_weight=True,
+    ),
+    "gain_fault": EffectSpec(
+        "gain_fault", "output", False, None, "", lambda p, c, a: Static(lambda u, v, x, y0: [y0])
+    ),
     "input_saturation": EffectSpec(
-        "input_saturation", "input", True, "level", "input units",
+        "input_saturation",
+        "input",
+        True,
+        "level",
+        "input units",
         lambda p, c, a: Static(saturate(p, c)),
-        lambda c: _q(c.u[c.split.fit], [0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.94, 0.97, 0.99,
-                                        0.995], c.u_centre)),
+        lambda c: _q(
+            c.u[c.split.fit], [0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.94, 0.97, 0.99, 0.995], c.u_centre
+        ),
+    ),
     "output_saturation": EffectSpec(
-        "output_saturation", "output", False, "level", "output units",
+        "output_saturation",
+        "output",
+        False,
+        "level",
+        "output units",
         lambda p, c, a: Static(out_saturate(p, c)),
-        lambda c: _q(c.y0[c.split.fit], [0.8, 0.9, 0.95, 0.97, 0.98, 0.99, 0.995, 0.999])),
+        lambda c: _q(c.y0[c.split.fit], [0.8, 0.9, 0.95, 0.97, 0.98, 0.99, 0.995, 0.999]),
+    ),
     "dead_zone": EffectSpec(
-        "dead_zone", "input", True, "half_width", "input units",
+        "dead_zone",
+        "input",
+        True,
+        "half_width",
+        "input units",
         lambda p, c, a: Static(dead_zone(p, c)),
-        lambda c: _q(c.u[c.split.fit], [0.01, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5],
-                     c.u_centre)),
+        lambda c: _q(
+            c.u[c.split.fit], [0.01, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5], c.u_centre
+        ),
+    ),
     "backlash": EffectSpec(
-        "backlash", "input", True, "gap", "input units",
+        "backlash",
+        "input",
+        True,
+        "gap",
+        "input units",
         lambda p, c, a: BacklashRegressor(p),
-        lambda c: np.ptp(c.u[c.split.fit]) * np.array([0.005, 0.01, 0.02, 0.04, 0.07, 0.1,
-                                                       0.15, 0.2, 0.3])),
-    "force_offset": EffectSpec("force_offset", "state", True, None, "",
-                               lambda p, c, a: Static(lambda u, v, x, y0: [np.ones_like(u)])),
-    "sensor_offset": EffectSpec("sensor_offset", "output", False, None, "",
-                                lambda p, c, a: Static(lambda u, v, x, y0: [np.ones_like(u)])),
+        lambda c: (
+            np.ptp(c.u[c.split.fit])
+            * np.array([0.005, 0.01, 0.02, 0.04, 0.07, 0.1, 0.15, 0.2, 0.3])
+        ),
+    ),
+    "force_offset": EffectSpec(
+        "force_offset",
+        "state",
+        True,
+        None,
+        "",
+        lambda p, c, a: Static(lambda u, v, x, y0: [np.ones_like(u)]),
+    ),
+    "sensor_offset": EffectSpec(
+        "sensor_offset",
+        "output",
+        False,
+        None,
+        "",
+        lambda p, c, a: Static(lambda u, v, x, y0: [np.ones_like(u)]),
+    ),
     # the loop's spring alone (`force.mode_shift` says what it changes)
-    "stiffness_change": EffectSpec("stiffness_change", "state", True, None, "",
-                                   lambda p, c, a: Static(lambda u, v, x, y0: [x])),
+    "stiffness_change": EffectSpec(
+        "stiffness_change", "state", True, None, "", lambda p, c, a: Static(lambda u, v, x, y0: [x])
+    ),
     # not a candidate: corrections of the inverse-dynamics form's mass, damping [, stiffness]
     # refitted with every candidate (columns from `Context.base_columns`)
     "force_balance": EffectSpec("force_balance", "state", False, None, "", lambda p, c, a: None),
     # not a candidate: in the force loop with any force effect (`force.in_the_loop`)
-    "loop_stiffness": EffectSpec("loop_stiffness", "state", True, None, "",
-                                 lambda p, c, a: Static(lambda u, v, x, y0: [x])),
+    "loop_stiffness": EffectSpec(
+        "loop_stiffness", "state", True, None, "", lambda p, c, a: Static(lambda u, v, x, y0: [x])
+    ),
     # not a candidate: with a fitted linear baseline, the baseline's numerator is refitted
     # together with every candidate (the baseline absorbed part of the missing effect)
-    "linear_refit": EffectSpec("linear_refit", "input", True, None, "",
-                               lambda p, c, a: Static(lambda u, v, x, y0: [u])),
+    "linear_refit": EffectSpec(
+        "linear_refit", "input", True, None, "", lambda p, c, a: Static(lambda u, v, x, y0: [u])
+    ),
 }
 
 #: the same fit as stiffness_change, named by the mode it moves (`force.mechanics_name`)
@@ -181,9 +267,13 @@ SPECS["mass_change"] = replace(SPECS["stiffness_change"], name="mass_change")
 #: a change of one parameter of the nominal mode (`mode_lines`), named by the effect it is
 #: (``LINES``): damping c₁/c₀, stiffness k₁/k₀, mass m₁/m₀
 MODE_LINES = {f"mode_{line}": line for line in LINES}
-SPECS.update({"mode_damping": _mode_line("damping", "damping_scale", "c1/c0"),
-              "mode_stiffness": _mode_line("stiffness", "stiffness_ratio", "k1/k0"),
-              "mode_mass": _mode_line("mass", "mass_ratio", "m1/m0")})
+SPECS.update(
+    {
+        "mode_damping": _mode_line("damping", "damping_scale", "c1/c0"),
+        "mode_stiffness": _mode_line("stiffness", "stiffness_ratio", "k1/k0"),
+        "mode_mass": _mode_line("mass", "mass_ratio", "m1/m0"),
+    }
+)
 
 #: the share of a pure change a linear explanation's coefficient may have (a dead time's
 #: shift, a mode line's move; `select.map_share` holds a static map to it too)
@@ -222,11 +312,11 @@ class Context:
     highpass_hz: float = 1.0
     cache: dict = field(default_factory=dict, repr=False)
 
-    def centre(self, spec: "EffectSpec") -> float:
+    def centre(self, spec: EffectSpec) -> float:
         """Input maps act around the input's operating point; a sensor clips around its 0."""
         return self.u_centre if spec.name in CENTRED else 0.0
 
-    def regressors(self, spec: "EffectSpec", param: float | None) -> np.ndarray:
+    def regressors(self, spec: EffectSpec, param: float | None) -> np.ndarray:
         """φ of one effect over the record (the last few are cached: some are slow loops)."""
         if spec.name == "force_balance":
             return self.base_columns
@@ -235,18 +325,26 @@ class Context:
             if len(self.cache) >= 8:
                 self.cache.pop(next(iter(self.cache)))
             self.cache[key] = spec.build(param, self.centre(spec), self.a_dom).run(
-                self.u, self.v, self.x, self.y0)
+                self.u, self.v, self.x, self.y0
+            )
         return self.cache[key]
 
-    def head(self, n: int) -> "Context":
+    def head(self, n: int) -> Context:
         """The first n samples, all of them for fitting (for parameter searches)."""
         from fdi_daemon.diagnose.signals import Split
 
         cut = slice(0, n)
-        return replace(self, u=self.u[cut], v=self.v[cut], x=self.x[cut], y0=self.y0[cut],
-                       target=self.target[cut],
-                       base_columns=None if self.base_columns is None else self.base_columns[cut],
-                       split=Split(warmup=self.split.warmup, train_end=n, n=n), cache={})
+        return replace(
+            self,
+            u=self.u[cut],
+            v=self.v[cut],
+            x=self.x[cut],
+            y0=self.y0[cut],
+            target=self.target[cut],
+            base_columns=None if self.base_columns is None else self.base_columns[cut],
+            split=Split(warmup=self.split.warmup, train_end=n, n=n),
+            cache={},
+        )
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -296,8 +394,9 @@ def regressor_param(spec: EffectSpec, value: float | None, fs_hz: float) -> floa
     return value * fs_hz if spec.name == "dead_time" else value
 
 
-def columns(spec: EffectSpec, param: float | None, ctx: Context,
-            phi: np.ndarray | None = None) -> np.ndarray:
+def columns(
+    spec: EffectSpec, param: float | None, ctx: Context, phi: np.ndarray | None = None
+) -> np.ndarray:
     """Design-matrix columns of one effect over the whole record (φ computed if not given)."""
     if spec.name == "force_balance":
         return ctx.base_columns
@@ -379,8 +478,9 @@ class NotApplicable(Exception):
     """The data do not allow this effect (e.g. an input that never leaves its median)."""
 
 
-def search_param(spec: EffectSpec, ctx: Context, base: np.ndarray | None = None,
-                 unit_weight: bool = False) -> float | None:
+def search_param(
+    spec: EffectSpec, ctx: Context, base: np.ndarray | None = None, unit_weight: bool = False
+) -> float | None:
     """Nonlinear parameter by search on the training part: grid, then bounded refinement.
     unit_weight: the effect's one column enters with coefficient 1 (not fitted), against the
     target alone (``base`` is not used)."""
@@ -398,22 +498,33 @@ def search_param(spec: EffectSpec, ctx: Context, base: np.ndarray | None = None,
     hi = grid[best + 1] if best + 1 < grid.size else grid[best] * 1.5
     if spec.integer_coarse:
         lo, hi = max(lo, 0.0), hi
-    res = minimize_scalar(lambda p: cost(columns(spec, p, ctx)),
-                          bounds=(lo, hi), method="bounded",
-                          options={"xatol": max(1e-6, 0.01 * (hi - lo)), "maxiter": 25})
+    res = minimize_scalar(
+        lambda p: cost(columns(spec, p, ctx)),
+        bounds=(lo, hi),
+        method="bounded",
+        options={"xatol": max(1e-6, 0.01 * (hi - lo)), "maxiter": 25},
+    )
     return float(res.x) if res.fun < costs[best] else float(grid[best])
 
 
-def fit_effect(name: str, ctx: Context, base: list[FittedEffect] | None = None,
-               base_columns: np.ndarray | None = None) -> tuple[FittedEffect, list[FittedEffect]]:
+def fit_effect(
+    name: str,
+    ctx: Context,
+    base: list[FittedEffect] | None = None,
+    base_columns: np.ndarray | None = None,
+) -> tuple[FittedEffect, list[FittedEffect]]:
     """Fit effect ``name`` on top of already chosen effects ``base`` (refitted jointly).
 
     Returns the new effect and the refitted base effects.
     """
     spec = SPECS[name]
     part, n_search = _search_part(ctx)
-    param = search_param(spec, part, None if base_columns is None else base_columns[:n_search],
-                         unit_weight=spec.searched_at_unit_weight)
+    param = search_param(
+        spec,
+        part,
+        None if base_columns is None else base_columns[:n_search],
+        unit_weight=spec.searched_at_unit_weight,
+    )
     x_new = columns(spec, param, ctx, ctx.regressors(spec, param))
     xx = x_new if base_columns is None else np.column_stack([base_columns, x_new])
     theta = least_squares(xx[ctx.split.fit], ctx.target[ctx.split.fit])
@@ -421,7 +532,7 @@ def fit_effect(name: str, ctx: Context, base: list[FittedEffect] | None = None,
     pos = 0
     for eff in base or []:
         k = eff.n_linear
-        refitted.append(_with_theta(eff.name, eff.param, theta[pos: pos + k], ctx))
+        refitted.append(_with_theta(eff.name, eff.param, theta[pos : pos + k], ctx))
         pos += k
     new = _with_theta(name, param, theta[pos:], ctx)
     return new, refitted
@@ -439,7 +550,7 @@ def _with_theta(name: str, param: float | None, theta: np.ndarray, ctx: Context)
     spec = SPECS[name]
     if spec.dynamic:
         width = len(ctx.a_dom)
-        coefs = [np.asarray(theta[j: j + width], float) for j in range(0, len(theta), width)]
+        coefs = [np.asarray(theta[j : j + width], float) for j in range(0, len(theta), width)]
     else:
         coefs = [np.asarray(theta, float)]
     eff = FittedEffect(name, param, coefs, n_linear=len(theta), centre=ctx.centre(spec))
@@ -447,10 +558,12 @@ def _with_theta(name: str, param: float | None, theta: np.ndarray, ctx: Context)
     return eff
 
 
-_LABELS = {"coulomb_friction": ["coulomb_level"],
-           "viscous_friction": ["viscous_coefficient"],
-           "stribeck_friction": ["coulomb_level", "stribeck_excess"],
-           "cubic_stiffness": ["cubic_coefficient"]}
+_LABELS = {
+    "coulomb_friction": ["coulomb_level"],
+    "viscous_friction": ["viscous_coefficient"],
+    "stribeck_friction": ["coulomb_level", "stribeck_excess"],
+    "cubic_stiffness": ["cubic_coefficient"],
+}
 
 #: friction effects: reported with the sign flipped so that a force opposing motion is
 #: positive on a plant whose force path has the input's sign (the §V model)
@@ -511,8 +624,9 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
             else:
                 out[label] = c
         if eff.name == "stribeck_friction":
-            plausible = friction_form(out, out["coulomb_level_input_equivalent"],
-                                      out["stribeck_excess_input_equivalent"])
+            plausible = friction_form(
+                out, out["coulomb_level_input_equivalent"], out["stribeck_excess_input_equivalent"]
+            )
     elif eff.name == "gain_fault":  # y = (1 + g) ŷ₀
         out["gain_ratio"] = 1.0 + float(eff.coefficients[0][0])
     elif eff.name == "dead_time":  # y = ŷ₀ + c (ŷ₀(t − τ) − ŷ₀(t)); a pure shift has c = 1
@@ -521,8 +635,9 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
         # the delay itself is the pure shift's (c held at 1), read against the nominal
         # model: beside the free c it trades with c (c·τ is the first-order shift)
         out["fitted_shift_s"] = out[spec.param]
-        out[spec.param] = stored_param(spec, search_param(spec, _search_part(ctx)[0],
-                                                          unit_weight=True), ctx.fs_hz)
+        out[spec.param] = stored_param(
+            spec, search_param(spec, _search_part(ctx)[0], unit_weight=True), ctx.fs_hz
+        )
     elif eff.name in MODE_LINES:  # y = ŷ₀ + c (ŷ_r − ŷ₀); a pure change has c = 1
         line = MODE_LINES[eff.name]
         out.update(mode_report(nominal_pole(ctx.a_dom), line, eff.param, ctx.fs_hz))
@@ -530,8 +645,9 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
         out["line_share"] = float(eff.coefficients[0][0])
         out["named_as"] = LINES[line]
         # a viscous friction adds damping (lost damping is no friction)
-        plausible = (SHARE_RANGE[0] <= out["line_share"] <= SHARE_RANGE[1]
-                     and (line != "damping" or eff.param > 1.0))
+        plausible = SHARE_RANGE[0] <= out["line_share"] <= SHARE_RANGE[1] and (
+            line != "damping" or eff.param > 1.0
+        )
     else:
         key = "offset" if eff.name == "sensor_offset" else "gain"
         out[key] = float(eff.coefficients[0][0])

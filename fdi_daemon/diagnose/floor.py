@@ -41,8 +41,9 @@ REPEAT_TOLERANCE = 0.05
 REPEAT_SHARE = 0.25
 
 
-def repeated_input(u: np.ndarray, min_samples: int, settle: int = 0
-                   ) -> tuple[int, np.ndarray] | None:
+def repeated_input(
+    u: np.ndarray, min_samples: int, settle: int = 0
+) -> tuple[int, np.ndarray] | None:
     """(P, k): the input's period P (the autocorrelation's highest peak at a lag of at least
     ``min_samples``) and the samples k whose input repeats one period later, u[k+P] = u[k]
     within REPEAT_TOLERANCE, as have the max(settle, min_samples) − 1 samples before it
@@ -70,8 +71,9 @@ def repeated_input(u: np.ndarray, min_samples: int, settle: int = 0
     return period, kept
 
 
-def noise_floor(y: np.ndarray, e: np.ndarray, u: np.ndarray, fs_hz: float, warmup: int,
-                test: slice) -> dict:
+def noise_floor(
+    y: np.ndarray, e: np.ndarray, u: np.ndarray, fs_hz: float, warmup: int, test: slice
+) -> dict:
     """``{"floor": NRMSE or None, "method": ..., ...}`` for the output y (comparison
     domain) with nominal error e; warmup: samples the model needs to forget its past."""
     y = np.asarray(y, float)
@@ -82,17 +84,25 @@ def noise_floor(y: np.ndarray, e: np.ndarray, u: np.ndarray, fs_hz: float, warmu
     if repeated is not None:
         period, k = repeated
         var = 0.5 * float(np.mean((y[k + period] - y[k]) ** 2))
-        return {"floor": math.sqrt(var) / spread, "method": "periodic",
-                "period_s": period / fs_hz, "repeated_share": k.size / len(y)}
+        return {
+            "floor": math.sqrt(var) / spread,
+            "method": "periodic",
+            "period_s": period / fs_hz,
+            "repeated_share": k.size / len(y),
+        }
     variance, f_hi = quiet_variance(u, e, fs_hz, test)
     if f_hi is None:
         return {"floor": None, "method": "none"}
-    return {"floor": None if variance is None else math.sqrt(variance) / spread,
-            "method": "spectrum", "input_band_hz": f_hi}
+    return {
+        "floor": None if variance is None else math.sqrt(variance) / spread,
+        "method": "spectrum",
+        "input_band_hz": f_hi,
+    }
 
 
-def quiet_variance(u: np.ndarray, e: np.ndarray, fs_hz: float, test: slice
-                   ) -> tuple[float | None, float | None]:
+def quiet_variance(
+    u: np.ndarray, e: np.ndarray, fs_hz: float, test: slice
+) -> tuple[float | None, float | None]:
     """(variance, f_hi): the variance of white noise in e from its power density where the
     input has no power (the QUIET_QUANTILE above 1.5 × f_hi, f_hi the band holding 99 % of
     the input power), taken as white over 0..fs/2; None when the input fills the band

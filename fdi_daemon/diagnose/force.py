@@ -47,8 +47,15 @@ from fdi_daemon.diagnose.effects import friction_form
 from fdi_daemon.diagnose.mode_lines import nominal_pole
 
 #: effects that are forces on the moving mass
-FORCE_EFFECTS = ("coulomb_friction", "viscous_friction", "stribeck_friction",
-                 "cubic_stiffness", "force_offset", "stiffness_change", "mass_change")
+FORCE_EFFECTS = (
+    "coulomb_friction",
+    "viscous_friction",
+    "stribeck_friction",
+    "cubic_stiffness",
+    "force_offset",
+    "stiffness_change",
+    "mass_change",
+)
 #: everything in the loop: the force effects and the loop's linear spring correction
 LOOPED = FORCE_EFFECTS + ("loop_stiffness",)
 #: the loop's linear force of x (a free B_F): the base's spring, or the candidate itself
@@ -108,7 +115,7 @@ def _phi_k(kind, par, v, x):
         return v
     if kind == 2:
         sg = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
-        return sg * math.exp(-(v / par) ** 2)
+        return sg * math.exp(-((v / par) ** 2))
     if kind == 3:
         return x * x * x
     if kind == 4:
@@ -131,8 +138,9 @@ def _slope(chain_n, vb0, fs):
 
 
 @jit(nrt=True)
-def _kernel(y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs,
-            phi_out, v_out):
+def _kernel(
+    y_ff, a, bmat, kind, par, chain_n, vb, va, s1, s2, prev, zhist, phist, fs, phi_out, v_out
+):
     n = a.size - 1
     m = bmat.shape[1] - 1
     ncol = bmat.shape[0]
@@ -246,9 +254,24 @@ class ForceLoop:
         y_ff = np.ascontiguousarray(y_ff, dtype=float)
         phi = np.empty((y_ff.size, self.kind.size))
         v = np.empty(y_ff.size)
-        y = _kernel(y_ff, self.a, self.bmat, self.kind, self.par, self.chain_n, self.vb,
-                    self.va, self.s1, self.s2, self.prev, self.zhist, self.phist,
-                    float(self.fs), phi, v)
+        y = _kernel(
+            y_ff,
+            self.a,
+            self.bmat,
+            self.kind,
+            self.par,
+            self.chain_n,
+            self.vb,
+            self.va,
+            self.s1,
+            self.s2,
+            self.prev,
+            self.zhist,
+            self.phist,
+            float(self.fs),
+            phi,
+            v,
+        )
         return y, phi, v
 
     def step(self, y_ff: float) -> float:
@@ -256,8 +279,13 @@ class ForceLoop:
 
     @property
     def state(self) -> list[np.ndarray]:
-        return [self.s1.copy(), self.s2.copy(), self.prev.copy(), self.zhist.copy(),
-                self.phist.copy()]
+        return [
+            self.s1.copy(),
+            self.s2.copy(),
+            self.prev.copy(),
+            self.zhist.copy(),
+            self.phist.copy(),
+        ]
 
 
 #: at most this many passes of the loop refinement (each: states from the last loop run,
@@ -288,11 +316,12 @@ def _held(eff, before: dict) -> np.ndarray:
 
 
 def _shifts(w: np.ndarray, width: int) -> np.ndarray:
-    return np.column_stack([np.concatenate([np.zeros(i), w[:len(w) - i]]) for i in range(width)])
+    return np.column_stack([np.concatenate([np.zeros(i), w[: len(w) - i]]) for i in range(width)])
 
 
-def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool = True,
-                joint: bool = True) -> tuple[list, np.ndarray]:
+def in_the_loop(
+    ctx, effects: list, previous: list | None = None, spring: bool = True, joint: bool = True
+) -> tuple[list, np.ndarray]:
     """Refit ``effects`` with the force effects in the loop; returns the refitted effects
     (``loop_stiffness`` added when no spring is among them, `SPRINGS`) and their
     contribution y − ŷ₀ over the record.
@@ -318,28 +347,40 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
     Alone it is the candidate ``stiffness_change`` (`select`: every other force effect must
     do significantly better than it).
     """
-    from fdi_daemon.diagnose.effects import SPECS, FittedEffect, columns, least_squares, \
-        physical_report
+    from fdi_daemon.diagnose.effects import (
+        SPECS,
+        FittedEffect,
+        columns,
+        least_squares,
+        physical_report,
+    )
 
     width = len(ctx.a_dom)
     if spring and not any(e.name in SPRINGS for e in effects):
-        effects = [FittedEffect("loop_stiffness", None, [np.zeros(width)], n_linear=width,
-                                n_free=width)] + list(effects)
+        effects = [
+            FittedEffect("loop_stiffness", None, [np.zeros(width)], n_linear=width, n_free=width)
+        ] + list(effects)
     ff = [e for e in effects if e.name not in LOOPED]
     fb = [e for e in effects if e.name in LOOPED]
     fit = ctx.split.fit
     end = ctx.split.train_end  # the output-error fits run the loop over the training part
     y_meas = ctx.target + ctx.y0
-    x_ff = (np.column_stack([columns(SPECS[e.name], e.param, ctx,
-                                     ctx.regressors(SPECS[e.name], e.param)) for e in ff])
-            if ff else np.zeros((len(ctx.u), 0)))
+    x_ff = (
+        np.column_stack(
+            [
+                columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
+                for e in ff
+            ]
+        )
+        if ff
+        else np.zeros((len(ctx.u), 0))
+    )
     n_ff = x_ff.shape[1]
     cols = [c for e in fb for c in kinds(e.name, e.param)]
 
     def run(theta_ff, nums):
         with np.errstate(all="ignore"):
-            y, phi, v = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).trace(
-                ctx.y0 + x_ff @ theta_ff)
+            y, phi, v = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).trace(ctx.y0 + x_ff @ theta_ff)
             sse = float(np.sum((y_meas - y)[fit] ** 2))
         return (y, phi, v), (sse if np.isfinite(sse) else np.inf)
 
@@ -356,8 +397,9 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
     def from_start(b_path):
         """Steps 1-3 from the force path B_F = θ b_path."""
         # 1. feed-forward start, 2. amplitudes on b_path in the loop
-        x_fb = np.column_stack([signal.lfilter(b_path, ctx.a_dom, _phi(k, p, ctx.v, ctx.x))
-                                for k, p in cols])
+        x_fb = np.column_stack(
+            [signal.lfilter(b_path, ctx.a_dom, _phi(k, p, ctx.v, ctx.x)) for k, p in cols]
+        )
         theta = least_squares(np.column_stack([x_ff, x_fb])[fit], ctx.target[fit])
         for _ in range(SHRINKS):  # a start whose loop diverges: towards the linear model
             if np.isfinite(run(theta[:n_ff], np.outer(theta[n_ff:], b_path))[1]):
@@ -369,8 +411,9 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
 
         r0 = residual(theta)
         with np.errstate(all="ignore"):
-            sol = least_squares_nl(residual, theta, method="trf", x_scale="jac",
-                                   max_nfev=30 * theta.size)
+            sol = least_squares_nl(
+                residual, theta, method="trf", x_scale="jac", max_nfev=30 * theta.size
+            )
         if float(sol.fun @ sol.fun) < float(r0 @ r0):
             theta = sol.x
         return refine(theta[:n_ff], np.outer(theta[n_ff:], b_path))
@@ -381,8 +424,10 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
         # 3. free numerators, passes on the regressors the loop applied (its own motion;
         #    the stick value while the mass is held)
         for _ in range(PASSES if np.isfinite(best) else 0):
-            xs = [x_ff] + [_shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), width)
-                           for j in range(len(cols))]
+            xs = [x_ff] + [
+                _shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), width)
+                for j in range(len(cols))
+            ]
             target = least_squares(np.column_stack(xs)[fit], ctx.target[fit])
             start = np.concatenate([best_ff, best_nums.ravel()])
             before = best
@@ -407,8 +452,9 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
             return training_error(th[:n_ff], th[n_ff:].reshape(len(cols), width))
 
         with np.errstate(all="ignore"):
-            sol = least_squares_nl(residual, x0, method="trf", x_scale="jac",
-                                   max_nfev=JOINT_ITERATIONS)
+            sol = least_squares_nl(
+                residual, x0, method="trf", x_scale="jac", max_nfev=JOINT_ITERATIONS
+            )
         theta_ff, nums = sol.x[:n_ff], sol.x[n_ff:].reshape(len(cols), width)
         traced, sse = run(theta_ff, nums)
         if sse < best and np.all(np.isfinite(traced[0])):  # not one that diverges later
@@ -426,8 +472,12 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
     if any(e.name in LOOPED for e in before.values()):
         # the loop fitted before (the effects named so far, as they were fitted), anything
         # new at zero: the fit never starts further from the data than the model it extends
-        fits.append(refine(np.concatenate([_held(e, before) for e in ff] + [np.zeros(0)]),
-                           np.concatenate([_held(e, before) for e in fb]).reshape(-1, width)))
+        fits.append(
+            refine(
+                np.concatenate([_held(e, before) for e in ff] + [np.zeros(0)]),
+                np.concatenate([_held(e, before) for e in fb]).reshape(-1, width),
+            )
+        )
 
     def input_path(best_ff) -> np.ndarray:
         """The loop's input numerator: B̂, plus B_e where the nominal one is refitted
@@ -435,31 +485,41 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
         pos = 0
         for e in ff:
             if e.name == "linear_refit":
-                return _padded(ctx.b_dom, width) + best_ff[pos:pos + width]
+                return _padded(ctx.b_dom, width) + best_ff[pos : pos + width]
             pos += e.n_linear
         return ctx.b_dom
 
     def fitted(best_ff, best_nums, y, phi, v) -> list:
         """The effects with these coefficients, each with its report (`force_report`)."""
-        viscous = next((best_nums[j] for j, (kind, _) in enumerate(cols) if kind == _VEL),
-                       None)
-        spring = next(((best_nums[j], phi[:, j]) for j, (kind, _) in enumerate(cols)
-                       if kind == _X), None)
+        viscous = next((best_nums[j] for j, (kind, _) in enumerate(cols) if kind == _VEL), None)
+        spring = next(
+            ((best_nums[j], phi[:, j]) for j, (kind, _) in enumerate(cols) if kind == _X), None
+        )
         b_input = input_path(best_ff)
         out, pos, row = [], 0, 0
         for e in effects:
             if e.name in LOOPED:
                 k = len(kinds(e.name, e.param))
-                new = FittedEffect(e.name, e.param, list(best_nums[row:row + k]),
-                                   n_linear=k * width, centre=e.centre, n_free=k * width)
-                new.physical = force_report(new, ctx, y, phi[:, row:row + k], v, b_input,
-                                            viscous, spring)
+                new = FittedEffect(
+                    e.name,
+                    e.param,
+                    list(best_nums[row : row + k]),
+                    n_linear=k * width,
+                    centre=e.centre,
+                    n_free=k * width,
+                )
+                new.physical = force_report(
+                    new, ctx, y, phi[:, row : row + k], v, b_input, viscous, spring
+                )
                 row += k
             else:
                 k = e.n_linear
-                flat = best_ff[pos:pos + k]
-                coefs = ([flat[j:j + width] for j in range(0, k, width)]
-                         if SPECS[e.name].dynamic else [flat])
+                flat = best_ff[pos : pos + k]
+                coefs = (
+                    [flat[j : j + width] for j in range(0, k, width)]
+                    if SPECS[e.name].dynamic
+                    else [flat]
+                )
                 new = FittedEffect(e.name, e.param, coefs, n_linear=k, centre=e.centre)
                 new.physical = physical_report(new, ctx)
                 pos += k
@@ -476,9 +536,11 @@ def in_the_loop(ctx, effects: list, previous: list | None = None, spring: bool =
                 # numerators is not determined by the data
                 added = linear.physical.get("damping_change_per_s")
                 e.physical["damping_change_per_s"] = added
-                e.physical["plausible"] = bool(e.physical["plausible"]
-                                               and e.physical["mode_change"] not in MECHANICS
-                                               and (added is None or added >= 0.0))
+                e.physical["plausible"] = bool(
+                    e.physical["plausible"]
+                    and e.physical["mode_change"] not in MECHANICS
+                    and (added is None or added >= 0.0)
+                )
         return out
 
     best, best_ff, best_nums, y, phi, v = min(fits, key=lambda f: f[0])
@@ -499,12 +561,16 @@ def possible(effects: list) -> bool:
     return all(e.physical.get("plausible", True) for e in effects)
 
 
-_FORCE_LABELS = {"coulomb_friction": ["coulomb_level"],
-                 "viscous_friction": ["viscous_coefficient"],
-                 "stribeck_friction": ["coulomb_level", "stribeck_excess"],
-                 "cubic_stiffness": ["cubic_coefficient"], "force_offset": ["offset"],
-                 "loop_stiffness": ["stiffness"], "stiffness_change": ["stiffness"],
-                 "mass_change": ["stiffness"]}
+_FORCE_LABELS = {
+    "coulomb_friction": ["coulomb_level"],
+    "viscous_friction": ["viscous_coefficient"],
+    "stribeck_friction": ["coulomb_level", "stribeck_excess"],
+    "cubic_stiffness": ["cubic_coefficient"],
+    "force_offset": ["offset"],
+    "loop_stiffness": ["stiffness"],
+    "stiffness_change": ["stiffness"],
+    "mass_change": ["stiffness"],
+}
 _FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 #: the largest share of a force effect's output energy (acceleration) that may be its
 #: mean: an effect that is mostly a constant acceleration is not a force of the motion (on
@@ -513,9 +579,16 @@ _FRICTION = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 STEADY_SHARE = 0.5
 
 
-def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
-                 b_input: np.ndarray, b_v: np.ndarray | None = None,
-                 spring: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
+def force_report(
+    eff,
+    ctx,
+    y: np.ndarray,
+    phi: np.ndarray,
+    v: np.ndarray,
+    b_input: np.ndarray,
+    b_v: np.ndarray | None = None,
+    spring: tuple[np.ndarray, np.ndarray] | None = None,
+) -> dict:
     """Size and physical check of a force effect, from the augmented motion: output ``y``,
     the regressors ``phi`` (samples × the effect's columns) and the velocity ``v`` of the
     loop (`ForceLoop.trace`); b_input: the loop's input numerator (B̂, refitted where the
@@ -574,19 +647,20 @@ def force_report(eff, ctx, y: np.ndarray, phi: np.ndarray, v: np.ndarray,
             out[f"{label}_power_ratio"] = power
             plausible = plausible and power < 0.0
     if eff.name == "stribeck_friction":
-        plausible = plausible and friction_form(out, out["coulomb_level_input_equivalent"],
-                                                out["stribeck_excess_input_equivalent"])
+        plausible = plausible and friction_form(
+            out, out["coulomb_level_input_equivalent"], out["stribeck_excess_input_equivalent"]
+        )
     if n == 0 and eff.name != "force_offset":
         # a force of the motion holds no steady acceleration: the mean acceleration of a
         # bounded motion is zero, a constant one is a sensor's offset
         mean_square = float(np.mean(total[fit] ** 2))
-        out["steady_share"] = (float(np.mean(total[fit])) ** 2 / mean_square
-                               if mean_square > 0 else 0.0)
+        out["steady_share"] = (
+            float(np.mean(total[fit])) ** 2 / mean_square if mean_square > 0 else 0.0
+        )
         plausible = plausible and out["steady_share"] <= STEADY_SHARE
     if eff.name in SPRINGS:  # the base's spring is reported too (`report`: loop_spring)
         out.update(mode_shift(ctx, eff.coefficients[0], b_v))
-        plausible = plausible and (eff.name == "loop_stiffness"
-                                   or out["mode_change"] in MECHANICS)
+        plausible = plausible and (eff.name == "loop_stiffness" or out["mode_change"] in MECHANICS)
     out["plausible"] = plausible
     return out
 
@@ -612,8 +686,10 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
     n, vb, va, fs = ctx.chain
     # products of polynomials in z⁻¹ are convolutions (numpy.polymul would drop a leading
     # zero, which in z⁻¹ is a delay)
-    den, num_x, num_v = {0: (np.convolve(va, va), np.convolve(vb, vb), np.convolve(vb, va)),
-                         1: (va, vb, va)}.get(n, ([1.0], [1.0], [fs, -fs]))
+    den, num_x, num_v = {
+        0: (np.convolve(va, va), np.convolve(vb, vb), np.convolve(vb, va)),
+        1: (va, vb, va),
+    }.get(n, ([1.0], [1.0], [fs, -fs]))
     a = np.asarray(ctx.a_dom, float)
     loop = _minus(np.convolve(a, den), np.convolve(b_x, num_x))
     if b_v is not None:
@@ -622,18 +698,23 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
     if pole is None:
         return {"mode_change": "unknown"}
     s0 = cmath.log(pole) * fs  # the least damped pair
-    s1 = min((s for s in s_roots(loop, fs) if s.imag > 0), key=lambda s: abs(s - s0),
-             default=None)
+    s1 = min((s for s in s_roots(loop, fs) if s.imag > 0), key=lambda s: abs(s - s0), default=None)
     if s1 is None:
         return {"mode_change": "unknown"}
     w0, w1 = abs(s0), abs(s1)
     zw0 = -s0.real  # ζ₀ω₀
-    k_move = (w1 ** 2 - w0 ** 2) / (2.0 * w0)  # rad/s
+    k_move = (w1**2 - w0**2) / (2.0 * w0)  # rad/s
     c_move = s0.real - s1.real  # Δ(ζω), rad/s
-    rho = (k_move * w0 / 2.0 + c_move * zw0) / ((w0 / 2.0) ** 2 + zw0 ** 2)
-    off = {"stiffness": abs(c_move), "damping": abs(k_move),
-           "mass": (abs(k_move * zw0 - c_move * w0 / 2.0) / math.hypot(w0 / 2.0, zw0)
-                    if rho > -1.0 else math.inf)}  # a mass is positive
+    rho = (k_move * w0 / 2.0 + c_move * zw0) / ((w0 / 2.0) ** 2 + zw0**2)
+    off = {
+        "stiffness": abs(c_move),
+        "damping": abs(k_move),
+        "mass": (
+            abs(k_move * zw0 - c_move * w0 / 2.0) / math.hypot(w0 / 2.0, zw0)
+            if rho > -1.0
+            else math.inf
+        ),
+    }  # a mass is positive
     moved_hz = abs(s1 - s0) / (2 * math.pi)
     resolution_hz = fs / max(ctx.split.train_end - ctx.split.warmup, 1)
     best, second = sorted(off, key=off.get)[:2]
@@ -645,12 +726,18 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
         change = "stiffness"  # a lightly damped mode: a mass is not told from a spring
     else:
         change = "unresolved"
-    return {"resonance_hz_nominal": w0 / (2 * math.pi), "resonance_hz": w1 / (2 * math.pi),
-            "damping_ratio_nominal": zw0 / w0, "damping_ratio": -s1.real / w1,
-            "stiffness_ratio": (w1 / w0) ** 2,
-            **({"mass_ratio": 1.0 / (1.0 + rho)} if change == "mass" else {}),
-            "damping_change_per_s": 2.0 * c_move, "mode_moved_hz": moved_hz,
-            "resolution_hz": resolution_hz, "mode_change": change}
+    return {
+        "resonance_hz_nominal": w0 / (2 * math.pi),
+        "resonance_hz": w1 / (2 * math.pi),
+        "damping_ratio_nominal": zw0 / w0,
+        "damping_ratio": -s1.real / w1,
+        "stiffness_ratio": (w1 / w0) ** 2,
+        **({"mass_ratio": 1.0 / (1.0 + rho)} if change == "mass" else {}),
+        "damping_change_per_s": 2.0 * c_move,
+        "mode_moved_hz": moved_hz,
+        "resolution_hz": resolution_hz,
+        "mode_change": change,
+    }
 
 
 def mechanics_name(effect):
@@ -666,8 +753,8 @@ def mechanics_name(effect):
 def _minus(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """p − q for polynomials in z⁻¹ (aligned at the z⁰ term, unlike `numpy.polysub`)."""
     out = np.zeros(max(len(p), len(q)))
-    out[:len(p)] += p
-    out[:len(q)] -= q
+    out[: len(p)] += p
+    out[: len(q)] -= q
     return out
 
 
@@ -684,9 +771,9 @@ def _phi(kind: int, par: float, v: np.ndarray, x: np.ndarray) -> np.ndarray:
     if kind == _VEL:
         return v
     if kind == _STRIBECK:
-        return np.sign(v) * np.exp(-(v / par) ** 2)
+        return np.sign(v) * np.exp(-((v / par) ** 2))
     if kind == _CUBE:
-        return x ** 3
+        return x**3
     if kind == _X:
         return x.copy()
     return np.ones_like(v)

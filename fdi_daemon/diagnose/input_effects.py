@@ -51,5 +51,4 @@ def saturate(level, c):
 
 
 def dead_zone(width, c):
-    return lambda u, v, x, y0: [np.sign(u - c) * np.maximum(np.abs(u - c) - width, 0.0)
-                                - (u - c)]
+    return lambda u, v, x, y0: [np.sign(u - c) * np.maximum(np.abs(u - c) - width, 0.0) - (u - c)]

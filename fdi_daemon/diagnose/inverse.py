@@ -29,8 +29,7 @@ from fdi_daemon.diagnose.effects import friction_form
 from fdi_daemon.diagnose.floor import quiet_variance
 
 #: effects that can be tested in this form (forces on the mass from the measured motion)
-INVERSE_CANDIDATES = ("coulomb_friction", "stribeck_friction", "cubic_stiffness",
-                      "force_offset")
+INVERSE_CANDIDATES = ("coulomb_friction", "stribeck_friction", "cubic_stiffness", "force_offset")
 
 
 def lowpass(u: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
@@ -56,8 +55,11 @@ def measured_motion(y: np.ndarray, output_kind: str, fs_hz: float) -> dict[str, 
     if output_kind == "position":
         behind = np.insert(y[:-1], 0, y[0])
         x = 0.5 * (ahead + y)
-        return {"a": (ahead - 2.0 * y + behind) * fs_hz ** 2, "v": (ahead - y) * fs_hz,
-                "x": x - np.mean(x)}
+        return {
+            "a": (ahead - 2.0 * y + behind) * fs_hz**2,
+            "v": (ahead - y) * fs_hz,
+            "x": x - np.mean(x),
+        }
     raise ValueError("the inverse-dynamics form needs a velocity or position output")
 
 
@@ -109,19 +111,29 @@ def baseline(u, y, output_kind: str, fs_hz: float, split: signals.Split) -> dict
     # motion, so a shifted force can stand in for the friction)
     forces = [np.sign(motion["v"]), np.ones_like(motion["v"])]
     timing = np.column_stack([cols] + [signal.lfilter(b, a, f) * moving for f in forces])
-    targets = [np.concatenate([np.full(lag, filtered_u[0]), filtered_u[:len(u) - lag]])
-               * moving for lag in range(MAX_LAG_SAMPLES + 1)]
+    targets = [
+        np.concatenate([np.full(lag, filtered_u[0]), filtered_u[: len(u) - lag]]) * moving
+        for lag in range(MAX_LAG_SAMPLES + 1)
+    ]
     shifted = np.column_stack([t[fit] for t in targets])  # one solve for every lag
-    sse = np.sum((shifted - timing[fit] @ np.linalg.lstsq(timing[fit], shifted,
-                                                          rcond=None)[0]) ** 2, axis=0)
+    sse = np.sum(
+        (shifted - timing[fit] @ np.linalg.lstsq(timing[fit], shifted, rcond=None)[0]) ** 2, axis=0
+    )
     lag = int(np.argmin(sse))
     target = targets[lag]
     coef, *_ = np.linalg.lstsq(cols[fit], target[fit], rcond=None)
-    return {"lp": (b, a), "target": target, "y0": cols @ coef, "columns": cols,
-            "moving": moving, "names": names, "lag": lag,
-            "coefficients": dict(zip(names, (float(c) for c in coef))),
-            "v": motion["v"], "x": motion["x"] if motion["x"] is not None
-            else np.zeros_like(motion["v"])}
+    return {
+        "lp": (b, a),
+        "target": target,
+        "y0": cols @ coef,
+        "columns": cols,
+        "moving": moving,
+        "names": names,
+        "lag": lag,
+        "coefficients": dict(zip(names, (float(c) for c in coef))),
+        "v": motion["v"],
+        "x": motion["x"] if motion["x"] is not None else np.zeros_like(motion["v"]),
+    }
 
 
 def physical(name: str, theta: np.ndarray, param: float | None, ctx=None) -> dict:
@@ -150,8 +162,16 @@ def physical(name: str, theta: np.ndarray, param: float | None, ctx=None) -> dic
     return out
 
 
-def noise_floor(y_raw: np.ndarray, output_kind: str, u: np.ndarray, target: np.ndarray,
-                coefficients: dict, lp: tuple, fs_hz: float, test: slice) -> dict:
+def noise_floor(
+    y_raw: np.ndarray,
+    output_kind: str,
+    u: np.ndarray,
+    target: np.ndarray,
+    coefficients: dict,
+    lp: tuple,
+    fs_hz: float,
+    test: slice,
+) -> dict:
     """The part of L u that the force balance cannot explain because the motion is
     measured with noise: white noise σ on the measured output (velocity or position)
     through the balance's own differences (`measured_motion`: M a + c v [+ k x]) and L, as
@@ -165,10 +185,13 @@ def noise_floor(y_raw: np.ndarray, output_kind: str, u: np.ndarray, target: np.n
         sigma = min(sigma, math.sqrt(quiet))
     if sigma <= 1e-9 * float(np.std(y_raw)):  # over half the second differences are 0 (to
         # rounding): a quantised or held output, whose noise this cannot measure
-        return {"floor": None, "output_noise": sigma,
-                "method": f"{output_kind} noise through the force balance: unknown, the "
-                          f"{output_kind}'s second differences are mostly zero (quantised "
-                          "or held)"}
+        return {
+            "floor": None,
+            "output_noise": sigma,
+            "method": f"{output_kind} noise through the force balance: unknown, the "
+            f"{output_kind}'s second differences are mostly zero (quantised "
+            "or held)",
+        }
     pulse = np.zeros(4096)
     pulse[2] = 1.0  # one noise sample, as every motion term sees it
     motion = measured_motion(pulse, output_kind, fs_hz)
@@ -177,7 +200,8 @@ def noise_floor(y_raw: np.ndarray, output_kind: str, u: np.ndarray, target: np.n
     # the gap's NRMSE runs over every held-out row, the rows at rest being zero on both sides
     live = float(np.mean(target[test] != 0))
     spread = float(np.std(target[test]))
-    return {"floor": float(sigma * np.sqrt(float(h @ h) * live) / spread) if spread > 0
-            else None,
-            "method": f"{output_kind} noise through the force balance",
-            "output_noise": float(sigma)}
+    return {
+        "floor": float(sigma * np.sqrt(float(h @ h) * live) / spread) if spread > 0 else None,
+        "method": f"{output_kind} noise through the force balance",
+        "output_noise": float(sigma),
+    }

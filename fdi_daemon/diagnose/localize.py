@@ -31,13 +31,21 @@ def time_segments(e: np.ndarray, fs_hz: float, top: int = N_TOP) -> list[dict]:
     seg = max(int(round(fs_hz)), n // 40, 2)
     rows = []
     for start in range(0, n - seg + 1, seg):
-        rows.append((float(np.sqrt(np.mean(e[start:start + seg] ** 2))), start))
+        rows.append((float(np.sqrt(np.mean(e[start : start + seg] ** 2))), start))
     if not rows:
         return []
     median = float(np.median([r for r, _ in rows])) or 1.0
     rows.sort(reverse=True)
-    return [{"kind": "time", "t0": s / fs_hz, "t1": (s + seg) / fs_hz, "rms": r,
-             "ratio_to_median": r / median} for r, s in rows[:top]]
+    return [
+        {
+            "kind": "time",
+            "t0": s / fs_hz,
+            "t1": (s + seg) / fs_hz,
+            "rms": r,
+            "ratio_to_median": r / median,
+        }
+        for r, s in rows[:top]
+    ]
 
 
 def state_bins(e: np.ndarray, values: np.ndarray, name: str, signed: bool = False) -> dict:
@@ -62,11 +70,23 @@ def state_bins(e: np.ndarray, values: np.ndarray, name: str, signed: bool = Fals
             continue
         mean = float(e[sel].mean())
         between += sel.sum() * (mean - e.mean()) ** 2
-        bins.append({"range": [float(edges[k]), float(edges[k + 1])], "mean": mean,
-                     "rms": float(np.sqrt(np.mean(e[sel] ** 2))), "samples": int(sel.sum())})
+        bins.append(
+            {
+                "range": [float(edges[k]), float(edges[k + 1])],
+                "mean": mean,
+                "rms": float(np.sqrt(np.mean(e[sel] ** 2))),
+                "samples": int(sel.sum()),
+            }
+        )
     worst = max(bins, key=lambda b: b["rms"])
-    return {"kind": "state", "variable": name, "explained": float(between / total),
-            "worst_range": worst["range"], "worst_rms": worst["rms"], "bins": bins}
+    return {
+        "kind": "state",
+        "variable": name,
+        "explained": float(between / total),
+        "worst_range": worst["range"],
+        "worst_rms": worst["rms"],
+        "bins": bins,
+    }
 
 
 def frequency_bands(e: np.ndarray, y: np.ndarray, fs_hz: float, top: int = 3) -> tuple[list, dict]:
@@ -85,9 +105,15 @@ def frequency_bands(e: np.ndarray, y: np.ndarray, fs_hz: float, top: int = 3) ->
         if not sel.any():
             continue
         pe, py = float(np.sum(p_e[sel])), float(np.sum(p_y[sel]))
-        bands.append({"kind": "frequency", "f0": float(f0), "f1": float(f1),
-                      "error_power_fraction": pe / total,
-                      "error_to_output": math.sqrt(pe / py) if py > 0 else math.inf})
+        bands.append(
+            {
+                "kind": "frequency",
+                "f0": float(f0),
+                "f1": float(f1),
+                "error_power_fraction": pe / total,
+                "error_to_output": math.sqrt(pe / py) if py > 0 else math.inf,
+            }
+        )
     bands.sort(key=lambda b: -b["error_power_fraction"])
     spectrum = {"f_hz": f, "error_psd": p_e, "output_psd": p_y}
     return bands[:top], spectrum
@@ -101,29 +127,44 @@ def whiteness(e: np.ndarray, lags: int = LJUNG_BOX_LAGS) -> dict:
     if var == 0.0 or n <= lags + 1:
         return {"ljung_box_q": 0.0, "lags": lags, "p_value": 1.0, "white": True}
     rho = np.array([float(x[k:] @ x[:-k]) / var for k in range(1, lags + 1)])
-    q = float(n * (n + 2) * np.sum(rho ** 2 / (n - np.arange(1, lags + 1))))
+    q = float(n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1))))
     p = float(stats.chi2.sf(q, lags))
     return {"ljung_box_q": q, "lags": lags, "p_value": p, "white": bool(p >= 0.01)}
 
 
-def localize(e: np.ndarray, y: np.ndarray, u: np.ndarray, v: np.ndarray, x: np.ndarray,
-             fs_hz: float, test: slice) -> dict:
+def localize(
+    e: np.ndarray,
+    y: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    x: np.ndarray,
+    fs_hz: float,
+    test: slice,
+) -> dict:
     """All three views; ``regions`` is the ranked list the report carries."""
     segments = time_segments(e, fs_hz)
-    states = [state_bins(e, v, "velocity", signed=True), state_bins(e, x, "position"),
-              state_bins(e, u, "input")]
+    states = [
+        state_bins(e, v, "velocity", signed=True),
+        state_bins(e, x, "position"),
+        state_bins(e, u, "input"),
+    ]
     bands, spectrum = frequency_bands(e, y, fs_hz)
     max_lag = int(min(max(25, round(0.1 * fs_hz)), len(e[test]) // 4))
     xc = residual_input_correlation(e[test], u[test], max_lag=max_lag)
     states_sorted = sorted(states, key=lambda s: -s["explained"])
-    regions = segments + [{k: v for k, v in s.items() if k != "bins"} for s in states_sorted] \
-        + bands
+    regions = (
+        segments + [{k: v for k, v in s.items() if k != "bins"} for s in states_sorted] + bands
+    )
     return {
         "regions": regions,
         "states": states_sorted,
         "spectrum": spectrum,
-        "cross_correlation": {"max_abs": xc["max_abs"], "bound_99": xc["bound"],
-                              "fraction_outside": xc["fraction_outside"],
-                              "lags": xc["lags"], "r": xc["r"]},
+        "cross_correlation": {
+            "max_abs": xc["max_abs"],
+            "bound_99": xc["bound"],
+            "fraction_outside": xc["fraction_outside"],
+            "lags": xc["lags"],
+            "r": xc["r"],
+        },
         "whiteness": whiteness(e[test]),
     }

@@ -73,11 +73,13 @@ def mode_report(pole: complex, line: str, ratio: float, fs_hz: float) -> dict:
     ratio, and the change of damping per unit mass Δ(c/m) (1/s)."""
     s0 = cmath.log(pole)
     damping, stiffness, _ = _moved(pole, line, ratio)
-    return {"resonance_hz_nominal": abs(s0) * fs_hz / (2 * np.pi),
-            "resonance_hz": np.sqrt(stiffness) * fs_hz / (2 * np.pi),
-            "damping_ratio_nominal": -s0.real / abs(s0),
-            "damping_ratio": damping / (2.0 * np.sqrt(stiffness)),
-            "damping_change_per_s": (damping + 2.0 * s0.real) * fs_hz}
+    return {
+        "resonance_hz_nominal": abs(s0) * fs_hz / (2 * np.pi),
+        "resonance_hz": np.sqrt(stiffness) * fs_hz / (2 * np.pi),
+        "damping_ratio_nominal": -s0.real / abs(s0),
+        "damping_ratio": damping / (2.0 * np.sqrt(stiffness)),
+        "damping_change_per_s": (damping + 2.0 * s0.real) * fs_hz,
+    }
 
 
 class ModeLineRegressor(Regressor):

@@ -24,8 +24,9 @@ class DeadTimeRegressor(Regressor):
         ext = np.concatenate([self.state[::-1], u])  # ext[j + d + 1] = u[j]
         h = self.d + 1
         n = len(u)
-        delayed = ((1 - self.frac) * ext[h - self.d: h - self.d + n]
-                   + self.frac * ext[h - self.d - 1: h - self.d - 1 + n])
+        delayed = (1 - self.frac) * ext[h - self.d : h - self.d + n] + self.frac * ext[
+            h - self.d - 1 : h - self.d - 1 + n
+        ]
         self.state = ext[::-1][: self.d + 1].copy()
         return (delayed - u)[:, None]
 

@@ -8,7 +8,6 @@ import numpy as np
 
 from fdi_daemon.io.outputs import pyplot, save_figure
 
-
 #: unit of the compared quantity by output kind (the inverse-dynamics form compares the input)
 UNITS = {"acceleration": "m/s²", "velocity": "m/s", "position": "m"}
 STATE_UNITS = {"velocity": "m/s", "position": "m", "input": "input units"}
@@ -40,12 +39,28 @@ def plot_diagnosis(result, report: dict, path: str | Path) -> Path:
     ax = axes[0]
     named = ", ".join(result.named) or "no effect added"
     ax.plot(t[w], y[w], "k", lw=1.6, label="measured", zorder=1)
-    ax.plot(t[w], result.y_after[w], "C2", lw=1.2,
-            label=f"+ {named} (gap {result.gap_after:.3g})", zorder=2)
-    ax.plot(t[w], result.y_before[w], "C3--", lw=1.0, alpha=0.8,
-            label=f"nominal (gap {result.gap_before:.3g})", zorder=3)
-    ax.set_title("held-out data: low-passed input against the force balance (0: at rest, "
-                 "left out)" if inverse else f"held-out data: {quantity}")
+    ax.plot(
+        t[w],
+        result.y_after[w],
+        "C2",
+        lw=1.2,
+        label=f"+ {named} (gap {result.gap_after:.3g})",
+        zorder=2,
+    )
+    ax.plot(
+        t[w],
+        result.y_before[w],
+        "C3--",
+        lw=1.0,
+        alpha=0.8,
+        label=f"nominal (gap {result.gap_before:.3g})",
+        zorder=3,
+    )
+    ax.set_title(
+        "held-out data: low-passed input against the force balance (0: at rest, left out)"
+        if inverse
+        else f"held-out data: {quantity}"
+    )
     ax.set_xlabel("t (s)")
     ax.set_ylabel(f"{quantity} ({unit})")
     ax.legend(**LEGEND)
@@ -58,8 +73,9 @@ def plot_diagnosis(result, report: dict, path: str | Path) -> Path:
             ax.axvspan(r["t0"], r["t1"], color="C1", alpha=0.15)
     ax.axvline(test_start / fs, color="k", ls=":", lw=1)
     ax.text(test_start / fs, ax.get_ylim()[1], " held out", va="top", fontsize=8)
-    ax.set_title(("force-balance" if inverse else "simulation")
-                 + " error (shaded: largest-error segments)")
+    ax.set_title(
+        ("force-balance" if inverse else "simulation") + " error (shaded: largest-error segments)"
+    )
     ax.set_xlabel("t (s)")
     ax.set_ylabel(f"error ({unit})")
     ax.legend(**LEGEND)
@@ -69,17 +85,21 @@ def plot_diagnosis(result, report: dict, path: str | Path) -> Path:
     best = states[0]
     values = {"velocity": ctx.v, "position": ctx.x, "input": ctx.u}[best["variable"]]
     stride = max(1, len(values) // 5000)
-    ax.plot(values[::stride], e1[::stride], ".", ms=1.5, color="C2", alpha=0.4, label="after",
-            zorder=1)
-    ax.plot(values[::stride], e0[::stride], ".", ms=1.2, color="C3", alpha=0.3,
-            label="before", zorder=2)
+    ax.plot(
+        values[::stride], e1[::stride], ".", ms=1.5, color="C2", alpha=0.4, label="after", zorder=1
+    )
+    ax.plot(
+        values[::stride], e0[::stride], ".", ms=1.2, color="C3", alpha=0.3, label="before", zorder=2
+    )
     centres = [0.5 * (b["range"][0] + b["range"][1]) for b in best["bins"]]
     ax.plot(centres, [b["mean"] for b in best["bins"]], "k-o", ms=3, label="bin mean (before)")
     source = "measured" if inverse else "simulated"
     ax.set_xlabel(f"{source} {best['variable']} ({STATE_UNITS[best['variable']]})")
     ax.set_ylabel(f"error ({unit})")
-    ax.set_title(f"error against {best['variable']} "
-                 f"(bin means explain {100 * best['explained']:.0f} % of its variance)")
+    ax.set_title(
+        f"error against {best['variable']} "
+        f"(bin means explain {100 * best['explained']:.0f} % of its variance)"
+    )
     ax.legend(**LEGEND)
     # 4. spectra
     ax = axes[3]
@@ -87,8 +107,9 @@ def plot_diagnosis(result, report: dict, path: str | Path) -> Path:
     sp1 = result.where_after["spectrum"]
     ax.semilogy(sp0["f_hz"], sp0["output_psd"], "k", lw=1, label="measured output")
     ax.semilogy(sp1["f_hz"], sp1["error_psd"], "C2", lw=1, label="error after", zorder=1)
-    ax.semilogy(sp0["f_hz"], sp0["error_psd"], "C3", lw=0.8, alpha=0.7, label="error before",
-                zorder=2)
+    ax.semilogy(
+        sp0["f_hz"], sp0["error_psd"], "C3", lw=0.8, alpha=0.7, label="error before", zorder=2
+    )
     floor = report.get("noise_floor", {}).get("floor")
     if floor is not None and not inverse:
         # the floor as a white density: floor² var(y) spread over 0..fs/2

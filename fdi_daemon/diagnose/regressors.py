@@ -3,7 +3,7 @@ explicit state), so that the augmented model computes exactly what was fitted.""
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -17,8 +17,10 @@ class Regressor:
         raise NotImplementedError
 
     def step(self, u: float, v: float, x: float, y0: float) -> list[float]:
-        return [float(c) for c in self.run(np.array([u]), np.array([v]), np.array([x]),
-                                           np.array([y0]))[0]]
+        return [
+            float(c)
+            for c in self.run(np.array([u]), np.array([v]), np.array([x]), np.array([y0]))[0]
+        ]
 
 
 class Static(Regressor):
@@ -29,5 +31,11 @@ class Static(Regressor):
         self.n_out = n_out
 
     def run(self, u, v, x, y0):
-        return np.column_stack(self.fn(np.asarray(u, float), np.asarray(v, float),
-                                       np.asarray(x, float), np.asarray(y0, float)))
+        return np.column_stack(
+            self.fn(
+                np.asarray(u, float),
+                np.asarray(v, float),
+                np.asarray(x, float),
+                np.asarray(y0, float),
+            )
+        )

@@ -33,27 +33,36 @@ def build_report(result, source: str = "") -> dict[str, Any]:
         "ranking": rounds[0] if rounds else [],
         "params": dict(named[0].physical) if named else {},
         "regions": where["regions"],
-        "effects": [{"effect": e.named_as, "form": e.name, "params": dict(e.physical)}
-                    for e in named],
+        "effects": [
+            {"effect": e.named_as, "form": e.name, "params": dict(e.physical)} for e in named
+        ],
         "rounds": rounds,
-        "test": {"held_out_from_s": ctx.split.train_end / ctx.fs_hz,
-                 "samples": ctx.split.n - ctx.split.train_end, "alpha": ALPHA,
-                 "score": "n_eff ln(SSE1/SSE0) + k ln(n_eff) on held-out data; "
-                          "F-test p < alpha"},
+        "test": {
+            "held_out_from_s": ctx.split.train_end / ctx.fs_hz,
+            "samples": ctx.split.n - ctx.split.train_end,
+            "alpha": ALPHA,
+            "score": "n_eff ln(SSE1/SSE0) + k ln(n_eff) on held-out data; F-test p < alpha",
+        },
         "localization": {
             "whiteness_before": where["whiteness"],
             "whiteness_after": result.where_after["whiteness"],
-            "cross_correlation_before": {k: v for k, v in where["cross_correlation"].items()
-                                         if k not in ("lags", "r")},
+            "cross_correlation_before": {
+                k: v for k, v in where["cross_correlation"].items() if k not in ("lags", "r")
+            },
             "cross_correlation_after": {
-                k: v for k, v in result.where_after["cross_correlation"].items()
-                if k not in ("lags", "r")},
+                k: v
+                for k, v in result.where_after["cross_correlation"].items()
+                if k not in ("lags", "r")
+            },
         },
-        "model": {"baseline": result.info["baseline"],
-                  "baseline_refit": "numerator of the nominal model refitted with every "
-                                    "candidate (effect linear_refit in the model file)",
-                  "output_kind": ctx.output_kind,
-                  "highpass_hz": result.info["highpass_hz"], "fs": ctx.fs_hz},
+        "model": {
+            "baseline": result.info["baseline"],
+            "baseline_refit": "numerator of the nominal model refitted with every "
+            "candidate (effect linear_refit in the model file)",
+            "output_kind": ctx.output_kind,
+            "highpass_hz": result.info["highpass_hz"],
+            "fs": ctx.fs_hz,
+        },
         "source": source,
         # how the effects were tested (issue 14): the form, the noise floor, the dead time
         "form": result.info["form"],
@@ -65,8 +74,10 @@ def build_report(result, source: str = "") -> dict[str, Any]:
             "by_correlation_s": result.info.get("dead_time_by_correlation_s"),
             # the force balance's: the measured motion behind its input (`inverse.baseline`)
             "motion_lag_s": result.info.get("inverse_lag_s"),
-            "named_s": next((e.physical.get("dead_time_s") for e in named
-                             if e.name == "dead_time"), None)},
+            "named_s": next(
+                (e.physical.get("dead_time_s") for e in named if e.name == "dead_time"), None
+            ),
+        },
         "linear_check": result.selection.linear,
         "spring_check": result.selection.spring,
         "held_by_later": result.selection.held_by_later,
@@ -92,64 +103,91 @@ def _explanation(name: str) -> str:
 
 def summary_lines(report: dict[str, Any]) -> list[str]:
     """A short human-readable summary for the terminal."""
-    lines = [f"baseline: {report['model']['baseline']}  "
-             f"(output {report['model']['output_kind']}, held out from "
-             f"t = {report['test']['held_out_from_s']:.3g} s)"]
+    lines = [
+        f"baseline: {report['model']['baseline']}  "
+        f"(output {report['model']['output_kind']}, held out from "
+        f"t = {report['test']['held_out_from_s']:.3g} s)"
+    ]
     lines.append(f"form: {report['form']} ({report['form_reason']})")
     floor = report["noise_floor"]
     if floor.get("floor") is not None:
-        lines.append(f"noise floor (NRMSE): {floor['floor']:.4g} ({floor['method']})"
-                     + ("  -- the nominal model is at the floor" if floor["at_floor"] else ""))
+        lines.append(
+            f"noise floor (NRMSE): {floor['floor']:.4g} ({floor['method']})"
+            + ("  -- the nominal model is at the floor" if floor["at_floor"] else "")
+        )
     else:
         lines.append(f"noise floor (NRMSE): unknown ({floor['method']})")
     check = report["linear_check"]
     if check.get("matching"):
         held = check.get("held_by")
-        lines.append(f"the numerator refit is mostly a {_explanation(check['matching'])}"
-                     + (f", held by {', '.join(held)}" if held else
-                        ", held by the named effects" if report["effect"] else "")
-                     + ": not named (see linear_check)")
+        lines.append(
+            f"the numerator refit is mostly a {_explanation(check['matching'])}"
+            + (
+                f", held by {', '.join(held)}"
+                if held
+                else ", held by the named effects"
+                if report["effect"]
+                else ""
+            )
+            + ": not named (see linear_check)"
+        )
     elif check.get("named") and check.get("on_top_of"):
-        lines.append(f"the numerator refit is mostly a {_explanation(check['named'])}, also "
-                     f"on top of {', '.join(check['on_top_of'])}: named")
+        lines.append(
+            f"the numerator refit is mostly a {_explanation(check['named'])}, also "
+            f"on top of {', '.join(check['on_top_of'])}: named"
+        )
     if report["linear_check"].get("unexplained"):
-        lines.append("the numerator refit alone is significant (a missing effect's linear "
-                     "part, or a numerator that is off) and is neither a gain change, a "
-                     "dead time nor a change of one parameter of the mode: it stays in the "
-                     "base")
+        lines.append(
+            "the numerator refit alone is significant (a missing effect's linear "
+            "part, or a numerator that is off) and is neither a gain change, a "
+            "dead time nor a change of one parameter of the mode: it stays in the "
+            "base"
+        )
     if report["effect"] is None:
         lines.append("no significant missing effect")
     else:
         for e in report["effects"]:
             params = ", ".join(
-                f"{k}={v:.4g}" + (f" {e['params'][k + '_unit']}"
-                                  if k + "_unit" in e["params"] else "")
+                f"{k}={v:.4g}"
+                + (f" {e['params'][k + '_unit']}" if k + "_unit" in e["params"] else "")
                 for k, v in e["params"].items()
-                if isinstance(v, (int, float)) and not isinstance(v, bool))
+                if isinstance(v, (int, float)) and not isinstance(v, bool)
+            )
             form = f"fitted as {e['form']}: " if e["form"] != e["effect"] else ""
             lines.append(f"missing effect: {e['effect']}  ({form}{params})")
     for held in report["held_by_later"]:
-        lines.append(f"{held['effect']} was named first and is not kept: "
-                     f"{', '.join(held['held_by'])}, refitted without it, does as well "
-                     f"(held-out SSE {held['sse_without']:.4g} against {held['sse_with']:.4g})")
+        lines.append(
+            f"{held['effect']} was named first and is not kept: "
+            f"{', '.join(held['held_by'])}, refitted without it, does as well "
+            f"(held-out SSE {held['sse_without']:.4g} against {held['sse_with']:.4g})"
+        )
     spring = report.get("loop_spring", {})
     if "resonance_hz" in spring:
-        lines.append(f"the force loop's linear part (its spring, in the base) moves the mode "
-                     f"{spring['resonance_hz_nominal']:.3g} -> {spring['resonance_hz']:.3g} Hz, "
-                     f"damping ratio {spring['damping_ratio_nominal']:.2g} -> "
-                     f"{spring['damping_ratio']:.2g} (stiffness x "
-                     f"{spring['stiffness_ratio']:.3g}; read as {spring['mode_change']})")
-    lines.append(f"gap (NRMSE, held out): {report['gap_before']:.4g} -> "
-                 f"{report['gap_after']:.4g}"
-                 + (f"  ({report['gap_before_to_floor']:.3g} -> "
-                    f"{report['gap_after_to_floor']:.3g} x the floor)"
-                    if report["gap_before_to_floor"] is not None else ""))
+        lines.append(
+            f"the force loop's linear part (its spring, in the base) moves the mode "
+            f"{spring['resonance_hz_nominal']:.3g} -> {spring['resonance_hz']:.3g} Hz, "
+            f"damping ratio {spring['damping_ratio_nominal']:.2g} -> "
+            f"{spring['damping_ratio']:.2g} (stiffness x "
+            f"{spring['stiffness_ratio']:.3g}; read as {spring['mode_change']})"
+        )
+    lines.append(
+        f"gap (NRMSE, held out): {report['gap_before']:.4g} -> "
+        f"{report['gap_after']:.4g}"
+        + (
+            f"  ({report['gap_before_to_floor']:.3g} -> "
+            f"{report['gap_after_to_floor']:.3g} x the floor)"
+            if report["gap_before_to_floor"] is not None
+            else ""
+        )
+    )
     lines.append("ranking:")
     for row in report["ranking"][:5]:
         mark = "*" if row["accepted"] else " "
         name = row["effect"] + (f" ({row['form']} form)" if row["form"] != row["effect"] else "")
-        lines.append(f" {mark} {name:<18} gap {row['gap_after']:.4g}  "
-                     f"score {row['score']:.1f}  p {row['p_value']:.2g}")
+        lines.append(
+            f" {mark} {name:<18} gap {row['gap_after']:.4g}  "
+            f"score {row['score']:.1f}  p {row['p_value']:.2g}"
+        )
     seg = [r for r in report["regions"] if r["kind"] == "time"][:1]
     st = [r for r in report["regions"] if r["kind"] == "state"][:1]
     fr = [r for r in report["regions"] if r["kind"] == "frequency"][:1]
@@ -159,7 +197,9 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     if st:
         where.append(f"{st[0]['variable']} (explains {100 * st[0]['explained']:.0f} %)")
     if fr:
-        where.append(f"{fr[0]['f0']:.3g}-{fr[0]['f1']:.3g} Hz "
-                     f"({100 * fr[0]['error_power_fraction']:.0f} % of error power)")
+        where.append(
+            f"{fr[0]['f0']:.3g}-{fr[0]['f1']:.3g} Hz "
+            f"({100 * fr[0]['error_power_fraction']:.0f} % of error power)"
+        )
     lines.append("error sat at: " + "; ".join(where))
     return lines

@@ -47,10 +47,26 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import stats
 
-from fdi_daemon.diagnose.effects import (BASE_TERMS, MODE_LINES, SHARE_RANGE, SPECS, Context,
-                                         FittedEffect, NotApplicable, columns, fit_effect)
-from fdi_daemon.diagnose.force import (FORCE_EFFECTS, LOOPED, MECHANICS, SPRINGS, in_the_loop,
-                                       mechanics_name, possible)
+from fdi_daemon.diagnose.effects import (
+    BASE_TERMS,
+    MODE_LINES,
+    SHARE_RANGE,
+    SPECS,
+    Context,
+    FittedEffect,
+    NotApplicable,
+    columns,
+    fit_effect,
+)
+from fdi_daemon.diagnose.force import (
+    FORCE_EFFECTS,
+    LOOPED,
+    MECHANICS,
+    SPRINGS,
+    in_the_loop,
+    mechanics_name,
+    possible,
+)
 from fdi_daemon.diagnose.mode_lines import LINES
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
@@ -59,9 +75,11 @@ ALPHA = 1e-3
 #: smallest share of the held-out error energy (SSE) an effect must remove to be named
 MIN_REDUCTION = 0.05
 #: effects that contain another as a special case (Stribeck with no excess is Coulomb)
-NESTS = {"stribeck_friction": "coulomb_friction",
-         # a constant force through the free force path settles to a constant output
-         "force_offset": "sensor_offset"}
+NESTS = {
+    "stribeck_friction": "coulomb_friction",
+    # a constant force through the free force path settles to a constant output
+    "force_offset": "sensor_offset",
+}
 #: how many effects are added at most (the first, then one more)
 MAX_EFFECTS = 2
 
@@ -89,9 +107,15 @@ class Candidate:
         name of the mode it moves, `force.mechanics_name`; a friction form by the friction
         it stands for, `FittedEffect.named_as`)."""
         effect = mechanics_name(self.effect)
-        entry = {"effect": effect.named_as, "form": effect.name, "gap_after": gap_after,
-                 "score": self.score, "p_value": self.p_value, "accepted": self.accepted,
-                 "params": dict(self.effect.physical)}
+        entry = {
+            "effect": effect.named_as,
+            "form": effect.name,
+            "gap_after": gap_after,
+            "score": self.score,
+            "p_value": self.p_value,
+            "accepted": self.accepted,
+            "params": dict(self.effect.physical),
+        }
         if self.sse_from_its_start is not None:
             entry["base_from_its_fit_sse_ratio"] = self.sse_from_its_start / self.sse_reference
         return entry
@@ -114,8 +138,14 @@ def effective_samples(e: np.ndarray, max_lag: int = 200) -> float:
     return n / tau
 
 
-def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.ndarray | None,
-             sse_reference: float, n_eff: float) -> Candidate:
+def evaluate(
+    name: str,
+    ctx: Context,
+    base: list[FittedEffect],
+    base_cols: np.ndarray | None,
+    sse_reference: float,
+    n_eff: float,
+) -> Candidate:
     """Fit ``name`` on top of ``base`` and judge it on the held-out part (n_eff: effective
     samples of the residual it has to explain, the same for every candidate of a round)."""
     eff, refitted = fit_effect(name, ctx, base, base_cols)
@@ -129,20 +159,34 @@ def evaluate(name: str, ctx: Context, base: list[FittedEffect], base_cols: np.nd
     else:
         x_new = columns(SPECS[name], eff.param, ctx, ctx.regressors(SPECS[name], eff.param))
         xx = x_new if base_cols is None else np.column_stack([base_cols, x_new])
-        theta = np.concatenate([np.concatenate([np.ravel(c) for c in e.coefficients])
-                                for e in effects])
+        theta = np.concatenate(
+            [np.concatenate([np.ravel(c) for c in e.coefficients]) for e in effects]
+        )
         prediction = xx @ theta
     sse1 = _sse(ctx, prediction, ctx.split.test)  # a force loop that diverges: inf
     k = eff.n_params + sum(e.n_params for e in refitted if e.name not in {b.name for b in base})
     k_total = eff.n_params + sum(b.n_params for b in refitted)
     score, p, pays = _judged(sse_reference, sse1, k, k_total, n_eff)
     map_share(refitted + [eff])
-    return Candidate(name, eff, refitted, sse1, sse_reference, n_eff, score, p,
-                     pays and possible(refitted + [eff]), prediction, k, k_total)
+    return Candidate(
+        name,
+        eff,
+        refitted,
+        sse1,
+        sse_reference,
+        n_eff,
+        score,
+        p,
+        pays and possible(refitted + [eff]),
+        prediction,
+        k,
+        k_total,
+    )
 
 
-def _judged(sse0: float, sse1: float, k: int, k_total: int, n_eff: float
-            ) -> tuple[float, float, bool]:
+def _judged(
+    sse0: float, sse1: float, k: int, k_total: int, n_eff: float
+) -> tuple[float, float, bool]:
     """A fit with held-out SSE ``sse1`` and ``k`` parameters more (``k_total`` in all)
     against one with ``sse0`` (module docstring): (Δ score, F-test p, whether it pays:
     p < ALPHA, Δ score < 0 and at least MIN_REDUCTION of sse0 removed)."""
@@ -153,10 +197,12 @@ def _judged(sse0: float, sse1: float, k: int, k_total: int, n_eff: float
         score, p = math.inf, 1.0
     else:
         score = n_eff * math.log(sse1 / sse0) + k * math.log(max(n_eff, 2.0))
-        p = (float(stats.f.sf(((sse0 - sse1) / k) / (sse1 / dof), k, dof))
-             if dof > 1 and sse1 < sse0 else 1.0)
-    return float(score), p, bool(p < ALPHA and score < 0.0
-                                 and sse1 <= (1.0 - MIN_REDUCTION) * sse0)
+        p = (
+            float(stats.f.sf(((sse0 - sse1) / k) / (sse1 / dof), k, dof))
+            if dof > 1 and sse1 < sse0
+            else 1.0
+        )
+    return float(score), p, bool(p < ALPHA and score < 0.0 and sse1 <= (1.0 - MIN_REDUCTION) * sse0)
 
 
 def _sse(ctx: Context, prediction: np.ndarray, part: np.ndarray) -> float:
@@ -171,8 +217,12 @@ def _sse(ctx: Context, prediction: np.ndarray, part: np.ndarray) -> float:
 #: static maps whose φ = N(w) − w must enter with the gain of the signal w they map: the
 #: input (a saturation, dead zone, backlash) or the output (a sensor's clip); each with the
 #: key of its fitted coefficient in ``physical``
-MAPS = {"input_saturation": "input_gain", "dead_zone": "input_gain", "backlash": "input_gain",
-        "output_saturation": "gain"}
+MAPS = {
+    "input_saturation": "input_gain",
+    "dead_zone": "input_gain",
+    "backlash": "input_gain",
+    "output_saturation": "gain",
+}
 
 
 def map_share(effects: list[FittedEffect]) -> None:
@@ -189,16 +239,16 @@ def map_share(effects: list[FittedEffect]) -> None:
     tolerance of a dead time's shift share; a map named in an earlier round keeps its name
     when a later effect takes over part of it (its share is reported, in ``physical``, for
     every map)."""
-    r = next((e.physical.get("input_gain", 0.0) for e in effects
-              if e.name == "linear_refit"), 0.0)
+    r = next((e.physical.get("input_gain", 0.0) for e in effects if e.name == "linear_refit"), 0.0)
     new = effects[-1]
     for e in effects:
         if e.name in MAPS and MAPS[e.name] in e.physical and 1.0 + r > 0.0:
             share = e.physical[MAPS[e.name]] / (1.0 + r)
             e.physical["map_share"] = share
             if e is new:
-                e.physical["plausible"] = bool(e.physical.get("plausible", True)
-                                               and SHARE_RANGE[0] <= share <= SHARE_RANGE[1])
+                e.physical["plausible"] = bool(
+                    e.physical.get("plausible", True) and SHARE_RANGE[0] <= share <= SHARE_RANGE[1]
+                )
 
 
 def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffect:
@@ -232,8 +282,9 @@ def nested_p_value(larger: Candidate, smaller: Candidate, n_eff: float) -> float
 def nested_in(name: str) -> tuple[str, ...]:
     """The candidates that ``name`` contains (`NESTS`; a force effect: the loop's spring)."""
     inner = (NESTS[name],) if name in NESTS else ()
-    return inner + (("stiffness_change",) if name in FORCE_EFFECTS
-                    and name != "stiffness_change" else ())
+    return inner + (
+        ("stiffness_change",) if name in FORCE_EFFECTS and name != "stiffness_change" else ()
+    )
 
 
 def _choose(results: list[Candidate], n_eff: float) -> Candidate | None:
@@ -251,17 +302,34 @@ def _choose(results: list[Candidate], n_eff: float) -> Candidate | None:
     while pool:
         best = pool[0]
         for _ in range(len(results)):
-            down = next((by_name[s] for s in nested_in(best.name) if s in by_name
-                         and nested_p_value(best, by_name[s], n_eff) >= ALPHA), None)
-            up = None if down else next(
-                (c for c in pool if best.name in nested_in(c.name)
-                 and nested_p_value(c, best, n_eff) < ALPHA), None)
+            down = next(
+                (
+                    by_name[s]
+                    for s in nested_in(best.name)
+                    if s in by_name and nested_p_value(best, by_name[s], n_eff) >= ALPHA
+                ),
+                None,
+            )
+            up = (
+                None
+                if down
+                else next(
+                    (
+                        c
+                        for c in pool
+                        if best.name in nested_in(c.name) and nested_p_value(c, best, n_eff) < ALPHA
+                    ),
+                    None,
+                )
+            )
             if down is None and up is None:
                 break
             best = down or up
-        if (best.name == "stiffness_change"
-                and best.effect.physical.get("mode_change") == "damping"
-                and best.effect.physical.get("damping_change_per_s", 0.0) > 0.0):
+        if (
+            best.name == "stiffness_change"
+            and best.effect.physical.get("mode_change") == "damping"
+            and best.effect.physical.get("damping_change_per_s", 0.0) > 0.0
+        ):
             best = by_name.get("viscous_friction", best)
         if best.accepted:
             return best
@@ -286,8 +354,7 @@ class Selection:
 
 #: what a significant numerator refit may be: a pure gain change, a pure shift, or a change
 #: of one parameter of the nominal mode (`mode_lines`: damping, stiffness, mass)
-LINEAR_EXPLANATIONS = ("gain_fault", "dead_time", "mode_damping", "mode_stiffness",
-                       "mode_mass")
+LINEAR_EXPLANATIONS = ("gain_fault", "dead_time", "mode_damping", "mode_stiffness", "mode_mass")
 #: share of the refit's improvement a gain or a shift must account for to be what the refit
 #: is (more than half: the refit's main content)
 MATCH_SHARE = 0.5
@@ -305,8 +372,9 @@ def match_share(name: str) -> float:
     return LINE_MATCH_SHARE if name in MODE_LINES else MATCH_SHARE
 
 
-def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | None = None
-                 ) -> tuple[list[FittedEffect], np.ndarray, dict]:
+def linear_round(
+    ctx: Context, floor_sse: float | None = None, explain: str | None = None
+) -> tuple[list[FittedEffect], np.ndarray, dict]:
     """The refit never swallows an effect silently.
 
     The nominal numerator refit (``linear_refit``) is judged like a candidate. When it is
@@ -332,9 +400,12 @@ def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | No
     sse0 = float(e0 @ e0)
     n_eff = effective_samples(e0)
     refit = evaluate("linear_refit", ctx, [], None, sse0, n_eff)
-    out = {"refit_significant": refit.accepted, "refit_p_value": refit.p_value,
-           "refit_sse_ratio": refit.sse_test / sse0 if sse0 > 0 else 1.0,
-           "explanations": []}
+    out = {
+        "refit_significant": refit.accepted,
+        "refit_p_value": refit.p_value,
+        "refit_sse_ratio": refit.sse_test / sse0 if sse0 > 0 else 1.0,
+        "explanations": [],
+    }
     if not refit.accepted:
         return [refit.effect], refit.prediction, out
     simple, matching = [], []
@@ -346,15 +417,20 @@ def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | No
             continue
         p_refit = nested_p_value(refit, c, n_eff)
         share = (sse0 - c.sse_test) / removed if removed > 0 else 0.0
-        out["explanations"].append({"effect": name, "sse_ratio": c.sse_test / sse0,
-                                    "p_value": c.p_value, "refit_beats_it_p": p_refit,
-                                    "refit_share": share,
-                                    "params": dict(c.effect.physical)})
+        out["explanations"].append(
+            {
+                "effect": name,
+                "sse_ratio": c.sse_test / sse0,
+                "p_value": c.p_value,
+                "refit_beats_it_p": p_refit,
+                "refit_share": share,
+                "params": dict(c.effect.physical),
+            }
+        )
         if name == explain:
             simple = [c]
             break
-        if (c.accepted and p_refit >= ALPHA
-                and (floor_sse is None or c.sse_test <= floor_sse)):
+        if c.accepted and p_refit >= ALPHA and (floor_sse is None or c.sse_test <= floor_sse):
             simple.append(c)
         elif c.accepted and share > match_share(name):
             matching.append(c)
@@ -365,13 +441,19 @@ def linear_round(ctx: Context, floor_sse: float | None = None, explain: str | No
     if matching:
         out["matching"] = min(matching, key=lambda c: c.sse_test).name
     out["unexplained"] = not matching and not any(
-        x["p_value"] < ALPHA and x["refit_beats_it_p"] >= ALPHA for x in out["explanations"])
+        x["p_value"] < ALPHA and x["refit_beats_it_p"] >= ALPHA for x in out["explanations"]
+    )
     return [refit.effect], refit.prediction, out
 
 
-def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
-                   refit_linear: bool = False, floor_sse: float | None = None,
-                   explain: str | None = None) -> Selection:
+def select_effects(
+    ctx: Context,
+    max_effects: int = MAX_EFFECTS,
+    progress=None,
+    refit_linear: bool = False,
+    floor_sse: float | None = None,
+    explain: str | None = None,
+) -> Selection:
     """Rounds of candidate search; see the module docstring.
 
     refit_linear: the nominal model's numerator is refitted jointly with every candidate
@@ -406,9 +488,12 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     elif refit_linear:
         chosen, prediction, linear = linear_round(ctx, floor_sse, explain)
     if chosen:
-        base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
-                                             ctx.regressors(SPECS[e.name], e.param))
-                                     for e in chosen])
+        base_cols = np.column_stack(
+            [
+                columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
+                for e in chosen
+            ]
+        )
         prediction = base_cols @ np.concatenate([np.ravel(c) for c in chosen[0].coefficients])
     rounds: list[list[Candidate]] = []
     spring: dict = {}
@@ -416,8 +501,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     skip = set(LINEAR_EXPLANATIONS) if refit_linear else set()
     while len([e for e in chosen if e.name not in BASE_TERMS]) < max_effects:
         reference = (chosen, prediction)
-        refit_base = bool(rounds) and ctx.form == "simulation" and any(
-            e.name in LOOPED for e in chosen)
+        refit_base = (
+            bool(rounds) and ctx.form == "simulation" and any(e.name in LOOPED for e in chosen)
+        )
         if refit_base:
             # the reference is the base given the fit each candidate gets on top of it
             # (its loop refitted from where it stands, `in_the_loop`): what the loop's
@@ -433,9 +519,11 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
         has_spring = any(e.name in SPRINGS for e in chosen)  # the loop's spring is in
         taken = {e.name for e in chosen} | {NESTS.get(e.name) for e in chosen}
         named_so_far = {e.named_as for e in chosen}
-        remaining = [c for c in ctx.candidates
-                     if c not in taken and c not in skip
-                     and not (has_spring and c == "stiffness_change")]
+        remaining = [
+            c
+            for c in ctx.candidates
+            if c not in taken and c not in skip and not (has_spring and c == "stiffness_change")
+        ]
         results = []
         for name in remaining:
             try:
@@ -455,8 +543,11 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 break
             # the base's loop from the candidate's start did it: that fit of the base is
             # kept when it fits the training part better, and the next candidate is tried
-            reference = min(reference, _possible_or(there, reference),
-                            key=lambda fit: _sse(ctx, fit[1], ctx.split.fit))
+            reference = min(
+                reference,
+                _possible_or(there, reference),
+                key=lambda fit: _sse(ctx, fit[1], ctx.split.fit),
+            )
             best.accepted = False
             best = _choose(results, n_eff)
         if best is None:
@@ -473,29 +564,38 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
                 # the effect named is the change the check found, read by the loop's free
                 # path (the loop's spring reading a mass): one effect, one name, read on
                 # the line, which has no free numerator to bend the mode with
-                return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
-                                      explain=linear["matching"])
+                return select_effects(
+                    ctx, max_effects, progress, refit_linear, floor_sse, explain=linear["matching"]
+                )
             refit = next(e for e in by_mode if e.name == "linear_refit")
-            held = _explanation_on_top(ctx, named, linear["matching"], best.prediction,
-                                       refit.n_params, floor_sse)
+            held = _explanation_on_top(
+                ctx, named, linear["matching"], best.prediction, refit.n_params, floor_sse
+            )
             if held is not None:
-                held.linear = {**linear, "named": linear["matching"],
-                               "on_top_of": [e.named_as for e in held.named
-                                             if e.name != linear["matching"]]}
+                held.linear = {
+                    **linear,
+                    "named": linear["matching"],
+                    "on_top_of": [e.named_as for e in held.named if e.name != linear["matching"]],
+                }
                 held.linear.pop("matching")
                 held.rounds = rounds + held.rounds
                 return held
-        chosen, prediction, check = spring_check(ctx, by_mode, best.prediction, floor_sse,
-                                                 linear)
+        chosen, prediction, check = spring_check(ctx, by_mode, best.prediction, floor_sse, linear)
         spring = check or spring
-        cols = [columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
-                for e in chosen]
+        cols = [
+            columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
+            for e in chosen
+        ]
         base_cols = np.column_stack(cols)
-    if linear.get("matching") and explain is None and not any(
-            e.name not in BASE_TERMS for e in chosen):
+    if (
+        linear.get("matching")
+        and explain is None
+        and not any(e.name not in BASE_TERMS for e in chosen)
+    ):
         # nothing but the refit: name what it matches
-        return select_effects(ctx, max_effects, progress, refit_linear, floor_sse,
-                              explain=linear["matching"])
+        return select_effects(
+            ctx, max_effects, progress, refit_linear, floor_sse, explain=linear["matching"]
+        )
     held_by_later: list[dict] = []
     if explain is None:
         chosen, prediction, held_by_later = _each_pays_on_top(ctx, chosen, prediction)
@@ -512,8 +612,9 @@ def select_effects(ctx: Context, max_effects: int = MAX_EFFECTS, progress=None,
     return Selection(chosen, rounds, prediction, linear, spring, held_by_later)
 
 
-def _each_pays_on_top(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray
-                      ) -> tuple[list[FittedEffect], np.ndarray, list[dict]]:
+def _each_pays_on_top(
+    ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray
+) -> tuple[list[FittedEffect], np.ndarray, list[dict]]:
     """Backward elimination: an effect named before a force effect must still pay on top of
     it, as a candidate would (`_judged`), with the others' loop refitted from where it
     stands without it (`in_the_loop`, as `_beyond_its_start` refits a base). A later
@@ -539,19 +640,22 @@ def _each_pays_on_top(ctx: Context, chosen: list[FittedEffect], prediction: np.n
         if not (math.isfinite(sse_without) and possible(effects)):
             continue
         e0 = ctx.target[test] - without[test]
-        _, p, pays = _judged(sse_without, sse_with, first.n_params, k_total,
-                             effective_samples(e0))
+        _, p, pays = _judged(sse_without, sse_with, first.n_params, k_total, effective_samples(e0))
         if not pays:
-            held = {"effect": first.named_as, "p_value": p,
-                    "held_by": [e.named_as for e in named if e is not first],
-                    "sse_with": sse_with, "sse_without": sse_without}
+            held = {
+                "effect": first.named_as,
+                "p_value": p,
+                "held_by": [e.named_as for e in named if e is not first],
+                "sse_with": sse_with,
+                "sse_without": sse_without,
+            }
             return [mechanics_name(e) for e in effects], without, [held]
     return chosen, prediction, []
 
 
-def _possible_or(fit: tuple[list[FittedEffect], np.ndarray],
-                 fallback: tuple[list[FittedEffect], np.ndarray]
-                 ) -> tuple[list[FittedEffect], np.ndarray]:
+def _possible_or(
+    fit: tuple[list[FittedEffect], np.ndarray], fallback: tuple[list[FittedEffect], np.ndarray]
+) -> tuple[list[FittedEffect], np.ndarray]:
     """``fit`` (effects, contribution) where its effects are physically possible, else
     ``fallback``: a refit of the base whose loop ends where a friction pushes the motion
     is no model of the record, and what a round names must be physically possible."""
@@ -565,8 +669,9 @@ def _stands_for(explanation: str) -> str:
     return LINES[MODE_LINES[explanation]] if explanation in MODE_LINES else explanation
 
 
-def _beyond_its_start(ctx: Context, cand: Candidate
-                      ) -> tuple[bool, tuple[list[FittedEffect], np.ndarray]]:
+def _beyond_its_start(
+    ctx: Context, cand: Candidate
+) -> tuple[bool, tuple[list[FittedEffect], np.ndarray]]:
     """Does ``cand`` pay on top of the base as the candidate's own fit left it? A later
     round's candidate moves the base's loop to another start before the joint fit, and the
     base refitted from there without it (`force.in_the_loop`) may do as well: then what
@@ -581,8 +686,9 @@ def _beyond_its_start(ctx: Context, cand: Candidate
     return _judged(reference, cand.sse_test, cand.k, cand.k_total, cand.n_eff)[2], there
 
 
-def _fit_set(ctx: Context, names: list[str], base: list[FittedEffect]
-             ) -> tuple[list[FittedEffect], np.ndarray, float]:
+def _fit_set(
+    ctx: Context, names: list[str], base: list[FittedEffect]
+) -> tuple[list[FittedEffect], np.ndarray, float]:
     """``names`` fitted in turn on top of ``base`` (jointly refitted, whatever their
     plausibility): (effects, contribution over the record, held-out SSE)."""
     test = ctx.split.test
@@ -590,26 +696,38 @@ def _fit_set(ctx: Context, names: list[str], base: list[FittedEffect]
     prediction = np.zeros_like(ctx.target)
     base_cols = None
     if chosen:
-        base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
-                                             ctx.regressors(SPECS[e.name], e.param))
-                                     for e in chosen])
-        prediction = base_cols @ np.concatenate([np.ravel(c) for e in chosen
-                                                 for c in e.coefficients])
+        base_cols = np.column_stack(
+            [
+                columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
+                for e in chosen
+            ]
+        )
+        prediction = base_cols @ np.concatenate(
+            [np.ravel(c) for e in chosen for c in e.coefficients]
+        )
     for name in names:
         e0 = ctx.target[test] - prediction[test]
         c = evaluate(name, ctx, chosen, base_cols, float(e0 @ e0), effective_samples(e0))
         chosen = c.base + [c.effect]
-        base_cols = np.column_stack([columns(SPECS[e.name], e.param, ctx,
-                                             ctx.regressors(SPECS[e.name], e.param))
-                                     for e in chosen])
+        base_cols = np.column_stack(
+            [
+                columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
+                for e in chosen
+            ]
+        )
         prediction = c.prediction
     e = ctx.target[test] - prediction[test]
     return chosen, prediction, float(e @ e)
 
 
-def _explanation_on_top(ctx: Context, named: list[str], explain: str,
-                        prediction: np.ndarray, refit_params: int, floor_sse: float | None
-                        ) -> Selection | None:
+def _explanation_on_top(
+    ctx: Context,
+    named: list[str],
+    explain: str,
+    prediction: np.ndarray,
+    refit_params: int,
+    floor_sse: float | None,
+) -> Selection | None:
     """Effects ``named`` with the refit in the base (``prediction``; the refit has
     ``refit_params`` numbers), whose refit the check found to be mostly a gain or a shift
     (``explain``): is it still that on top of them? The three nested fits E ⊂ E +
@@ -665,8 +783,13 @@ def _explanation_on_top(ctx: Context, named: list[str], explain: str,
     dof_refit = n_eff - refit_params - sum(e.n_params for e in chosen if e.name != explain)
     if sse_with >= sse_alone or sse_refit >= sse_named or min(dof, dof_refit) <= 1:
         return None  # nothing to explain: the refit adds nothing to E on held-out data
-    p_refit = float(stats.f.sf(((sse_named - sse_refit) / refit_params)
-                               / (sse_refit / dof_refit), refit_params, dof_refit))
+    p_refit = float(
+        stats.f.sf(
+            ((sse_named - sse_refit) / refit_params) / (sse_refit / dof_refit),
+            refit_params,
+            dof_refit,
+        )
+    )
     p = float(stats.f.sf(((sse_alone - sse_with) / k) / (sse_with / dof), k, dof))
     share = (sse_named - sse_with) / (sse_named - sse_refit)
     if p_refit >= ALPHA or p >= ALPHA or share <= match_share(explain):
@@ -684,8 +807,9 @@ def _direction(explanation: FittedEffect) -> float:
     return 1.0
 
 
-def _physical_on_top(ctx: Context, named: list[str], first: list[FittedEffect]
-                     ) -> tuple[list[str], list[FittedEffect], np.ndarray, float] | None:
+def _physical_on_top(
+    ctx: Context, named: list[str], first: list[FittedEffect]
+) -> tuple[list[str], list[FittedEffect], np.ndarray, float] | None:
     """The effects ``named`` refitted on top of ``first`` (`_fit_set`), each the smaller of
     its nested pair (`NESTS`) when the set is not physically possible there (the rounds
     never name an effect that is not): (names, effects, contribution, held-out SSE), or
@@ -697,7 +821,7 @@ def _physical_on_top(ctx: Context, named: list[str], first: list[FittedEffect]
     whether the refit is still the explanation is the share and the F-tests' question."""
     explanation = first[0]
     smaller = [NESTS.get(n, n) for n in named]
-    for names in ([named, smaller] if smaller != named else [named]):
+    for names in [named, smaller] if smaller != named else [named]:
         chosen, pred, sse = _fit_set(ctx, names, first)
         if possible([e for e in chosen if e.name != explanation.name]):
             for e in chosen:
@@ -707,15 +831,15 @@ def _physical_on_top(ctx: Context, named: list[str], first: list[FittedEffect]
     return None
 
 
-def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
-                         explain: str, floor_sse: float | None) -> Selection | None:
+def _without_explanation(
+    ctx: Context, names: list[str], prediction: np.ndarray, explain: str, floor_sse: float | None
+) -> Selection | None:
     """The effects ``names`` named on top of a gain or a shift (``explain``), fitted again
     without it: a friction's describing function or a map's Bussgang gain also looks like
     a gain change. The selection without the explanation when it names the same effects
     and the explanation does not pay on top of them (F-test at ALPHA, its parameters
     against the held-out SSE); None when it does."""
-    alone = select_effects(replace(ctx, candidates=tuple(names)), len(names),
-                           floor_sse=floor_sse)
+    alone = select_effects(replace(ctx, candidates=tuple(names)), len(names), floor_sse=floor_sse)
     if sorted(e.name for e in alone.named) != sorted(names):
         return None
     test = ctx.split.test
@@ -732,10 +856,13 @@ def _without_explanation(ctx: Context, names: list[str], prediction: np.ndarray,
     return alone if float(stats.f.sf(f_stat, k, dof)) >= ALPHA else None
 
 
-
-def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray,
-                 floor_sse: float | None, linear: dict
-                 ) -> tuple[list[FittedEffect], np.ndarray, dict]:
+def spring_check(
+    ctx: Context,
+    chosen: list[FittedEffect],
+    prediction: np.ndarray,
+    floor_sse: float | None,
+    linear: dict,
+) -> tuple[list[FittedEffect], np.ndarray, dict]:
     """The loop's spring never swallows a change of the mechanics silently.
 
     Every force effect brings the loop's spring (``loop_stiffness``, §4.3), unnamed. After
@@ -758,9 +885,12 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     damper added, when named), its prediction and the figures of the check ({} when there
     was nothing to check)."""
     spring = next((e for e in chosen if e.name == "loop_stiffness"), None)
-    if (spring is None or "stiffness_change" not in ctx.candidates
-            or ctx.form != "simulation"
-            or len([e for e in chosen if e.name not in BASE_TERMS]) >= MAX_EFFECTS):
+    if (
+        spring is None
+        or "stiffness_change" not in ctx.candidates
+        or ctx.form != "simulation"
+        or len([e for e in chosen if e.name not in BASE_TERMS]) >= MAX_EFFECTS
+    ):
         return chosen, prediction, {}
     rest = [e for e in chosen if e is not spring]
     _, without = in_the_loop(ctx, rest, rest, spring=False)
@@ -775,9 +905,13 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
     if n_eff - k_total <= 1:
         return chosen, prediction, {"named": False, "pays": False}
     score, p, pays = _judged(sse0, sse1, spring.n_params, k_total, n_eff)
-    check = {"p_value": p, "score": score, "sse_ratio": sse1 / sse0,
-             "above_floor": floor_sse is None or sse0 > floor_sse,
-             "mode_change": spring.physical.get("mode_change")}
+    check = {
+        "p_value": p,
+        "score": score,
+        "sse_ratio": sse1 / sse0,
+        "above_floor": floor_sse is None or sse0 > floor_sse,
+        "mode_change": spring.physical.get("mode_change"),
+    }
     if not (pays and check["above_floor"]):
         check["named"] = False
         return chosen, prediction, check
@@ -786,35 +920,49 @@ def spring_check(ctx: Context, chosen: list[FittedEffect], prediction: np.ndarra
         check.update(named=True, damper=True)
         return damper[0], damper[1], check
     matching = linear.get("matching")
-    check["named"] = (check["mode_change"] in MECHANICS
-                      and MECHANICS[check["mode_change"]] not in {e.named_as for e in rest}
-                      and (matching not in MODE_LINES
-                           or matching == f"mode_{check['mode_change']}"))
+    check["named"] = (
+        check["mode_change"] in MECHANICS
+        and MECHANICS[check["mode_change"]] not in {e.named_as for e in rest}
+        and (matching not in MODE_LINES or matching == f"mode_{check['mode_change']}")
+    )
     if check["named"]:
         key = f"{check['mode_change']}_ratio"
-        line = next((x["params"][key] for x in linear.get("explanations", [])
-                     if x["effect"] == f"mode_{check['mode_change']}"), None)
+        line = next(
+            (
+                x["params"][key]
+                for x in linear.get("explanations", [])
+                if x["effect"] == f"mode_{check['mode_change']}"
+            ),
+            None,
+        )
         check["line_ratio"] = line
         check["named"] = line is None or (line - 1.0) * (spring.physical[key] - 1.0) > 0.0
     if not check["named"]:
         return chosen, prediction, check
-    named = replace(spring, name=MECHANICS[check["mode_change"]],
-                    physical={**spring.physical, "plausible": True})
+    named = replace(
+        spring,
+        name=MECHANICS[check["mode_change"]],
+        physical={**spring.physical, "plausible": True},
+    )
     return rest + [named], prediction, check
 
 
-def _damper_beside_the_spring(ctx: Context, rest: list[FittedEffect], sse_spring: float,
-                              n_eff: float, k_total: int
-                              ) -> tuple[list[FittedEffect], np.ndarray] | None:
+def _damper_beside_the_spring(
+    ctx: Context, rest: list[FittedEffect], sse_spring: float, n_eff: float, k_total: int
+) -> tuple[list[FittedEffect], np.ndarray] | None:
     """``rest`` with a viscous friction in the loop (the spring beside it), when that is
     physically possible and pays on top of the spring's fit (held-out SSE ``sse_spring``,
     ``k_total`` parameters): the spring's free numerator can carry a damper, and the
     friction's free path beside it can bend its mode towards another reading (the rig's
     load damping × 2 read as a mass × 0.835, docs/diagnose.md §9)."""
     width = len(ctx.a_dom)
-    damper = FittedEffect("viscous_friction", None, [np.zeros(width)], n_linear=width,
-                          n_free=width)
+    damper = FittedEffect("viscous_friction", None, [np.zeros(width)], n_linear=width, n_free=width)
     effects, prediction = in_the_loop(ctx, rest + [damper], rest)
-    _, _, pays = _judged(sse_spring, _sse(ctx, prediction, ctx.split.test), damper.n_params,
-                         k_total + damper.n_params, n_eff)
+    _, _, pays = _judged(
+        sse_spring,
+        _sse(ctx, prediction, ctx.split.test),
+        damper.n_params,
+        k_total + damper.n_params,
+        n_eff,
+    )
     return (effects, prediction) if pays and possible(effects) else None

@@ -49,8 +49,9 @@ def measured_transform(n: int, highpass_hz: float, fs_hz: float) -> tuple[np.nda
     return b, a
 
 
-def domain_plant(b_acc: np.ndarray, a_acc: np.ndarray, n: int, highpass_hz: float,
-                 fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
+def domain_plant(
+    b_acc: np.ndarray, a_acc: np.ndarray, n: int, highpass_hz: float, fs_hz: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Lⁿ Ĝ: the model in the measured quantity's domain (L the leaky trapezoid integrator)."""
     p = leaky_pole(highpass_hz, fs_hz)
     b, a = np.asarray(b_acc, float), np.asarray(a_acc, float)
@@ -60,8 +61,9 @@ def domain_plant(b_acc: np.ndarray, a_acc: np.ndarray, n: int, highpass_hz: floa
     return b, a
 
 
-def acceleration_plant(b_dom: np.ndarray, a_dom: np.ndarray, n: int, highpass_hz: float,
-                       fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
+def acceleration_plant(
+    b_dom: np.ndarray, a_dom: np.ndarray, n: int, highpass_hz: float, fs_hz: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Ĝ in acceleration from a model of the measured quantity: B/A · ((1 − p q⁻¹)/T)ⁿ.
 
     The exact inverse of the trapezoid L would put a pole at z = −1; the backward difference
@@ -92,8 +94,9 @@ def highpass_from_input(u: np.ndarray, fs_hz: float) -> float:
 
 def state_estimator(fs_hz: float, highpass_hz: float) -> VelocityEstimator:
     """The integrator used for v from â and x from v (first-order DC block, trapezoid)."""
-    return VelocityEstimator(fs_hz, highpass_hz=highpass_hz, highpass_order=1,
-                             integrator="trapezoid")
+    return VelocityEstimator(
+        fs_hz, highpass_hz=highpass_hz, highpass_order=1, integrator="trapezoid"
+    )
 
 
 class StateChain:

@@ -7,20 +7,18 @@ baseline and form of the test (`baseline`, `inverse`) -> noise floor and dead ti
 
 from __future__ import annotations
 
-from fdi_daemon.diagnose.effects import BASE_TERMS
-
 from dataclasses import dataclass
 
 import numpy as np
 
 from fdi_daemon.diagnose import signals
 from fdi_daemon.diagnose.augment import AugmentedPlant
-from fdi_daemon.diagnose.effects import Context
-from fdi_daemon.diagnose.localize import localize
+from fdi_daemon.diagnose.baseline import in_form, prepare
+from fdi_daemon.diagnose.effects import BASE_TERMS, Context
 from fdi_daemon.diagnose.floor import FLOOR_MARGIN, delay_by_correlation, noise_floor
 from fdi_daemon.diagnose.inverse import noise_floor as inverse_floor
+from fdi_daemon.diagnose.localize import localize
 from fdi_daemon.diagnose.select import Selection, select_effects
-from fdi_daemon.diagnose.baseline import in_form, prepare
 
 
 @dataclass
@@ -42,9 +40,17 @@ class DiagnoseResult:
         return [e.named_as for e in self.selection.chosen if e.name not in BASE_TERMS]
 
 
-def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = "acceleration",
-                 plant_b: np.ndarray | None = None, plant_a: np.ndarray | None = None,
-                 order: int | None = None, progress=None, form: str = "auto") -> DiagnoseResult:
+def run_diagnose(
+    u: np.ndarray,
+    y: np.ndarray,
+    fs_hz: float,
+    output_kind: str = "acceleration",
+    plant_b: np.ndarray | None = None,
+    plant_a: np.ndarray | None = None,
+    order: int | None = None,
+    progress=None,
+    form: str = "auto",
+) -> DiagnoseResult:
     """plant_b/plant_a: Ĝ (acceleration) from a model file; None: fit a linear baseline
     (of ``order``, None: chosen from the data). form: see `baseline.prepare`.
 
@@ -67,8 +73,9 @@ def run_diagnose(u: np.ndarray, y: np.ndarray, fs_hz: float, output_kind: str = 
     best.info["form_reason"] = (
         f"{result.info['form_reason']}: both forms were tested, the effects named left "
         f"{_left(simulated):.3g} of the simulation's gap and {_left(balance):.3g} of the "
-        "force balance's, so the " + ("model is simulated" if best is simulated
-                                      else "force balance is tested"))
+        "force balance's, so the "
+        + ("model is simulated" if best is simulated else "force balance is tested")
+    )
     return best
 
 
@@ -84,35 +91,61 @@ def _diagnose(ctx: Context, info: dict, y: np.ndarray, progress) -> DiagnoseResu
     test = ctx.split.test
     y_meas = info["y_dom"]
     gap_before = signals.nrmse(y_meas[test], ctx.y0[test])
-    floor = (noise_floor(y_meas, y_meas - ctx.y0, ctx.u, fs_hz, ctx.split.warmup, test)
-             if simulated else
-             inverse_floor(y, ctx.output_kind, ctx.u, ctx.target + ctx.y0,
-                           info["inverse_baseline"], ctx.lowpass, fs_hz, test))
-    floor["at_floor"] = bool(floor["floor"] is not None
-                             and gap_before <= FLOOR_MARGIN * floor["floor"])
+    floor = (
+        noise_floor(y_meas, y_meas - ctx.y0, ctx.u, fs_hz, ctx.split.warmup, test)
+        if simulated
+        else inverse_floor(
+            y,
+            ctx.output_kind,
+            ctx.u,
+            ctx.target + ctx.y0,
+            info["inverse_baseline"],
+            ctx.lowpass,
+            fs_hz,
+            test,
+        )
+    )
+    floor["at_floor"] = bool(
+        floor["floor"] is not None and gap_before <= FLOOR_MARGIN * floor["floor"]
+    )
     info["noise_floor"] = floor
     if simulated:
         fit = ctx.split.fit
         info["dead_time_by_correlation_s"] = delay_by_correlation(
-            y_meas[fit], ctx.y0[fit], fs_hz, ctx.max_delay_samples)
+            y_meas[fit], ctx.y0[fit], fs_hz, ctx.max_delay_samples
+        )
     if floor["at_floor"]:  # nothing to find: the nominal model is as good as the noise
         selection = Selection([], [], np.zeros_like(ctx.target))
     else:
-        floor_sse = (None if floor["floor"] is None else
-                     (FLOOR_MARGIN * floor["floor"]) ** 2
-                     * float(np.sum((y_meas[test] - np.mean(y_meas[test])) ** 2)))
-        selection = select_effects(ctx, progress=progress, refit_linear=True,
-                                   floor_sse=floor_sse)
-    plant = AugmentedPlant(fs_hz, info["plant_b"], info["plant_a"], ctx.output_kind,
-                           info["highpass_hz"], selection.chosen if simulated else [],
-                           domain=info["domain"])
+        floor_sse = (
+            None
+            if floor["floor"] is None
+            else (FLOOR_MARGIN * floor["floor"]) ** 2
+            * float(np.sum((y_meas[test] - np.mean(y_meas[test])) ** 2))
+        )
+        selection = select_effects(ctx, progress=progress, refit_linear=True, floor_sse=floor_sse)
+    plant = AugmentedPlant(
+        fs_hz,
+        info["plant_b"],
+        info["plant_a"],
+        ctx.output_kind,
+        info["highpass_hz"],
+        selection.chosen if simulated else [],
+        domain=info["domain"],
+    )
     y_after = plant.run(ctx.u) if simulated else ctx.y0 + selection.prediction
     e_before = y_meas - ctx.y0
     e_after = y_meas - y_after
     return DiagnoseResult(
-        ctx=ctx, info=info, selection=selection, plant=plant, y_measured=y_meas,
-        y_before=ctx.y0, y_after=y_after,
+        ctx=ctx,
+        info=info,
+        selection=selection,
+        plant=plant,
+        y_measured=y_meas,
+        y_before=ctx.y0,
+        y_after=y_after,
         gap_before=gap_before,
         gap_after=signals.nrmse(y_meas[test], y_after[test]),
         where_before=localize(e_before, y_meas, ctx.u, ctx.v, ctx.x, fs_hz, test),
-        where_after=localize(e_after, y_meas, ctx.u, ctx.v, ctx.x, fs_hz, test))
+        where_after=localize(e_after, y_meas, ctx.u, ctx.v, ctx.x, fs_hz, test),
+    )

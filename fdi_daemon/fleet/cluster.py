@@ -40,13 +40,17 @@ def dask_client(scheduler: str | None, workers: int):
             yield client
         return
     with _sigint_ignored():  # the worker processes inherit it: Ctrl-C is the parent's job
-        cluster = dd.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address=None,
-                                  # no dashboard, yet the scheduler's HTTP server took port
-                                  # 8787 (and warned "already in use" beside another run)
-                                  scheduler_kwargs={"dashboard": False,
-                                                    "dashboard_address": "127.0.0.1:0"},
-                                  silence_logs=logging.ERROR)
+        cluster = dd.LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+            # no dashboard, yet the scheduler's HTTP server took port
+            # 8787 (and warned "already in use" beside another run)
+            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+            silence_logs=logging.ERROR,
+        )
     interrupted = False
     try:
         with dd.Client(cluster) as client:
@@ -87,10 +91,12 @@ def _sigint_ignored():
         signal.signal(signal.SIGINT, previous)
 
 
-def replay_fleet(jobs: Sequence[tuple[str, str | None]], client,
-                 on_row: Callable[[dict[str, Any]], None] | None = None,
-                 task: Callable[[str, str | None], dict[str, Any]] = replay_row
-                 ) -> list[dict[str, Any]]:
+def replay_fleet(
+    jobs: Sequence[tuple[str, str | None]],
+    client,
+    on_row: Callable[[dict[str, Any]], None] | None = None,
+    task: Callable[[str, str | None], dict[str, Any]] = replay_row,
+) -> list[dict[str, Any]]:
     """One row per ``(recording, model file or None)``, in the order of ``jobs``.
 
     Every file is one ``task(file, model)`` (`replay_row`, which never raises). A task
@@ -122,8 +128,9 @@ def replay_fleet(jobs: Sequence[tuple[str, str | None]], client,
         try:
             rows[i] = alone.result()
         except Exception as exc:
-            rows[i] = summary_row(files[i], models[i],
-                                  error=f"worker failed: {type(exc).__name__}: {exc}")
+            rows[i] = summary_row(
+                files[i], models[i], error=f"worker failed: {type(exc).__name__}: {exc}"
+            )
         finally:
             alone.release()
         if on_row is not None:

@@ -32,8 +32,11 @@ def find_recordings(dir_or_glob: str) -> list[str]:
     glob (``**`` recurses), sorted; UserError when there are none."""
     path = Path(dir_or_glob)
     if path.is_dir():
-        found = [str(p) for p in path.iterdir()
-                 if p.is_file() and p.name.lower().endswith(RECORDING_SUFFIXES)]
+        found = [
+            str(p)
+            for p in path.iterdir()
+            if p.is_file() and p.name.lower().endswith(RECORDING_SUFFIXES)
+        ]
     elif _GLOB_CHARS & set(dir_or_glob):
         found = [p for p in glob.glob(dir_or_glob, recursive=True) if Path(p).is_file()]
     elif path.is_file():
@@ -41,8 +44,10 @@ def find_recordings(dir_or_glob: str) -> list[str]:
     else:
         raise UserError(f"{dir_or_glob}: no such folder or file, and not a glob pattern")
     if not found:
-        raise UserError(f"{dir_or_glob}: no recordings found "
-                        f"(a folder is searched for {', '.join(RECORDING_SUFFIXES)})")
+        raise UserError(
+            f"{dir_or_glob}: no recordings found "
+            f"(a folder is searched for {', '.join(RECORDING_SUFFIXES)})"
+        )
     return sorted(found)
 
 
@@ -54,26 +59,29 @@ class ModelMap:
     entries: tuple[tuple[str, str], ...]  # (key, model path), in the file's order
 
     @classmethod
-    def single(cls, model: str) -> "ModelMap":
+    def single(cls, model: str) -> ModelMap:
         """Every recording with the same model (``--model``)."""
         if not Path(model).is_file():
             raise UserError(f"{model}: no such model file")
         return cls("--model", (("*", model),))
 
     @classmethod
-    def load(cls, path: str | Path) -> "ModelMap":
+    def load(cls, path: str | Path) -> ModelMap:
         from fdi_daemon.io.yaml_file import read_yaml
 
         data = read_yaml(path, "model map")
         if not isinstance(data, dict) or not data:
-            raise ConfigError(f"{path}: a model map is a mapping of file names or glob "
-                              f"patterns to model files, e.g. '\"rig-07-*\": rig07.yaml'")
+            raise ConfigError(
+                f"{path}: a model map is a mapping of file names or glob "
+                f"patterns to model files, e.g. '\"rig-07-*\": rig07.yaml'"
+            )
         base = Path(path).parent
         entries = []
         for key, model in data.items():
             if not isinstance(key, str) or not isinstance(model, str) or not model:
-                raise ConfigError(f"{path}: {key!r}: expected a pattern and a model file "
-                                  f"path, got {model!r}")
+                raise ConfigError(
+                    f"{path}: {key!r}: expected a pattern and a model file path, got {model!r}"
+                )
             model_path = base / model
             if not model_path.is_file():
                 raise ConfigError(f"{path}: {key}: model file {model_path} does not exist")

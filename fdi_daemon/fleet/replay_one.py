@@ -22,10 +22,23 @@ from typing import Any
 Runner = Callable[[Any, Any, int], tuple[list[dict[str, Any]], Any]]
 
 #: columns of the fleet table, in order (docs/fleet.md)
-ROW_COLUMNS = ("file", "model", "samples", "fs", "alarm_episodes", "alarms",
-               "alarm_peak_priority", "first_detection_t",
-               "isolated_t", "classification", "friction_level_final", "gaps",
-               "missing_samples", "bad_samples", "error")
+ROW_COLUMNS = (
+    "file",
+    "model",
+    "samples",
+    "fs",
+    "alarm_episodes",
+    "alarms",
+    "alarm_peak_priority",
+    "first_detection_t",
+    "isolated_t",
+    "classification",
+    "friction_level_final",
+    "gaps",
+    "missing_samples",
+    "bad_samples",
+    "error",
+)
 
 
 @dataclass
@@ -44,10 +57,14 @@ def run_batch(monitor, rec, stride: int):
     return monitor.run(rec, trace_every=stride)
 
 
-def replay_recording(recording: str | Path, model_path: str | Path,
-                     runner: Runner = run_batch,
-                     columns: Mapping[str, str] | None = None,
-                     alarm_settings=None, status_period_s: float | None = None) -> Replay:
+def replay_recording(
+    recording: str | Path,
+    model_path: str | Path,
+    runner: Runner = run_batch,
+    columns: Mapping[str, str] | None = None,
+    alarm_settings=None,
+    status_period_s: float | None = None,
+) -> Replay:
     """Replay ``recording`` with the model file ``model_path``; UserError on bad input.
 
     columns: fdi name -> the file's column name (``--columns``), as `read_recording` takes.
@@ -56,8 +73,7 @@ def replay_recording(recording: str | Path, model_path: str | Path,
     """
     import numpy as np
 
-    from fdi_daemon.alarms.replay import (STATUS_PERIOD_S, alarm_events, merge_events,
-                                          status_stride)
+    from fdi_daemon.alarms.replay import STATUS_PERIOD_S, alarm_events, merge_events, status_stride
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.detect.summary import replay_summary
     from fdi_daemon.errors import UserError
@@ -67,22 +83,29 @@ def replay_recording(recording: str | Path, model_path: str | Path,
     model = load_model(model_path)
     rec = read_recording(recording, strict=False, columns=columns)
     if not same_rate(rec.fs, model.fs):
-        raise UserError(f"{recording}: sampled at {rec.fs:g} Hz but the model is for "
-                        f"{model.fs:g} Hz")
+        raise UserError(
+            f"{recording}: sampled at {rec.fs:g} Hz but the model is for {model.fs:g} Hz"
+        )
     monitor = Monitor(model)
     stride = status_stride(model.fs, status_period_s or STATUS_PERIOD_S)
     events, trace = runner(monitor, rec, stride)
     events = merge_events(events, alarm_events(monitor, events, trace, stride, alarm_settings))
     snap = monitor.snapshot()
     levels = trace.friction_level[np.isfinite(trace.friction_level)]
-    summary = replay_summary(events, len(rec), model.fs, monitor.settings.method,
-                             (snap["theta1"], snap["theta2"]),
-                             float(levels[-1]) if levels.size else None)
+    summary = replay_summary(
+        events,
+        len(rec),
+        model.fs,
+        monitor.settings.method,
+        (snap["theta1"], snap["theta2"]),
+        float(levels[-1]) if levels.size else None,
+    )
     return Replay(rec, monitor, events, trace, summary)
 
 
-def summary_row(file: str, model: str | None, summary: dict[str, Any] | None = None,
-                error: str | None = None) -> dict[str, Any]:
+def summary_row(
+    file: str, model: str | None, summary: dict[str, Any] | None = None, error: str | None = None
+) -> dict[str, Any]:
     """One row of the fleet table from a replay summary, or from the error that stopped it."""
     s = summary or {}
     return {
@@ -110,8 +133,7 @@ def replay_row(file: str, model: str | None) -> dict[str, Any]:
     from fdi_daemon.errors import UserError
 
     if model is None:
-        return summary_row(file, None, error="no model: the model map has no pattern for "
-                                             "this file")
+        return summary_row(file, None, error="no model: the model map has no pattern for this file")
     try:
         return summary_row(file, model, replay_recording(file, model).summary)
     except UserError as exc:

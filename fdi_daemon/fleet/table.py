@@ -3,19 +3,31 @@
 from __future__ import annotations
 
 import csv
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from fdi_daemon.errors import UserError
 from fdi_daemon.fleet.replay_one import ROW_COLUMNS
 
 #: Parquet column types (pyarrow type names); CSV writes an empty cell for a missing value
-PARQUET_TYPES = {"file": "string", "model": "string", "samples": "int64", "fs": "float64",
-                 "alarm_episodes": "int64", "alarms": "int64",
-                 "alarm_peak_priority": "int64", "first_detection_t": "float64",
-                 "isolated_t": "float64", "classification": "string",
-                 "friction_level_final": "float64", "gaps": "int64",
-                 "missing_samples": "int64", "bad_samples": "int64", "error": "string"}
+PARQUET_TYPES = {
+    "file": "string",
+    "model": "string",
+    "samples": "int64",
+    "fs": "float64",
+    "alarm_episodes": "int64",
+    "alarms": "int64",
+    "alarm_peak_priority": "int64",
+    "first_detection_t": "float64",
+    "isolated_t": "float64",
+    "classification": "string",
+    "friction_level_final": "float64",
+    "gaps": "int64",
+    "missing_samples": "int64",
+    "bad_samples": "int64",
+    "error": "string",
+}
 
 
 def write_table(path: str | Path, rows: Sequence[dict[str, Any]]) -> None:
@@ -41,7 +53,8 @@ def _write_parquet(path: Path, rows: Sequence[dict[str, Any]]) -> None:
         import pyarrow as pa
         import pyarrow.parquet as pq
     except ImportError:
-        raise UserError(f"{path}: writing Parquet needs pyarrow: pip install 'fdi[fleet]' "
-                        f"(or write .csv)") from None
+        raise UserError(
+            f"{path}: writing Parquet needs pyarrow: pip install 'fdi[fleet]' (or write .csv)"
+        ) from None
     schema = pa.schema([(name, getattr(pa, PARQUET_TYPES[name])()) for name in ROW_COLUMNS])
     pq.write_table(pa.Table.from_pylist(list(rows), schema=schema), path)

@@ -51,18 +51,26 @@ def initial_pulse_count(nb: int, nf: int, nk: int) -> int:
 def _regressors(u: np.ndarray, y: np.ndarray, nb: int, nf: int, nk: int, start: int):
     """ARX regressors [−y(t−1..t−nf), u(t−nk..t−nk−nb+1)] for t >= start."""
     n = len(u)
-    cols = [-y[start - k: n - k] for k in range(1, nf + 1)]
-    cols += [u[start - nk - k: n - nk - k] for k in range(nb)]
+    cols = [-y[start - k : n - k] for k in range(1, nf + 1)]
+    cols += [u[start - nk - k : n - nk - k] for k in range(nb)]
     return np.column_stack(cols), y[start:]
 
 
-def arx_start(u: np.ndarray, y: np.ndarray, nb: int, nf: int, nk: int,
-              sm_iterations: int = 20, tolerance: float = 1e-8) -> tuple[np.ndarray, np.ndarray]:
+def arx_start(
+    u: np.ndarray,
+    y: np.ndarray,
+    nb: int,
+    nf: int,
+    nk: int,
+    sm_iterations: int = 20,
+    tolerance: float = 1e-8,
+) -> tuple[np.ndarray, np.ndarray]:
     """Stable (b, f) from ARX then Steiglitz–McBride iterations."""
     start = initial_pulse_count(nb, nf, nk)
     if len(u) <= start + nb + nf:
-        raise ValueError(f"window of {len(u)} samples is too short for [nb nf nk] = "
-                         f"[{nb} {nf} {nk}]")
+        raise ValueError(
+            f"window of {len(u)} samples is too short for [nb nf nk] = [{nb} {nf} {nk}]"
+        )
     f = np.ones(1 + nf)
     b = np.zeros(nb)
     best = None
@@ -96,16 +104,16 @@ class _Problem:
         self._cache_x = None
 
     def unpack(self, x):
-        b = x[:self.nb]
-        f = stable_poly.poly_from_eta(x[self.nb:self.nb + self.nf], self.radius)
-        d = x[self.nb + self.nf:]
+        b = x[: self.nb]
+        f = stable_poly.poly_from_eta(x[self.nb : self.nb + self.nf], self.radius)
+        d = x[self.nb + self.nf :]
         return b, f, d
 
     def simulate(self, x):
         b, f, d = self.unpack(x)
         drive = np.zeros(len(self.u))
-        drive[self.nk:] = signal.lfilter(b, [1.0], self.u)[:len(self.u) - self.nk]
-        drive[:self.ni] += d
+        drive[self.nk :] = signal.lfilter(b, [1.0], self.u)[: len(self.u) - self.nk]
+        drive[: self.ni] += d
         return signal.lfilter([1.0], f, drive)
 
     def residual(self, x):
@@ -121,14 +129,14 @@ class _Problem:
         jac = np.zeros((n, self.nb + self.nf + self.ni))
         for k in range(self.nb):
             s = self.nk + k
-            jac[s:, k] = -u_f[:n - s]
+            jac[s:, k] = -u_f[: n - s]
         dyf = np.zeros((n, self.nf))
         for k in range(1, self.nf + 1):
-            dyf[k:, k - 1] = y_f[:n - k]
-        eta = x[self.nb:self.nb + self.nf]
-        jac[:, self.nb:self.nb + self.nf] = dyf @ stable_poly.poly_eta_jacobian(eta, self.radius)
+            dyf[k:, k - 1] = y_f[: n - k]
+        eta = x[self.nb : self.nb + self.nf]
+        jac[:, self.nb : self.nb + self.nf] = dyf @ stable_poly.poly_eta_jacobian(eta, self.radius)
         for k in range(self.ni):
-            jac[k:, self.nb + self.nf + k] = -imp[:n - k]
+            jac[k:, self.nb + self.nf + k] = -imp[: n - k]
         return jac
 
     def initial_pulses_for(self, b, f):
@@ -138,13 +146,20 @@ class _Problem:
         imp = signal.lfilter([1.0], f, self.pulses[:, 0])
         basis = np.zeros((len(self.u), self.ni))
         for k in range(self.ni):
-            basis[k:, k] = imp[:len(self.u) - k]
+            basis[k:, k] = imp[: len(self.u) - k]
         return np.linalg.lstsq(basis, base, rcond=None)[0]
 
 
-def fit_output_error(u: np.ndarray, y: np.ndarray, nb: int = 4, nf: int = 3, nk: int = 0,
-                     start: tuple[np.ndarray, np.ndarray] | None = None,
-                     max_evaluations: int = 100, max_pole_radius: float | None = None) -> OEFit:
+def fit_output_error(
+    u: np.ndarray,
+    y: np.ndarray,
+    nb: int = 4,
+    nf: int = 3,
+    nk: int = 0,
+    start: tuple[np.ndarray, np.ndarray] | None = None,
+    max_evaluations: int = 100,
+    max_pole_radius: float | None = None,
+) -> OEFit:
     """Prediction-error fit of y = q^-nk B/F u + e (eq. 8) on one window.
 
     start: (b, f) to warm-start from (e.g. the fit at a neighbouring γ); default ARX then
@@ -169,9 +184,24 @@ def fit_output_error(u: np.ndarray, y: np.ndarray, nb: int = 4, nf: int = 3, nk:
     problem = _Problem(u, y, nb, nf, nk, radius)
     d0 = problem.initial_pulses_for(b0, f0)
     x0 = np.concatenate([b0, stable_poly.eta_from_poly(f0, radius), d0])
-    sol = least_squares(problem.residual, x0, jac=problem.jacobian, method="lm",
-                        x_scale="jac", max_nfev=max_evaluations, xtol=1e-7, ftol=1e-7)
+    sol = least_squares(
+        problem.residual,
+        x0,
+        jac=problem.jacobian,
+        method="lm",
+        x_scale="jac",
+        max_nfev=max_evaluations,
+        xtol=1e-7,
+        ftol=1e-7,
+    )
     b, f, d = problem.unpack(sol.x)
     y_sim = problem.simulate(sol.x)
-    return OEFit(b=b.copy(), f=f, nk=nk, initial_pulses=d.copy(),
-                 sse=float(np.sum((y - y_sim) ** 2)), y_sim=y_sim, evaluations=int(sol.nfev))
+    return OEFit(
+        b=b.copy(),
+        f=f,
+        nk=nk,
+        initial_pulses=d.copy(),
+        sse=float(np.sum((y - y_sim) ** 2)),
+        y_sim=y_sim,
+        evaluations=int(sol.nfev),
+    )

@@ -20,8 +20,14 @@ from fdi_daemon.io.outputs import pyplot, save_figure
 
 
 def _legend_above(ax, ncol: int = 2) -> None:
-    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), ncol=ncol, fontsize=8,
-              frameon=False, borderaxespad=0.2)
+    ax.legend(
+        loc="lower right",
+        bbox_to_anchor=(1.0, 1.0),
+        ncol=ncol,
+        fontsize=8,
+        frameon=False,
+        borderaxespad=0.2,
+    )
 
 
 def phase_on_model_branch(G: np.ndarray, model: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -40,22 +46,34 @@ def zoom_window(t: np.ndarray, error: np.ndarray, span_s: float) -> np.ndarray:
     energy = np.convolve(np.asarray(error, dtype=float) ** 2, np.ones(width), mode="valid")
     start = int(np.argmax(energy))
     mask = np.zeros(n, dtype=bool)
-    mask[start:start + width] = True
+    mask[start : start + width] = True
     return mask
 
 
-def plot_identification(path: str | Path, fr, model_response: np.ndarray,
-                        band_hz: tuple[float, float], validation: dict | None = None,
-                        title: str = "", zoom_s: float = 0.5) -> Path:
+def plot_identification(
+    path: str | Path,
+    fr,
+    model_response: np.ndarray,
+    band_hz: tuple[float, float],
+    validation: dict | None = None,
+    title: str = "",
+    zoom_s: float = 0.5,
+) -> Path:
     """Fig. 4 (+ coherence, + validation time series when given: whole, and a `zoom_s`
     long stretch where the simulation misses most)."""
-    return save_figure(identification_figure(fr, model_response, band_hz, validation, title,
-                                             zoom_s), path)
+    return save_figure(
+        identification_figure(fr, model_response, band_hz, validation, title, zoom_s), path
+    )
 
 
-def identification_figure(fr, model_response: np.ndarray, band_hz: tuple[float, float],
-                          validation: dict | None = None, title: str = "",
-                          zoom_s: float = 0.5):
+def identification_figure(
+    fr,
+    model_response: np.ndarray,
+    band_hz: tuple[float, float],
+    validation: dict | None = None,
+    title: str = "",
+    zoom_s: float = 0.5,
+):
     """The figure of `plot_identification` (not yet saved)."""
     plt = pyplot()
     rows = 5 if validation is not None else 3
@@ -65,8 +83,7 @@ def identification_figure(fr, model_response: np.ndarray, band_hz: tuple[float, 
     shown = sel & (f <= min(f[-1], max(4 * band_hz[1], band_hz[1] + 10)))
     ax_mag, ax_ph, ax_coh = axes[:3]
     ax_mag.loglog(f[shown], np.abs(fr.G[shown]), ".", ms=3, color="0.4", label="data G(ω)")
-    ax_mag.loglog(f[shown], np.abs(model_response[shown]), "-", color="C0",
-                  label="model Ĝ")
+    ax_mag.loglog(f[shown], np.abs(model_response[shown]), "-", color="C0", label="model Ĝ")
     ax_mag.set_ylabel("|G| (m/s² per V)")
     _legend_above(ax_mag)
     model_deg, data_deg = phase_on_model_branch(fr.G[shown], model_response[shown])
@@ -83,17 +100,20 @@ def identification_figure(fr, model_response: np.ndarray, band_hz: tuple[float, 
     for ax in (ax_mag, ax_ph, ax_coh):
         ax.axvspan(band_hz[0], band_hz[1], color="C1", alpha=0.12, lw=0)
         ax.grid(True, which="both", alpha=0.3)
-    ax_mag.set_title(title or "Frequency response (shaded: fitted band)", loc="left",
-                     fontsize=10)
+    ax_mag.set_title(title or "Frequency response (shaded: fitted band)", loc="left", fontsize=10)
     if validation is not None:
         t, y, y_sim = validation["t"], validation["y"], validation["y_sim"]
         zoom = zoom_window(t, y - y_sim, zoom_s)
         ax_all, ax_zoom = axes[3], axes[4]
         for ax, sel in ((ax_all, slice(None)), (ax_zoom, zoom)):
-            ax.plot(t[sel], y[sel], color="0.4", lw=0.6 if ax is ax_all else 1.0,
-                    label="measured")
-            ax.plot(t[sel], y_sim[sel], color="C0", lw=0.6 if ax is ax_all else 1.0,
-                    label=f"simulated (fit {validation['fit_percent']:.1f} %)")
+            ax.plot(t[sel], y[sel], color="0.4", lw=0.6 if ax is ax_all else 1.0, label="measured")
+            ax.plot(
+                t[sel],
+                y_sim[sel],
+                color="C0",
+                lw=0.6 if ax is ax_all else 1.0,
+                label=f"simulated (fit {validation['fit_percent']:.1f} %)",
+            )
             ax.set_xlabel("t (s)")
             ax.set_ylabel("accel (m/s²)")
             ax.grid(True, alpha=0.3)
@@ -101,8 +121,9 @@ def identification_figure(fr, model_response: np.ndarray, band_hz: tuple[float, 
         ax_all.axvspan(t[zoom][0], t[zoom][-1], color="C1", alpha=0.35, lw=0, label="zoom")
         _legend_above(ax_all, ncol=4)
         ax_all.set_title(validation.get("label", "validation"), loc="left", fontsize=9)
-        ax_zoom.set_title(f"zoom: the {zoom_s:g} s where the simulation misses most",
-                          loc="left", fontsize=9)
+        ax_zoom.set_title(
+            f"zoom: the {zoom_s:g} s where the simulation misses most", loc="left", fontsize=9
+        )
     return fig
 
 
@@ -110,21 +131,38 @@ def moving_rms(x: np.ndarray, width: int) -> np.ndarray:
     """RMS over a centred window of `width` samples (shorter at the ends)."""
     x2 = np.asarray(x, dtype=float) ** 2
     kernel = np.ones(max(1, width))
-    return np.sqrt(np.convolve(x2, kernel, mode="same") / np.convolve(np.ones_like(x2), kernel,
-                                                                       mode="same"))
+    return np.sqrt(
+        np.convolve(x2, kernel, mode="same") / np.convolve(np.ones_like(x2), kernel, mode="same")
+    )
 
 
-def plot_signature(path: str | Path, t: np.ndarray, residual: np.ndarray, result,
-                   title: str = "", zoom_s: float = 1.0,
-                   residual_label: str = "acceleration residual r", velocity: str = "") -> Path:
+def plot_signature(
+    path: str | Path,
+    t: np.ndarray,
+    residual: np.ndarray,
+    result,
+    title: str = "",
+    zoom_s: float = 1.0,
+    residual_label: str = "acceleration residual r",
+    velocity: str = "",
+) -> Path:
     """Fig. 8 and the γ cost profile (`signature_figure`); returns the path."""
-    return save_figure(signature_figure(t, residual, result, title, zoom_s, residual_label,
-                                        velocity=velocity), path)
+    return save_figure(
+        signature_figure(t, residual, result, title, zoom_s, residual_label, velocity=velocity),
+        path,
+    )
 
 
-def signature_figure(t: np.ndarray, residual: np.ndarray, result, title: str = "",
-                     zoom_s: float = 1.0, residual_label: str = "acceleration residual r",
-                     rms_s: float = 0.25, velocity: str = ""):
+def signature_figure(
+    t: np.ndarray,
+    residual: np.ndarray,
+    result,
+    title: str = "",
+    zoom_s: float = 1.0,
+    residual_label: str = "acceleration residual r",
+    rms_s: float = 0.25,
+    velocity: str = "",
+):
     """Fig. 8 as the RMS over `rms_s` of the fitted residual (as it was filtered for the fit:
     `residual_label`), of G_e x_f and of their difference over the whole window (the traces
     themselves would be a solid block), the traces over the last `zoom_s` seconds, and the
@@ -138,8 +176,9 @@ def signature_figure(t: np.ndarray, residual: np.ndarray, result, title: str = "
     width = int(round(rms_s * fs))
     ax_t.plot(t, moving_rms(residual, width), color="0.35", lw=1.0, label=residual_label)
     ax_t.plot(t, moving_rms(model, width), color="C0", lw=1.0, label=f"G_e x_f, {gamma_text}")
-    ax_t.plot(t, moving_rms(residual - model, width), color="C3", lw=1.0,
-              label="unexplained (difference)")
+    ax_t.plot(
+        t, moving_rms(residual - model, width), color="C3", lw=1.0, label="unexplained (difference)"
+    )
     zoom = t >= t[-1] - zoom_s
     ax_t.axvspan(t[zoom][0], t[-1], color="C1", alpha=0.25, lw=0, label="zoom below")
     ax_t.set_ylabel(f"RMS over {rms_s:g} s (m/s²)")
@@ -150,23 +189,30 @@ def signature_figure(t: np.ndarray, residual: np.ndarray, result, title: str = "
     for ax in (ax_t, ax_z):
         ax.set_xlabel("t (s)")
         ax.grid(True, alpha=0.3)
-    ax_t.legend(loc="upper left", bbox_to_anchor=(0.0, -0.2), ncol=2, fontsize=8,
-                frameon=False)
+    ax_t.legend(loc="upper left", bbox_to_anchor=(0.0, -0.2), ncol=2, fontsize=8, frameon=False)
     _legend_above(ax_z)
-    ax_t.set_title(title or f"Residual and filtered friction signal (paper Fig. 8): "
-                            f"{result.info.get('fit_percent', float('nan')):.1f} % explained"
-                            + (f", velocity {velocity}" if velocity else ""),
-                   loc="left", fontsize=10)
+    ax_t.set_title(
+        title
+        or f"Residual and filtered friction signal (paper Fig. 8): "
+        f"{result.info.get('fit_percent', float('nan')):.1f} % explained"
+        + (f", velocity {velocity}" if velocity else ""),
+        loc="left",
+        fontsize=10,
+    )
     ax_z.set_title(f"last {zoom_s:g} s of the window", loc="left", fontsize=9)
     rel = result.relative_cost()
     ax_g.plot(result.grid, rel, "o-", ms=3, color="C0", label="cost")
-    ax_g.axvspan(result.interval[0], result.interval[1], color="C1", alpha=0.15, lw=0,
-                 label="99 % interval")
+    ax_g.axvspan(
+        result.interval[0], result.interval[1], color="C1", alpha=0.15, lw=0, label="99 % interval"
+    )
     ax_g.axvline(result.gamma_f, color="C3", lw=1, label=gamma_text)
     ax_g.set_xlabel("γ (s/m)")
     ax_g.set_ylabel("SSE(γ) / SSE(γ_f)")
-    ax_g.set_title("cost profile" + ("  —  FLAT: γ_f not identifiable" if result.flat else ""),
-                   loc="left", fontsize=9)
+    ax_g.set_title(
+        "cost profile" + ("  —  FLAT: γ_f not identifiable" if result.flat else ""),
+        loc="left",
+        fontsize=9,
+    )
     _legend_above(ax_g, ncol=3)
     ax_g.grid(True, alpha=0.3)
     return fig

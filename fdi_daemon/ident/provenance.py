@@ -22,8 +22,12 @@ def utc_now_iso() -> str:
 
 def source_entry(path: str | Path, command: list[str]) -> dict:
     """{source, source_sha256, date_utc, command} for a model's provenance."""
-    return {"source": str(path), "source_sha256": file_sha256(path), "date_utc": utc_now_iso(),
-            "command": " ".join(shlex.quote(part) for part in command)}
+    return {
+        "source": str(path),
+        "source_sha256": file_sha256(path),
+        "date_utc": utc_now_iso(),
+        "command": " ".join(shlex.quote(part) for part in command),
+    }
 
 
 def command_line(command: str, args, positional: tuple[str, ...] = ("recording",)) -> list[str]:

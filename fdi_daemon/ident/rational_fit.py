@@ -89,17 +89,30 @@ def _refine(b, a, G, weight, zb, za, radius):
     nb = zb.shape[1]
     x0 = np.concatenate([b, stable_poly.eta_from_poly(a, radius)])
     sol = least_squares(
-        lambda p: _residual_and_jacobian(p, G, weight, zb, za, nb, radius, False), x0,
+        lambda p: _residual_and_jacobian(p, G, weight, zb, za, nb, radius, False),
+        x0,
         jac=lambda p: _residual_and_jacobian(p, G, weight, zb, za, nb, radius, True),
-        method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10, max_nfev=200)
+        method="lm",
+        x_scale="jac",
+        xtol=1e-10,
+        ftol=1e-10,
+        max_nfev=200,
+    )
     b_new = sol.x[:nb]
     a_new = stable_poly.poly_from_eta(sol.x[nb:], radius)
     return b_new, a_new, float(2.0 * sol.cost), int(sol.nfev)
 
 
-def fit_rational(freq_hz: np.ndarray, G: np.ndarray, fs_hz: float, order: int = 4,
-                 weight: np.ndarray | None = None, max_pole_radius: float = 1.0,
-                 max_sk_iterations: int = 50, sk_tolerance: float = 1e-9) -> RationalFit:
+def fit_rational(
+    freq_hz: np.ndarray,
+    G: np.ndarray,
+    fs_hz: float,
+    order: int = 4,
+    weight: np.ndarray | None = None,
+    max_pole_radius: float = 1.0,
+    max_sk_iterations: int = 50,
+    sk_tolerance: float = 1e-9,
+) -> RationalFit:
     """Fit Ĝ = B/A of the given order (b0 = 0) to G on freq_hz, eq. (2).
 
     weight: W_k (default 1/|G_k|, the paper's choice). Needs at least `order` points.
@@ -111,8 +124,9 @@ def fit_rational(freq_hz: np.ndarray, G: np.ndarray, fs_hz: float, order: int = 
     if order < 1:
         raise ValueError("model order must be >= 1")
     if len(freq_hz) < order:
-        raise ValueError(f"{len(freq_hz)} frequency points are too few for order {order} "
-                         f"(need >= {order})")
+        raise ValueError(
+            f"{len(freq_hz)} frequency points are too few for order {order} (need >= {order})"
+        )
     if weight is None:
         mag = np.abs(G)
         if np.any(mag == 0):
@@ -127,7 +141,7 @@ def fit_rational(freq_hz: np.ndarray, G: np.ndarray, fs_hz: float, order: int = 
     starts = {"levy": (b_levy, np.concatenate([[1.0], a_tail]))}
     b_sk, a_sk = starts["levy"]
     iterations = 0
-    for iterations in range(1, max_sk_iterations + 1):
+    for iterations in range(1, max_sk_iterations + 1):  # noqa: B007 - read after the loop
         A_prev = np.abs(1.0 + za @ a_sk[1:])
         b_next, a_tail = _linearised(G, weight, zb, za, 1.0 / A_prev)
         a_next = np.concatenate([[1.0], a_tail])
@@ -148,7 +162,12 @@ def fit_rational(freq_hz: np.ndarray, G: np.ndarray, fs_hz: float, order: int = 
     model = (zb @ b_fit) / (1.0 + za @ a_fit[1:])
     rel = np.abs(model - G) / np.maximum(np.abs(G), np.finfo(float).tiny)
     return RationalFit(
-        b=np.concatenate([[0.0], b_fit]), a=a_fit, cost=cost,
-        rms_relative_error=float(np.sqrt(np.mean(rel ** 2))), start=name,
-        sk_iterations=iterations, reflected_poles=reflected,
-        info={"lm_evaluations": nfev, "points": int(len(G))})
+        b=np.concatenate([[0.0], b_fit]),
+        a=a_fit,
+        cost=cost,
+        rms_relative_error=float(np.sqrt(np.mean(rel**2))),
+        start=name,
+        sk_iterations=iterations,
+        reflected_poles=reflected,
+        info={"lm_evaluations": nfev, "points": int(len(G))},
+    )

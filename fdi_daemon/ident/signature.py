@@ -47,7 +47,8 @@ RECOMMENDATION = (
     "the viscous part. Record the fault under an excitation whose velocity amplitude varies "
     "(a sine stepped through several amplitudes), played once fault-free and once with the "
     "fault, as in configs/scenarios/signature_calibration_paired.yaml, and run `fdi signature "
-    "--reference-window R0:R1 --lowpass-hz F` on it (docs/identification.md).")
+    "--reference-window R0:R1 --lowpass-hz F` on it (docs/identification.md)."
+)
 
 
 EDGE_RECOMMENDATION = (
@@ -55,7 +56,8 @@ EDGE_RECOMMENDATION = (
     "minimum may lie beyond it or the signature does not describe the residual. Check the "
     "share of the residual G_e explains, use the model-based velocity (`--velocity-method "
     "model_observer`) and a calibration run with low-frequency content "
-    "(configs/scenarios/signature_calibration_multisine.yaml), or widen --gamma-grid.")
+    "(configs/scenarios/signature_calibration_multisine.yaml), or widen --gamma-grid."
+)
 
 #: below this share of the fault residual's variance explained by G_e·x_f, warn
 LOW_VAF_PERCENT = 50.0
@@ -71,8 +73,10 @@ def gamma_grid(lo: float = 0.0, hi: float = 10.0, step: float = 0.2) -> np.ndarr
         raise ValueError(f"gamma grid needs hi > lo and step > 0 (got {lo}:{hi}:{step})")
     count = int(np.floor((hi - lo) / step + 1e-9)) + 1
     if count > MAX_GRID_POINTS:
-        raise ValueError(f"{lo:g}:{hi:g}:{step:g} has {count:.3g} points, more than "
-                         f"{MAX_GRID_POINTS} (one fit each): use a larger step")
+        raise ValueError(
+            f"{lo:g}:{hi:g}:{step:g} has {count:.3g} points, more than "
+            f"{MAX_GRID_POINTS} (one fit each): use a larger step"
+        )
     return lo + step * np.arange(count)
 
 
@@ -143,7 +147,7 @@ class SignatureResult:
 
     @property
     def status(self) -> str:
-        """"identified", "flat" or "not identified (edge)"."""
+        """ "identified", "flat" or "not identified (edge)"."""
         if self.at_edge:
             return "not identified (edge)"
         return "flat" if self.flat else "identified"
@@ -157,8 +161,11 @@ class SignatureResult:
         rel = self.relative_cost()
         return {
             "gamma_f": float(self.gamma_f),
-            "grid": [float(self.grid[0]), float(self.grid[-1]),
-                     float(self.grid[1] - self.grid[0]) if len(self.grid) > 1 else 0.0],
+            "grid": [
+                float(self.grid[0]),
+                float(self.grid[-1]),
+                float(self.grid[1] - self.grid[0]) if len(self.grid) > 1 else 0.0,
+            ],
             "orders_nb_nf_nk": list(self.orders),
             "interval_99": [float(self.interval[0]), float(self.interval[1])],
             "effective_samples": float(self.effective_samples),
@@ -182,8 +189,8 @@ def _effective_samples(error: np.ndarray) -> float:
         return float(n)
     nfft = int(2 ** np.ceil(np.log2(2 * n)))
     spec = np.abs(np.fft.rfft(e, nfft)) ** 2
-    rho = np.fft.irfft(spec, nfft)[1:n // 4 + 1] / denom
-    return float(np.clip(n / (1.0 + 2.0 * np.sum(rho ** 2)), 1.0, n))
+    rho = np.fft.irfft(spec, nfft)[1 : n // 4 + 1] / denom
+    return float(np.clip(n / (1.0 + 2.0 * np.sum(rho**2)), 1.0, n))
 
 
 class _FrictionSignals:
@@ -202,8 +209,9 @@ class _FrictionSignals:
 
 def _sweep(residual, signals, grid, orders, order_idx, fits, on_step, radius, start=None):
     for i in order_idx:
-        fit = fit_output_error(signals(grid[i]), residual, *orders, start=start,
-                               max_pole_radius=radius)
+        fit = fit_output_error(
+            signals(grid[i]), residual, *orders, start=start, max_pole_radius=radius
+        )
         if fits[i] is None or fit.sse < fits[i].sse:
             fits[i] = fit
         start = (fits[i].b, fits[i].f)
@@ -216,12 +224,19 @@ def sweep_fits(grid_points: int) -> int:
     return 3 * grid_points - 1
 
 
-def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
-                       grid: np.ndarray | None = None, orders: tuple[int, int, int] = (4, 3, 0),
-                       refine: bool = True, flat_fraction: float = 0.2,
-                       min_depth: float = 0.01, prefilter: tuple | np.ndarray | None = None,
-                       fit_from: int = 0, max_pole_radius: float | None = None,
-                       on_step: Callable[[], None] | None = None) -> SignatureResult:
+def estimate_signature(
+    residual: np.ndarray,
+    velocity: np.ndarray,
+    grid: np.ndarray | None = None,
+    orders: tuple[int, int, int] = (4, 3, 0),
+    refine: bool = True,
+    flat_fraction: float = 0.2,
+    min_depth: float = 0.01,
+    prefilter: tuple | np.ndarray | None = None,
+    fit_from: int = 0,
+    max_pole_radius: float | None = None,
+    on_step: Callable[[], None] | None = None,
+) -> SignatureResult:
     """Grid search over γ with an OE fit of G_e at each point (eq. 13), then refinement.
 
     residual, velocity: r (eq. 3) and v; the fit uses samples fit_from.. (the fault window),
@@ -247,13 +262,30 @@ def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
     residual = residual[fit_from:]
     fits: list[OEFit | None] = [None] * len(grid)
     _sweep(residual, signals, grid, orders, range(len(grid)), fits, on_step, max_pole_radius)
-    _sweep(residual, signals, grid, orders, range(len(grid) - 1, -1, -1), fits, on_step,
-           max_pole_radius)
+    _sweep(
+        residual,
+        signals,
+        grid,
+        orders,
+        range(len(grid) - 1, -1, -1),
+        fits,
+        on_step,
+        max_pole_radius,
+    )
     # carry the best basin found outwards (a sweep can sit in a poorer local minimum)
     best = int(np.argmin([f.sse for f in fits]))
     for side in (range(best - 1, -1, -1), range(best + 1, len(grid))):
-        _sweep(residual, signals, grid, orders, side, fits, on_step, max_pole_radius,
-               start=(fits[best].b, fits[best].f))
+        _sweep(
+            residual,
+            signals,
+            grid,
+            orders,
+            side,
+            fits,
+            on_step,
+            max_pole_radius,
+            start=(fits[best].b, fits[best].f),
+        )
     sse = np.array([f.sse for f in fits])
     evaluations = sum(f.evaluations for f in fits)
     best = int(np.argmin(sse))
@@ -266,13 +298,15 @@ def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
         warm = (best_fit.b, best_fit.f)
 
         def cost(gamma: float) -> float:
-            fit = fit_output_error(signals(gamma), residual, *orders, start=warm,
-                                   max_pole_radius=max_pole_radius)
+            fit = fit_output_error(
+                signals(gamma), residual, *orders, start=warm, max_pole_radius=max_pole_radius
+            )
             cache[gamma] = fit
             return fit.sse
 
-        minimize_scalar(cost, bounds=(lo, hi), method="bounded",
-                        options={"xatol": 1e-3 * (grid[1] - grid[0])})
+        minimize_scalar(
+            cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 * (grid[1] - grid[0])}
+        )
         refined = min(cache, key=lambda g: cache[g].sse)
         evaluations += sum(f.evaluations for f in cache.values())
         if cache[refined].sse < best_fit.sse:
@@ -284,8 +318,7 @@ def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
     interval = (float(inside.min()), float(inside.max())) if inside.size else (gamma_f, gamma_f)
     span = float(grid[-1] - grid[0]) if len(grid) > 1 else 0.0
     depth = float(np.max(sse) / best_fit.sse - 1.0)
-    flat = span > 0 and ((interval[1] - interval[0]) > flat_fraction * span
-                         or depth < min_depth)
+    flat = span > 0 and ((interval[1] - interval[0]) > flat_fraction * span or depth < min_depth)
     fit_pct = fit_percent(residual, best_fit.y_sim)
     vaf = variance_accounted_for(residual, best_fit.y_sim)
     if at_edge:
@@ -293,21 +326,37 @@ def estimate_signature(residual: np.ndarray, velocity: np.ndarray,
     else:
         recommendation = RECOMMENDATION if flat else None
     return SignatureResult(
-        gamma_f=gamma_f, fit=best_fit, grid=grid, sse=sse, sse_min=best_fit.sse,
-        interval=interval, effective_samples=n_eff, flat=bool(flat),
-        recommendation=recommendation, orders=tuple(orders), evaluations=evaluations,
+        gamma_f=gamma_f,
+        fit=best_fit,
+        grid=grid,
+        sse=sse,
+        sse_min=best_fit.sse,
+        interval=interval,
+        effective_samples=n_eff,
+        flat=bool(flat),
+        recommendation=recommendation,
+        orders=tuple(orders),
+        evaluations=evaluations,
         info={"fit_percent": float(fit_pct), "vaf_percent": float(vaf), "depth": depth},
-        residual=residual, at_edge=bool(at_edge))
+        residual=residual,
+        at_edge=bool(at_edge),
+    )
 
 
-def fit_fault_filter(residual: np.ndarray, velocity: np.ndarray, gamma_f: float,
-                     orders: tuple[int, int, int] = (4, 3, 0), fit_from: int = 0,
-                     max_pole_radius: float | None = None) -> OEFit:
+def fit_fault_filter(
+    residual: np.ndarray,
+    velocity: np.ndarray,
+    gamma_f: float,
+    orders: tuple[int, int, int] = (4, 3, 0),
+    fit_from: int = 0,
+    max_pole_radius: float | None = None,
+) -> OEFit:
     """G_e at a fixed γ_f on the unfiltered window (eq. 12): the filter the monitor runs on
     full-band signals, after γ_f was chosen on prefiltered data."""
     u = friction_signal(np.asarray(velocity, dtype=float), gamma_f)[fit_from:]
-    return fit_output_error(u, np.asarray(residual, dtype=float)[fit_from:], *orders,
-                            max_pole_radius=max_pole_radius)
+    return fit_output_error(
+        u, np.asarray(residual, dtype=float)[fit_from:], *orders, max_pole_radius=max_pole_radius
+    )
 
 
 def variance_accounted_for(residual: np.ndarray, y_sim: np.ndarray) -> float:

@@ -41,8 +41,7 @@ class FrequencyResponse:
         """Grid points whose input spectrum (at the estimate's resolution) is within
         `input_floor_db` of its peak."""
         psd = self.input_psd if self.resolved_input_psd is None else self.resolved_input_psd
-        return informative_mask(self.freq_hz, np.ones_like(self.freq_hz), psd, 0.0,
-                                input_floor_db)
+        return informative_mask(self.freq_hz, np.ones_like(self.freq_hz), psd, 0.0, input_floor_db)
 
 
 def _demeaned(x: np.ndarray) -> np.ndarray:
@@ -65,7 +64,7 @@ def _covariances(a: np.ndarray, b: np.ndarray, lag_samples: int) -> np.ndarray:
     n = len(a)
     nfft = int(2 ** np.ceil(np.log2(2 * n)))
     cross = np.fft.irfft(np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft)), nfft) / n
-    return np.concatenate([cross[nfft - lag_samples:], cross[:lag_samples + 1]])
+    return np.concatenate([cross[nfft - lag_samples :], cross[: lag_samples + 1]])
 
 
 def _bt_spectra(u, y, lag_samples, window, nfft):
@@ -75,8 +74,8 @@ def _bt_spectra(u, y, lag_samples, window, nfft):
         r = _covariances(a, b, lag_samples) * w
         # place τ = 0 at index 0, negative lags wrapped to the end
         buf = np.zeros(nfft)
-        buf[:lag_samples + 1] = r[lag_samples:]
-        buf[nfft - lag_samples:] = r[:lag_samples]
+        buf[: lag_samples + 1] = r[lag_samples:]
+        buf[nfft - lag_samples :] = r[:lag_samples]
         spectra.append(np.fft.rfft(buf))
     phi_yu, phi_u, phi_y = spectra
     return phi_yu, np.real(phi_u), np.real(phi_y)
@@ -99,8 +98,9 @@ def smooth_input_psd(u: np.ndarray, fs_hz: float, freq_hz: np.ndarray) -> np.nda
     return np.interp(freq_hz, f, p_uu)
 
 
-def welch_h1(u: np.ndarray, y: np.ndarray, fs_hz: float,
-             segment_samples: int | None = None) -> FrequencyResponse:
+def welch_h1(
+    u: np.ndarray, y: np.ndarray, fs_hz: float, segment_samples: int | None = None
+) -> FrequencyResponse:
     """H1 estimate G = P_uy/P_uu and coherence by Welch averaging (Hann, 50 % overlap)."""
     u, y = _demeaned(u), _demeaned(y)
     nper = segment_samples or welch_segment_samples(len(u))
@@ -109,8 +109,9 @@ def welch_h1(u: np.ndarray, y: np.ndarray, fs_hz: float,
     _, p_uu = signal.welch(u, fs=fs_hz, nperseg=nper)
     _, p_yy = signal.welch(y, fs=fs_hz, nperseg=nper)
     G, coh = _ratio_and_coherence(p_uy, p_uu, p_yy)
-    return FrequencyResponse(f, G, coh, p_uu, "welch",
-                             {"segment_samples": int(nper), "overlap": 0.5, "window": "hann"})
+    return FrequencyResponse(
+        f, G, coh, p_uu, "welch", {"segment_samples": int(nper), "overlap": 0.5, "window": "hann"}
+    )
 
 
 def _ratio_and_coherence(p_uy, p_uu, p_yy):
@@ -123,8 +124,14 @@ def _ratio_and_coherence(p_uy, p_uu, p_yy):
     return G, coh
 
 
-def blackman_tukey(u: np.ndarray, y: np.ndarray, fs_hz: float, lag_samples: int,
-                   window: str = "hann", nfft: int | None = None) -> FrequencyResponse:
+def blackman_tukey(
+    u: np.ndarray,
+    y: np.ndarray,
+    fs_hz: float,
+    lag_samples: int,
+    window: str = "hann",
+    nfft: int | None = None,
+) -> FrequencyResponse:
     """Blackman–Tukey estimate G = Φ_yu/Φ_u with a lag window of M = lag_samples (as ``spa``).
 
     The grid has nfft/2 + 1 points from 0 to fs/2 (default nfft: the next power of two
@@ -143,10 +150,20 @@ def blackman_tukey(u: np.ndarray, y: np.ndarray, fs_hz: float, lag_samples: int,
     G, coh = _ratio_and_coherence(phi_yu, phi_u, phi_y)
     freq = np.fft.rfftfreq(nfft, 1.0 / fs_hz)
     averages = 1.0 / relative_variance_factor(window, lag_samples, n)
-    return FrequencyResponse(freq, G, coh, smooth_input_psd(u, fs_hz, freq), "blackman-tukey",
-                             {"lag_samples": int(lag_samples), "lag_window": window,
-                              "nfft": int(nfft), "effective_averages": round(averages, 2)},
-                             resolved_input_psd=np.maximum(phi_u, 0.0) / fs_hz)
+    return FrequencyResponse(
+        freq,
+        G,
+        coh,
+        smooth_input_psd(u, fs_hz, freq),
+        "blackman-tukey",
+        {
+            "lag_samples": int(lag_samples),
+            "lag_window": window,
+            "nfft": int(nfft),
+            "effective_averages": round(averages, 2),
+        },
+        resolved_input_psd=np.maximum(phi_u, 0.0) / fs_hz,
+    )
 
 
 def relative_variance_factor(window: str, lag_samples: int, n_samples: int) -> float:
@@ -154,9 +171,13 @@ def relative_variance_factor(window: str, lag_samples: int, n_samples: int) -> f
     return float(np.sum(lag_window(window, lag_samples) ** 2) / n_samples)
 
 
-def select_lag_window(u: np.ndarray, y: np.ndarray, fs_hz: float, window: str = "hann",
-                      band_hz: tuple[float, float] | None = None,
-                      ) -> tuple[int, list[dict]]:
+def select_lag_window(
+    u: np.ndarray,
+    y: np.ndarray,
+    fs_hz: float,
+    window: str = "hann",
+    band_hz: tuple[float, float] | None = None,
+) -> tuple[int, list[dict]]:
     """Choose the lag window M from the data: the candidate with the least estimated error.
 
     Candidates are powers of two from 16 to N/2. For each M the relative mean-square error
@@ -167,13 +188,15 @@ def select_lag_window(u: np.ndarray, y: np.ndarray, fs_hz: float, window: str = 
     the same lag window (floored at 0.05); both averaged over the band. Returns (M, per-candidate table).
     """
     n = len(u)
-    candidates = [2 ** k for k in range(4, 20) if 2 ** k <= n // 2]
+    candidates = [2**k for k in range(4, 20) if 2**k <= n // 2]
     if not candidates:
         raise ValueError(f"{n} samples are too few for a lag-window estimate (need >= 32)")
     partner = {m: min(2 * m, n - 1) for m in candidates}
     nfft = int(2 ** np.ceil(np.log2(max(n, 4 * partner[candidates[-1]]))))
-    estimates = {m: blackman_tukey(u, y, fs_hz, m, window, nfft)
-                 for m in sorted(set(candidates) | set(partner.values()))}
+    estimates = {
+        m: blackman_tukey(u, y, fs_hz, m, window, nfft)
+        for m in sorted(set(candidates) | set(partner.values()))
+    }
     finest = estimates[partner[candidates[-1]]]
     f = finest.freq_hz
     if band_hz is None:
@@ -195,23 +218,33 @@ def select_lag_window(u: np.ndarray, y: np.ndarray, fs_hz: float, window: str = 
         # coherence floored at 0.05: a few points without signal must not decide alone
         coh = np.clip(estimates[m].coherence[mask], 0.05, 1.0)
         var = float(np.mean(relative_variance_factor(window, m, n) * (1.0 - coh) / coh))
-        table.append({"lag_samples": m, "bias2": float(bias2), "variance": var,
-                      "mse": float(bias2 + var)})
+        table.append(
+            {"lag_samples": m, "bias2": float(bias2), "variance": var, "mse": float(bias2 + var)}
+        )
     best = min(table, key=lambda row: row["mse"])
     return int(best["lag_samples"]), table
 
 
-def informative_mask(freq_hz: np.ndarray, coherence: np.ndarray, input_psd: np.ndarray,
-                     min_coherence: float = 0.8, input_floor_db: float = -20.0) -> np.ndarray:
+def informative_mask(
+    freq_hz: np.ndarray,
+    coherence: np.ndarray,
+    input_psd: np.ndarray,
+    min_coherence: float = 0.8,
+    input_floor_db: float = -20.0,
+) -> np.ndarray:
     """Frequencies (> 0) where Φ_u is within `input_floor_db` of its peak and γ² >= min."""
     peak = np.max(input_psd[freq_hz > 0]) if np.any(freq_hz > 0) else 0.0
     floor = peak * 10.0 ** (input_floor_db / 10.0)
     return (freq_hz > 0) & (input_psd >= floor) & (coherence >= min_coherence)
 
 
-def informative_band(fr: FrequencyResponse, min_coherence: float = 0.8,
-                     input_floor_db: float = -20.0, output_floor_db: float = OUTPUT_FLOOR_DB,
-                     max_hz: float | None = None) -> tuple[float, float]:
+def informative_band(
+    fr: FrequencyResponse,
+    min_coherence: float = 0.8,
+    input_floor_db: float = -20.0,
+    output_floor_db: float = OUTPUT_FLOOR_DB,
+    max_hz: float | None = None,
+) -> tuple[float, float]:
     """The band worth fitting, as (lo_hz, hi_hz).
 
     From the lowest to the highest excited frequency (input spectrum within
@@ -236,5 +269,6 @@ def informative_band(fr: FrequencyResponse, min_coherence: float = 0.8,
     if good.size < 2:
         raise ValueError(
             f"no informative band: coherence >= {min_coherence} with input within "
-            f"{-input_floor_db:g} dB of its peak holds at {good.size} frequency point(s)")
+            f"{-input_floor_db:g} dB of its peak holds at {good.size} frequency point(s)"
+        )
     return float(f[good[0]]), float(f[good[-1]])

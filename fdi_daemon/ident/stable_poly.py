@@ -61,8 +61,9 @@ def poly_eta_jacobian(eta: np.ndarray, radius: float = 1.0, step: float = 1e-7) 
     for j in range(n):
         d = np.zeros(n)
         d[j] = step
-        jac[:, j] = (poly_from_eta(eta + d, radius)[1:]
-                     - poly_from_eta(eta - d, radius)[1:]) / (2 * step)
+        jac[:, j] = (poly_from_eta(eta + d, radius)[1:] - poly_from_eta(eta - d, radius)[1:]) / (
+            2 * step
+        )
     return jac
 
 
@@ -83,8 +84,11 @@ def record_pole_radius(n_samples: int) -> float:
     return float(np.exp(-1.0 / max(int(n_samples), 1)))
 
 
-def reflect_unstable(b: np.ndarray, a: np.ndarray, radius: float = 1.0,
-                     ) -> tuple[np.ndarray, np.ndarray, int]:
+def reflect_unstable(
+    b: np.ndarray,
+    a: np.ndarray,
+    radius: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Reflect roots of A outside |z| = radius to radius²/conj(p).
 
     For radius 1 this keeps |B/A| on the unit circle (|z − p| = |p|·|z − 1/p*| there), so B
@@ -102,6 +106,6 @@ def reflect_unstable(b: np.ndarray, a: np.ndarray, radius: float = 1.0,
         return b.copy(), a.copy(), 0
     gain = float(np.prod(np.abs(poles[outside]) / radius))
     # strictly inside: a root exactly on the circle is pulled in slightly
-    poles = np.where(outside, radius ** 2 / np.conj(poles) * (1.0 - 1e-9), poles)
+    poles = np.where(outside, radius**2 / np.conj(poles) * (1.0 - 1e-9), poles)
     a_new = np.real(np.poly(poles))
     return b / gain, a_new, int(outside.sum())

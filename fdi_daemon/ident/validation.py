@@ -33,8 +33,12 @@ def free_responses(a: np.ndarray, n_samples: int) -> np.ndarray:
     return basis
 
 
-def simulate(b: np.ndarray, a: np.ndarray, u: np.ndarray, y: np.ndarray | None = None,
-             ) -> np.ndarray:
+def simulate(
+    b: np.ndarray,
+    a: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray | None = None,
+) -> np.ndarray:
     """Simulated output B/A u; with `y`, the initial state and mean that fit y best are added."""
     u = np.asarray(u, dtype=float)
     y_sim = signal.lfilter(b, a, u)
@@ -55,8 +59,11 @@ def fit_percent(y: np.ndarray, y_sim: np.ndarray) -> float:
     return float(100.0 * (1.0 - np.linalg.norm(y - y_sim) / spread))
 
 
-def residual_input_correlation(residual: np.ndarray, u: np.ndarray, max_lag: int = 25,
-                               ) -> dict:
+def residual_input_correlation(
+    residual: np.ndarray,
+    u: np.ndarray,
+    max_lag: int = 25,
+) -> dict:
     """r_eu(τ) for τ = -max_lag..max_lag, normalised, with the 99 % band ±2.576/√N."""
     e = np.asarray(residual, dtype=float) - np.mean(residual)
     x = np.asarray(u, dtype=float) - np.mean(u)
@@ -65,15 +72,20 @@ def residual_input_correlation(residual: np.ndarray, u: np.ndarray, max_lag: int
     full = signal.correlate(e, x, mode="full", method="fft")
     mid = n - 1
     lags = np.arange(-max_lag, max_lag + 1)
-    r = full[mid - max_lag: mid + max_lag + 1] / norm if norm > 0 else np.zeros(len(lags))
+    r = full[mid - max_lag : mid + max_lag + 1] / norm if norm > 0 else np.zeros(len(lags))
     bound = Z_99 / np.sqrt(n)
-    return {"lags": lags, "r": r, "bound": float(bound),
-            "max_abs": float(np.max(np.abs(r))),
-            "fraction_outside": float(np.mean(np.abs(r) > bound))}
+    return {
+        "lags": lags,
+        "r": r,
+        "bound": float(bound),
+        "max_abs": float(np.max(np.abs(r))),
+        "fraction_outside": float(np.mean(np.abs(r) > bound)),
+    }
 
 
-def band_errors(freq_hz: np.ndarray, G_data: np.ndarray, G_model: np.ndarray,
-                edges_hz: list[float]) -> list[dict]:
+def band_errors(
+    freq_hz: np.ndarray, G_data: np.ndarray, G_model: np.ndarray, edges_hz: list[float]
+) -> list[dict]:
     """RMS relative error |Ĝ − G|/|G| in each band [edges[i], edges[i+1])."""
     out = []
     mag = np.abs(G_data)
@@ -82,7 +94,11 @@ def band_errors(freq_hz: np.ndarray, G_data: np.ndarray, G_model: np.ndarray,
         if not sel.any():
             continue
         rel = np.abs(G_model[sel] - G_data[sel]) / mag[sel]
-        out.append({"band_hz": [float(lo), float(hi)],
-                    "rms_relative_error": float(np.sqrt(np.mean(rel ** 2))),
-                    "points": int(sel.sum())})
+        out.append(
+            {
+                "band_hz": [float(lo), float(hi)],
+                "rms_relative_error": float(np.sqrt(np.mean(rel**2))),
+                "points": int(sel.sum()),
+            }
+        )
     return out

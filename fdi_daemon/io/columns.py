@@ -13,8 +13,10 @@ from fdi_daemon.errors import UserError
 
 __all__ = ["add_columns_option", "parse_columns"]
 
-HELP = ("map the recording's column names to fdi's, e.g. t=time,v_in=u,accel=y "
-        "(fdi name = file column; names not mapped are used as they are)")
+HELP = (
+    "map the recording's column names to fdi's, e.g. t=time,v_in=u,accel=y "
+    "(fdi name = file column; names not mapped are used as they are)"
+)
 
 
 def parse_columns(spec: str | None) -> dict[str, str]:
@@ -25,8 +27,9 @@ def parse_columns(spec: str | None) -> dict[str, str]:
     for part in spec.split(","):
         name, sep, column = (s.strip() for s in part.partition("="))
         if not sep or not name or not column:
-            raise UserError(f"--columns: {part.strip()!r} is not NAME=COLUMN "
-                            f"(example: t=time,v_in=u,accel=y)")
+            raise UserError(
+                f"--columns: {part.strip()!r} is not NAME=COLUMN (example: t=time,v_in=u,accel=y)"
+            )
         if name in mapping:
             raise UserError(f"--columns: {name} is mapped twice")
         mapping[name] = column
@@ -39,8 +42,7 @@ def parse_columns(spec: str | None) -> dict[str, str]:
 
 def add_columns_option(parser: argparse.ArgumentParser) -> None:
     """The shared ``--columns`` option; its value arrives parsed (a dict) in ``args.columns``."""
-    parser.add_argument("--columns", metavar="NAME=COL,...", type=_parse_arg, default={},
-                        help=HELP)
+    parser.add_argument("--columns", metavar="NAME=COL,...", type=_parse_arg, default={}, help=HELP)
 
 
 def _parse_arg(spec: str) -> dict[str, str]:

@@ -18,9 +18,13 @@ __all__ = ["known_settings", "split_known"]
 log = logging.getLogger("fdi.model")
 
 
-def split_known(mapping: Mapping[str, Any] | None, known: Iterable[str], where: str,
-                noun: str = "setting", fate: str = "ignoring"
-                ) -> tuple[dict[str, Any], dict[str, Any]]:
+def split_known(
+    mapping: Mapping[str, Any] | None,
+    known: Iterable[str],
+    where: str,
+    noun: str = "setting",
+    fate: str = "ignoring",
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """The entries of ``mapping`` split into (known, unknown). An unknown key close to a
     known one is a typo: ConfigError naming both. Any other unknown key is logged as a
     warning ("<where>: <fate> <noun> 'x', which this version does not know")."""
@@ -39,8 +43,9 @@ def split_known(mapping: Mapping[str, Any] | None, known: Iterable[str], where: 
     return inside, outside
 
 
-def known_settings(mapping: Mapping[str, Any] | None, known: Iterable[str], where: str
-                   ) -> dict[str, Any]:
+def known_settings(
+    mapping: Mapping[str, Any] | None, known: Iterable[str], where: str
+) -> dict[str, Any]:
     """The entries of a settings mapping that this version knows (`split_known`); the
     others are ignored with a warning."""
     return split_known(mapping, known, where)[0]

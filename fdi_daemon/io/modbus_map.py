@@ -48,8 +48,9 @@ a write completes and reads back what it applied.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Sequence
+from typing import Literal
 
 from pymodbus.client.mixin import ModbusClientMixin
 
@@ -144,40 +145,61 @@ class SlotSample:
 
 
 def encode_header(h: Header, word_order: WordOrder) -> list[int]:
-    return (encode_u32(h.sample_counter, word_order)
-            + [h.fs_hz, h.status, h.fifo_depth, h.fifo_valid, h.map_version,
-               h.words_per_sample]
-            + encode_f32(h.v_in_scale, word_order) + encode_f32(h.accel_scale, word_order)
-            + encode_f32(h.position_scale, word_order) + [0, 0])
+    return (
+        encode_u32(h.sample_counter, word_order)
+        + [h.fs_hz, h.status, h.fifo_depth, h.fifo_valid, h.map_version, h.words_per_sample]
+        + encode_f32(h.v_in_scale, word_order)
+        + encode_f32(h.accel_scale, word_order)
+        + encode_f32(h.position_scale, word_order)
+        + [0, 0]
+    )
 
 
 def decode_header(regs: Sequence[int], word_order: WordOrder) -> Header:
     if len(regs) < HEADER_REGS:
         raise ValueError(f"header needs {HEADER_REGS} registers, got {len(regs)}")
-    return Header(decode_u32(regs[0:2], word_order), regs[2], regs[3], regs[4], regs[5],
-                  regs[6], regs[7], decode_f32(regs[8:10], word_order),
-                  decode_f32(regs[10:12], word_order), decode_f32(regs[12:14], word_order))
+    return Header(
+        decode_u32(regs[0:2], word_order),
+        regs[2],
+        regs[3],
+        regs[4],
+        regs[5],
+        regs[6],
+        regs[7],
+        decode_f32(regs[8:10], word_order),
+        decode_f32(regs[10:12], word_order),
+        decode_f32(regs[12:14], word_order),
+    )
 
 
-def encode_slot(seq: int, v_in: float, accel: float, position: float,
-                word_order: WordOrder) -> list[int]:
+def encode_slot(
+    seq: int, v_in: float, accel: float, position: float, word_order: WordOrder
+) -> list[int]:
     """Eight registers of one FIFO slot (raw register values, before scaling)."""
     return encode_u32(seq, word_order) + _to_registers(
-        [float(v_in), float(accel), float(position)], _DATATYPE.FLOAT32, word_order)
+        [float(v_in), float(accel), float(position)], _DATATYPE.FLOAT32, word_order
+    )
 
 
-def decode_slots(regs: Sequence[int], word_order: WordOrder,
-                 scales: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> list[SlotSample]:
+def decode_slots(
+    regs: Sequence[int], word_order: WordOrder, scales: tuple[float, float, float] = (1.0, 1.0, 1.0)
+) -> list[SlotSample]:
     """Decode consecutive 8-register slots (newest first, as stored)."""
     if len(regs) % WORDS_PER_SAMPLE:
         raise ValueError(f"slot block of {len(regs)} registers is not a multiple of 8")
     out = []
     _check_order(word_order)
     for i in range(0, len(regs), WORDS_PER_SAMPLE):
-        r = list(regs[i:i + WORDS_PER_SAMPLE])
+        r = list(regs[i : i + WORDS_PER_SAMPLE])
         v_in, accel, position = _from_registers(r[2:8], _DATATYPE.FLOAT32, word_order)
-        out.append(SlotSample(decode_u32(r[0:2], word_order), v_in * scales[0],
-                              accel * scales[1], position * scales[2]))
+        out.append(
+            SlotSample(
+                decode_u32(r[0:2], word_order),
+                v_in * scales[0],
+                accel * scales[1],
+                position * scales[2],
+            )
+        )
     return out
 
 
@@ -193,17 +215,18 @@ def encode_faults(values: dict[str, float], word_order: WordOrder) -> list[int]:
         raise ValueError(f"unknown fault register(s): {', '.join(sorted(unknown))}")
     regs = [0] * FAULT_REGS
     for name, (offset, nominal) in FAULT_REGISTERS.items():
-        regs[offset:offset + 2] = encode_f32(values.get(name, nominal), word_order)
+        regs[offset : offset + 2] = encode_f32(values.get(name, nominal), word_order)
     return regs
 
 
 def decode_faults(regs: Sequence[int], word_order: WordOrder) -> dict[str, float]:
     if len(regs) < FAULT_REGS:
         raise ValueError(f"fault block needs {FAULT_REGS} registers, got {len(regs)}")
-    return {name: decode_f32(regs[off:off + 2], word_order)
-            for name, (off, _) in FAULT_REGISTERS.items()}
+    return {
+        name: decode_f32(regs[off : off + 2], word_order)
+        for name, (off, _) in FAULT_REGISTERS.items()
+    }
 
 
 def nominal_faults() -> dict[str, float]:
     return {name: nominal for name, (_, nominal) in FAULT_REGISTERS.items()}
-

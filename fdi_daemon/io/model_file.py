@@ -77,8 +77,12 @@ class FdiModel:
         }
         if self.fault_filter is not None:
             ff = self.fault_filter
-            out["fault_filter"] = {"b": _floats(ff.b), "f": _floats(ff.f), "nk": int(ff.nk),
-                                   "gamma_f": None if ff.gamma_f is None else float(ff.gamma_f)}
+            out["fault_filter"] = {
+                "b": _floats(ff.b),
+                "f": _floats(ff.f),
+                "nk": int(ff.nk),
+                "gamma_f": None if ff.gamma_f is None else float(ff.gamma_f),
+            }
         for key in ("velocity", "detector", "provenance"):
             value = getattr(self, key)
             if value:
@@ -125,41 +129,55 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
         if not isinstance(nk, int) or isinstance(nk, bool) or nk < 0:
             raise ConfigError(f"{source}: fault_filter.nk must be a whole number >= 0")
         gamma = ff.get("gamma_f", 0.0)
-        if gamma is not None and (isinstance(gamma, bool) or not isinstance(gamma, (int, float))
-                                  or not math.isfinite(gamma)):
+        if gamma is not None and (
+            isinstance(gamma, bool)
+            or not isinstance(gamma, (int, float))
+            or not math.isfinite(gamma)
+        ):
             raise ConfigError(f"{source}: fault_filter.gamma_f must be a finite number or null")
         fault_filter = FaultFilter(
             b=_coefficients(ff, "b", f"{source}: fault_filter"),
             f=_coefficients(ff, "f", f"{source}: fault_filter", monic=True),
-            nk=nk, gamma_f=None if gamma is None else float(gamma))
-    sections = {key: _mapping(data, key, source, required=False)
-                for key in ("velocity", "detector", "provenance")}
+            nk=nk,
+            gamma_f=None if gamma is None else float(gamma),
+        )
+    sections = {
+        key: _mapping(data, key, source, required=False)
+        for key in ("velocity", "detector", "provenance")
+    }
     extra = {k: v for k, v in data.items() if k not in SECTIONS}
-    return FdiModel(fs=fs, plant_b=plant_b, plant_a=plant_a, fault_filter=fault_filter,
-                    extra=extra, **sections)
+    return FdiModel(
+        fs=fs, plant_b=plant_b, plant_a=plant_a, fault_filter=fault_filter, extra=extra, **sections
+    )
 
 
 def _require(data: dict, keys: tuple[str, ...], where: str) -> None:
     missing = [key for key in keys if key not in data]
     if missing:
-        raise ConfigError(f"{where}: missing required key{'s' * (len(missing) > 1)} "
-                          f"{', '.join(missing)}")
+        raise ConfigError(
+            f"{where}: missing required key{'s' * (len(missing) > 1)} {', '.join(missing)}"
+        )
 
 
-def _section(data: dict, key: str, known: tuple[str, ...], required: tuple[str, ...],
-             source: str) -> dict:
+def _section(
+    data: dict, key: str, known: tuple[str, ...], required: tuple[str, ...], source: str
+) -> dict:
     """A mapping whose keys are checked: typos refused, other unknown keys ignored with a
     warning, required ones present."""
-    section, _ = split_known(_mapping(data, key, source, required=True), known,
-                             f"{source}: {key}", noun="key")
+    section, _ = split_known(
+        _mapping(data, key, source, required=True), known, f"{source}: {key}", noun="key"
+    )
     _require(section, required, f"{source}: {key}")
     return section
 
 
 def _positive(data: dict, key: str, source: str) -> float:
     value = data.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
-            math.isfinite(value) and value > 0):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not (math.isfinite(value) and value > 0)
+    ):
         raise ConfigError(f"{source}: {key} must be a positive number (got {value!r})")
     return float(value)
 
@@ -175,8 +193,11 @@ def _mapping(data: dict, key: str, source: str, required: bool) -> dict:
 
 def _coefficients(section: dict, key: str, where: str, monic: bool = False) -> np.ndarray:
     value = section.get(key)
-    if not isinstance(value, list) or not value or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+    if (
+        not isinstance(value, list)
+        or not value
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    ):
         raise ConfigError(f"{where}.{key} must be a non-empty list of numbers")
     arr = np.asarray(value, dtype=float)
     if not np.all(np.isfinite(arr)):

@@ -28,11 +28,13 @@ def pyplot():
     return plt
 
 
-def check_outputs(outputs: Mapping[str, str | Path | None],
-                  inputs: Iterable[str | Path | None] | Mapping[str, str | Path | None] = (),
-                  plots: Iterable[str] = (),
-                  rewrites: Mapping[str, str | Path | None] | None = None,
-                  new_dirs: bool = False) -> None:
+def check_outputs(
+    outputs: Mapping[str, str | Path | None],
+    inputs: Iterable[str | Path | None] | Mapping[str, str | Path | None] = (),
+    plots: Iterable[str] = (),
+    rewrites: Mapping[str, str | Path | None] | None = None,
+    new_dirs: bool = False,
+) -> None:
     """Refuse, before any work, output paths that cannot be written or would destroy an input.
 
     outputs: option -> path (None: not asked for); inputs: files the command reads (or a
@@ -54,15 +56,17 @@ def check_outputs(outputs: Mapping[str, str | Path | None],
         if path.exists() and not path.is_file():
             continue  # a device, a pipe (/dev/null, /dev/stdout), a socket: never read back
         if not new_dirs and not path.resolve().parent.is_dir():
-            raise UserError(f"{option} {path}: cannot write there: directory {path.parent} "
-                            f"does not exist")
+            raise UserError(
+                f"{option} {path}: cannot write there: directory {path.parent} does not exist"
+            )
         allowed = rewrites.get(option)
         for name, source in read:
             if same_file(path, source) and not (allowed and same_file(source, Path(allowed))):
-                also = (f" ({name})" if name else
-                        "" if str(source) == str(path) else f" ({source})")
-                raise UserError(f"{option} {path}: is also an input of this command{also}; "
-                                f"writing it would destroy it")
+                also = f" ({name})" if name else "" if str(source) == str(path) else f" ({source})"
+                raise UserError(
+                    f"{option} {path}: is also an input of this command{also}; "
+                    f"writing it would destroy it"
+                )
         key = path.resolve()
         if key in seen:
             raise UserError(f"{option} and {seen[key]} name the same file {path}")
@@ -86,8 +90,9 @@ def _check_plot_format(path: Path, what: str) -> None:
     suffix = path.suffix.lower().lstrip(".")
     formats = FigureCanvasBase.get_supported_filetypes()
     if suffix and suffix not in formats:
-        raise UserError(f"{what} {path}: cannot write a plot as .{suffix} "
-                        f"(use e.g. .png, .pdf or .svg)")
+        raise UserError(
+            f"{what} {path}: cannot write a plot as .{suffix} (use e.g. .png, .pdf or .svg)"
+        )
 
 
 @contextlib.contextmanager

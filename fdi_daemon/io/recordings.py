@@ -24,8 +24,8 @@ import io
 import json
 import math
 import zipfile
-from dataclasses import dataclass, field
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -122,11 +122,11 @@ class Recording:
             return float(self.meta["fs"])
         return nominal_fs_hz(self.t, self.columns.get("seq"))
 
-    def samples(self, part: slice) -> "Recording":
+    def samples(self, part: slice) -> Recording:
         """The samples of ``part``, a slice of sample indices (views of the columns)."""
         return Recording({k: v[part] for k, v in self.columns.items()}, dict(self.meta))
 
-    def window(self, t0: float, t1: float) -> "Recording":
+    def window(self, t0: float, t1: float) -> Recording:
         """The samples with t0 <= t < t1 (times in s)."""
         keep = (self.t >= t0) & (self.t < t1)
         if not keep.any():
@@ -165,26 +165,30 @@ def same_rate(fs_a_hz: float, fs_b_hz: float) -> bool:
 MAX_FIT_VALUE = 1e150
 
 
-def fit_column(rec: "Recording", name: str, path: str | Path) -> np.ndarray:
+def fit_column(rec: Recording, name: str, path: str | Path) -> np.ndarray:
     """Column ``name`` for the offline fits (identify, signature, baseline, diagnose): every
     value finite and at most MAX_FIT_VALUE in magnitude, else RecordingError naming the
     file, the column and the first bad row."""
     values = np.asarray(rec[name], dtype=float)
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
-        raise RecordingError(f"{path}: column {name} is not finite at row {int(bad[0])} "
-                             f"({bad.size} bad value(s))")
+        raise RecordingError(
+            f"{path}: column {name} is not finite at row {int(bad[0])} ({bad.size} bad value(s))"
+        )
     huge = np.flatnonzero(np.abs(values) > MAX_FIT_VALUE)
     if huge.size:
         row = int(huge[0])
-        raise RecordingError(f"{path}: column {name} holds {values[row]:.3g} at row {row}: "
-                             f"values beyond {MAX_FIT_VALUE:.0e} cannot be fitted "
-                             "(check the column's unit)")
+        raise RecordingError(
+            f"{path}: column {name} holds {values[row]:.3g} at row {row}: "
+            f"values beyond {MAX_FIT_VALUE:.0e} cannot be fitted "
+            "(check the column's unit)"
+        )
     return values
 
 
-def check_sampling(t: np.ndarray, seq: np.ndarray | None = None,
-                   fs_hz: float | None = None) -> SamplingReport:
+def check_sampling(
+    t: np.ndarray, seq: np.ndarray | None = None, fs_hz: float | None = None
+) -> SamplingReport:
     """Find gaps, duplicates and backward steps in ``seq`` (preferred) or ``t``."""
     fs = fs_hz if fs_hz is not None else nominal_fs_hz(t, seq)
     issues: list[SamplingIssue] = []
@@ -193,16 +197,18 @@ def check_sampling(t: np.ndarray, seq: np.ndarray | None = None,
         for i in np.flatnonzero(steps != 1):
             step = int(steps[i])
             kind = "gap" if step > 1 else ("duplicate" if step == 0 else "backwards")
-            issues.append(SamplingIssue(kind, int(i + 1), float(t[i + 1]),
-                                        step - 1 if step > 1 else 0))
+            issues.append(
+                SamplingIssue(kind, int(i + 1), float(t[i + 1]), step - 1 if step > 1 else 0)
+            )
         return SamplingReport(fs, issues)
     steps = np.diff(t) * fs  # in samples
     bad = np.flatnonzero(np.abs(steps - 1.0) > DT_TOLERANCE)
     for i in bad:
         step = float(steps[i])
         if step > 1.0 + DT_TOLERANCE:
-            issues.append(SamplingIssue("gap", int(i + 1), float(t[i + 1]),
-                                        max(1, int(round(step)) - 1)))
+            issues.append(
+                SamplingIssue("gap", int(i + 1), float(t[i + 1]), max(1, int(round(step)) - 1))
+            )
         elif step < -DT_TOLERANCE:
             issues.append(SamplingIssue("backwards", int(i + 1), float(t[i + 1])))
         else:  # a step of less than 0.75 samples: the same sample again, or a clock slip
@@ -213,10 +219,13 @@ def check_sampling(t: np.ndarray, seq: np.ndarray | None = None,
 # ----------------------------------------------------------------------------- reading
 
 
-def read_recording(path: str | Path, strict: bool = True,
-                   required: tuple[str, ...] = REQUIRED_COLUMNS,
-                   columns: Mapping[str, str] | None = None,
-                   fs_hz: float | None = None) -> Recording:
+def read_recording(
+    path: str | Path,
+    strict: bool = True,
+    required: tuple[str, ...] = REQUIRED_COLUMNS,
+    columns: Mapping[str, str] | None = None,
+    fs_hz: float | None = None,
+) -> Recording:
     """Read a recording in any supported format and check its sampling.
 
     strict: refuse gaps, duplicates and backward time with a RecordingError; otherwise
@@ -240,15 +249,25 @@ def read_recording(path: str | Path, strict: bool = True,
             columns_read, meta = _read_mat(path)
         else:
             raise RecordingError(
-                f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
+                f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)"
+            )
     except RecordingError:
         raise
-    except (OSError, EOFError, ValueError, KeyError, TypeError, UnicodeDecodeError,
-            NotImplementedError, zipfile.BadZipFile) as exc:
+    except (
+        OSError,
+        EOFError,
+        ValueError,
+        KeyError,
+        TypeError,
+        UnicodeDecodeError,
+        NotImplementedError,
+        zipfile.BadZipFile,
+    ) as exc:
         raise RecordingError(f"{path}: cannot read recording: {_one_line(exc)}") from None
 
-    columns = _renamed(columns_read, mapping, path) if (mapping := dict(columns or {})) \
-        else columns_read
+    columns = (
+        _renamed(columns_read, mapping, path) if (mapping := dict(columns or {})) else columns_read
+    )
     if fs_hz is not None and "t" not in columns and columns:
         n = len(next(iter(columns.values())))
         columns = {"t": np.arange(n) / fs_hz, **columns}
@@ -257,7 +276,8 @@ def read_recording(path: str | Path, strict: bool = True,
         raise RecordingError(
             f"{path}: missing column(s) {', '.join(missing)} "
             f"(found: {', '.join(columns) or 'none'}; map other names with "
-            f"--columns {missing[0]}=COLUMN)")
+            f"--columns {missing[0]}=COLUMN)"
+        )
     if "t" in columns and not np.all(np.isfinite(columns["t"])):
         bad = int(np.flatnonzero(~np.isfinite(columns["t"]))[0])
         raise RecordingError(f"{path}: time column t is not finite at row {bad}")
@@ -275,21 +295,24 @@ def read_recording(path: str | Path, strict: bool = True,
     if strict and not rec.sampling.ok:
         raise RecordingError(f"{path}: irregular sampling, {rec.sampling.summary()}")
     if fs_hz is not None and not same_rate(rec.fs, fs_hz):
-        raise RecordingError(f"{path}: sampled at {rec.fs:g} Hz by its time column, "
-                             f"not {fs_hz:g} Hz")
+        raise RecordingError(
+            f"{path}: sampled at {rec.fs:g} Hz by its time column, not {fs_hz:g} Hz"
+        )
     return rec
 
 
-def _renamed(found: dict[str, np.ndarray], mapping: Mapping[str, str], path: Path
-             ) -> dict[str, np.ndarray]:
+def _renamed(
+    found: dict[str, np.ndarray], mapping: Mapping[str, str], path: Path
+) -> dict[str, np.ndarray]:
     """The file's columns with ``mapping`` (fdi name -> file column) applied."""
     absent = [f"{name}={col}" for name, col in mapping.items() if col not in found]
     if absent:
-        raise RecordingError(f"{path}: --columns {', '.join(absent)}: no such column "
-                             f"(found: {', '.join(found) or 'none'})")
+        raise RecordingError(
+            f"{path}: --columns {', '.join(absent)}: no such column "
+            f"(found: {', '.join(found) or 'none'})"
+        )
     sources = set(mapping.values())
-    out = {name: col for name, col in found.items()
-           if name not in sources and name not in mapping}
+    out = {name: col for name, col in found.items() if name not in sources and name not in mapping}
     out.update({name: found[col] for name, col in mapping.items()})
     return out
 
@@ -315,7 +338,7 @@ def _open_text(path: Path):
     # of the first column's name ("missing column t (found: \ufefft, ...)")
     if path.name.lower().endswith(".gz"):
         return gzip.open(path, "rt", encoding="utf-8-sig", newline="")
-    return open(path, "r", encoding="utf-8-sig", newline="")
+    return open(path, encoding="utf-8-sig", newline="")
 
 
 def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
@@ -350,11 +373,13 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
         return {name: np.empty(0) for name in header}, meta
     try:
         with np.errstate(all="ignore"):
-            data = np.loadtxt(io.StringIO(body), delimiter=delimiter, comments="#", ndmin=2,
-                              dtype=np.float64)
+            data = np.loadtxt(
+                io.StringIO(body), delimiter=delimiter, comments="#", ndmin=2, dtype=np.float64
+            )
     except ValueError:
-        raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol,
-                                                  delimiter)) from None
+        raise RecordingError(
+            _locate_bad_csv_line(path, lines, body_start, ncol, delimiter)
+        ) from None
     if data.shape[1] != ncol:
         raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol, delimiter))
     columns = {name: np.ascontiguousarray(data[:, j]) for j, name in enumerate(header)}
@@ -372,8 +397,9 @@ def _delimiter(header: str) -> str:
     return ","
 
 
-def _locate_bad_csv_line(path: Path, lines: list[str], start: int, ncol: int,
-                         delimiter: str) -> str:
+def _locate_bad_csv_line(
+    path: Path, lines: list[str], start: int, ncol: int, delimiter: str
+) -> str:
     for number in range(start + 1, len(lines) + 1):
         line = lines[number - 1].strip()
         if not line or line.startswith("#"):
@@ -390,20 +416,25 @@ def _locate_bad_csv_line(path: Path, lines: list[str], start: int, ncol: int,
 
 
 #: largest sample counter accepted (2**53: every whole number up to it is exact in float64)
-MAX_SEQ = 2 ** 53
+MAX_SEQ = 2**53
 
 
 def _as_counter(seq: np.ndarray, path: Path) -> np.ndarray:
-    if (not np.all(np.isfinite(seq)) or np.any(np.abs(seq) > MAX_SEQ)
-            or np.any(seq != np.round(seq))):
+    if (
+        not np.all(np.isfinite(seq))
+        or np.any(np.abs(seq) > MAX_SEQ)
+        or np.any(seq != np.round(seq))
+    ):
         raise RecordingError(f"{path}: column seq must hold whole numbers below 2**53")
     return seq.astype(np.int64)
 
 
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     if not zipfile.is_zipfile(path):  # else numpy takes it for a pickle and suggests loading it
-        raise RecordingError(f"{path}: cannot read recording: not an .npz file (a zip archive "
-                             f"of arrays, one per column): damaged, cut short or of another kind")
+        raise RecordingError(
+            f"{path}: cannot read recording: not an .npz file (a zip archive "
+            f"of arrays, one per column): damaged, cut short or of another kind"
+        )
     with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
         meta = _meta_object(str(data["__meta__"])) if "__meta__" in data.files else {}
         columns = {}
@@ -480,13 +511,16 @@ def write_recording(path: str | Path, rec: Recording) -> Path:
             elif name.endswith(".mat"):
                 from scipy.io import savemat
 
-                savemat(str(target), {**rec.columns, "meta_json": json.dumps(meta)},
-                        do_compression=True, oned_as="column")
+                savemat(
+                    str(target),
+                    {**rec.columns, "meta_json": json.dumps(meta)},
+                    do_compression=True,
+                    oned_as="column",
+                )
             else:
                 _write_csv(target, rec.columns, meta, path.name)
     except OSError as exc:
-        raise RecordingError(f"{path}: cannot write the recording: "
-                             f"{exc.strerror or exc}") from None
+        raise RecordingError(f"{path}: cannot write the recording: {exc.strerror or exc}") from None
     return path
 
 
@@ -514,8 +548,7 @@ def format_csv_rows(columns: dict[str, np.ndarray]) -> str:
 WRITE_CHUNK = 1 << 20
 
 
-def _write_csv(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str],
-               name: str) -> None:
+def _write_csv(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str], name: str) -> None:
     """The CSV text into ``path`` (gzip-compressed for a .gz ending); ``name``: the file's
     final name, which a .gz header holds (not that of the temporary file written)."""
     text = csv_header_lines(list(columns), meta) + format_csv_rows(columns)
@@ -525,4 +558,4 @@ def _write_csv(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str],
             fh = stack.enter_context(gzip.GzipFile(filename=name, mode="wb", fileobj=fh))
         out = stack.enter_context(io.TextIOWrapper(fh, encoding="utf-8", newline=""))
         for start in range(0, len(text), WRITE_CHUNK):
-            out.write(text[start:start + WRITE_CHUNK])
+            out.write(text[start : start + WRITE_CHUNK])

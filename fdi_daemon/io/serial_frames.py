@@ -109,8 +109,13 @@ class FrameDecoder:
         self.saturated = 0
 
     def counters(self) -> dict[str, int]:
-        return {"frames": self.frames, "crc_errors": self.crc_errors, "resyncs": self.resyncs,
-                "bytes_dropped": self.bytes_dropped, "saturated_frames": self.saturated}
+        return {
+            "frames": self.frames,
+            "crc_errors": self.crc_errors,
+            "resyncs": self.resyncs,
+            "bytes_dropped": self.bytes_dropped,
+            "saturated_frames": self.saturated,
+        }
 
     @property
     def pending_bytes(self) -> int:
@@ -138,7 +143,7 @@ class FrameDecoder:
                 self._drop(1)  # not a frame start after all
                 pos += 1
                 continue
-            body = bytes(buf[pos + 2:pos + 20])
+            body = bytes(buf[pos + 2 : pos + 20])
             (crc,) = _CRC.unpack_from(buf, pos + 20)
             if crc != crc16_ccitt(body):
                 self.crc_errors += 1

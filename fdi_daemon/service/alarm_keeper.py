@@ -46,9 +46,15 @@ def baseline_of(snapshot: dict[str, Any]) -> float | None:
 class AlarmKeeper:
     """See the module docstring."""
 
-    def __init__(self, settings: AlarmSettings, model: str, *,
-                 stored: dict[str, Any] | None = None, allow_remote: bool = False,
-                 clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self,
+        settings: AlarmSettings,
+        model: str,
+        *,
+        stored: dict[str, Any] | None = None,
+        allow_remote: bool = False,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
         self.model = model
         self.allow_remote = allow_remote
         self._clock = clock
@@ -58,8 +64,9 @@ class AlarmKeeper:
         self.lifecycle = AlarmLifecycle(settings)
         if stored is not None:
             self.lifecycle = AlarmLifecycle.from_dict(stored["alarm"], settings, now=clock())
-            self.event_counts = {str(k): int(v) for k, v in
-                                 (stored.get("event_counts") or {}).items()}
+            self.event_counts = {
+                str(k): int(v) for k, v in (stored.get("event_counts") or {}).items()
+            }
         self.trend = MinuteAggregator()
         self.recent = RecentTrend()
         self.last_t: float | None = None
@@ -72,8 +79,9 @@ class AlarmKeeper:
         with self._lock:
             return self._stamp(self.lifecycle.step(self._clock(), None, event))
 
-    def status(self, snapshot: dict[str, Any]) -> tuple[list[dict[str, Any]],
-                                                        dict[str, Any] | None]:
+    def status(
+        self, snapshot: dict[str, Any]
+    ) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
         now = self._clock()
         level = (snapshot.get("monitor") or {}).get("friction_level")
         level = float(level) if isinstance(level, (int, float)) else None
@@ -103,16 +111,23 @@ class AlarmKeeper:
     def summary(self) -> dict[str, Any]:
         now = self._clock()
         with self._lock:
-            return {**self.lifecycle.summary(now), "baseline_level": self.baseline,
-                    "steps": list(self.lifecycle.settings.steps),
-                    "remote_acknowledge": self.allow_remote,
-                    "trend": self.recent.summary(now)}
+            return {
+                **self.lifecycle.summary(now),
+                "baseline_level": self.baseline,
+                "steps": list(self.lifecycle.settings.steps),
+                "remote_acknowledge": self.allow_remote,
+                "trend": self.recent.summary(now),
+            }
 
     def state(self, event_counts: dict[str, int]) -> dict[str, Any]:
         """What the state file holds (`fdi_daemon.service.state_file`)."""
         with self._lock:
-            return {"model": self.model, "written": self._clock(),
-                    "alarm": self.lifecycle.to_dict(), "event_counts": dict(event_counts)}
+            return {
+                "model": self.model,
+                "written": self._clock(),
+                "alarm": self.lifecycle.to_dict(),
+                "event_counts": dict(event_counts),
+            }
 
     def reconfigure(self, settings: AlarmSettings, allow_remote: bool) -> None:
         """New settings after a reload; the alarm itself goes on."""
@@ -123,15 +138,18 @@ class AlarmKeeper:
     # ------------------------------------------------------------------ server threads
     def handle(self, request: dict[str, Any]) -> dict[str, Any]:
         """A request of the status socket or Modbus server: {"request", "by", "duration_s"}."""
-        return self.request(str(request.get("request")), str(request.get("by", "")),
-                            request.get("duration_s"))
+        return self.request(
+            str(request.get("request")), str(request.get("by", "")), request.get("duration_s")
+        )
 
-    def request(self, action: str, by: str, duration_s: float | None = None
-                ) -> dict[str, Any]:
+    def request(self, action: str, by: str, duration_s: float | None = None) -> dict[str, Any]:
         """acknowledge | shelve (duration_s) | unshelve; the answer says why if refused."""
         if not self.allow_remote:
-            return {"ok": False, "error": "remote acknowledge and shelving are disabled "
-                                          "(alarms.allow_remote_acknowledge: false)"}
+            return {
+                "ok": False,
+                "error": "remote acknowledge and shelving are disabled "
+                "(alarms.allow_remote_acknowledge: false)",
+            }
         now = self._clock()
         with self._lock:
             if action == "acknowledge":
@@ -143,13 +161,18 @@ class AlarmKeeper:
             elif action == "unshelve":
                 ok, reason, events = self.lifecycle.unshelve(now, by)
             else:
-                return {"ok": False, "error": f"unknown request {action!r} (acknowledge, "
-                                              "shelve, unshelve)"}
+                return {
+                    "ok": False,
+                    "error": f"unknown request {action!r} (acknowledge, shelve, unshelve)",
+                }
             self._pending.extend(self._stamp(events))
             self._mark_trend(now)
             summary = self.lifecycle.summary(now)
-        return {"ok": True, "result": reason, "alarm": summary} if ok else \
-            {"ok": False, "error": reason, "alarm": summary}
+        return (
+            {"ok": True, "result": reason, "alarm": summary}
+            if ok
+            else {"ok": False, "error": reason, "alarm": summary}
+        )
 
     # ------------------------------------------------------------------ internals
     def _stamp(self, events: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -45,18 +45,29 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-
 from fdi_daemon.alarms.lifecycle import AlarmSettings
 from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.io.yaml_file import read_yaml
 
-__all__ = ["RigConfig", "load_config", "config_from_dict", "default_config_path",
-           "default_state_dir", "SCHEMA"]
+__all__ = [
+    "RigConfig",
+    "load_config",
+    "config_from_dict",
+    "default_config_path",
+    "default_state_dir",
+    "SCHEMA",
+]
 
 LINK_KINDS = ("serial", "modbus-tcp", "modbus-rtu", "replay", "sim")
 SIM_TRANSPORTS = ("modbus-tcp", "modbus-rtu", "serial")
-SIM_FAULT_KEYS = ("bearing_supply", "accel_bias", "valve_gain", "supply_pressure",
-                  "accel_dropout", "accel_saturation")
+SIM_FAULT_KEYS = (
+    "bearing_supply",
+    "accel_bias",
+    "valve_gain",
+    "supply_pressure",
+    "accel_dropout",
+    "accel_saturation",
+)
 
 
 @dataclass(frozen=True)
@@ -104,16 +115,23 @@ def _listen(v: Any) -> str | None:
     if sep and host and port.isdigit() and int(port) <= 65535:
         return None
     return "must be HOST:PORT, e.g. 127.0.0.1:9108 (port 0 = any free port)"
+
+
 def _steps(v: Any) -> str | None:
-    ok = (v and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                    and 0 < x < math.inf for x in v)
-          and all(a < b for a, b in zip(v, v[1:])))
+    ok = (
+        v
+        and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and 0 < x < math.inf for x in v
+        )
+        and all(a < b for a, b in zip(v, v[1:]))
+    )
     return None if ok else "must be a list of positive, increasing levels"
 
 
 def _one_of(*choices: str) -> Callable[[Any], str | None]:
     def check(v: Any) -> str | None:
         return None if v in choices else f"must be one of {', '.join(choices)}"
+
     return check
 
 
@@ -126,121 +144,213 @@ INT = (int,)
 #: section -> key -> Field, or section -> key -> nested dict of Fields
 SCHEMA: dict[str, dict[str, Any]] = {
     "model": {
-        "path": Field(STR, None, "model file (YAML) from `fdi identify` + `fdi signature`; "
-                                 "relative to the config file"),
+        "path": Field(
+            STR,
+            None,
+            "model file (YAML) from `fdi identify` + `fdi signature`; relative to the config file",
+        ),
     },
     "sinks": {
-        "event_log": Field(STR, "events.jsonl", "JSON Lines event log (append; fsync on "
-                                                "alarms); null disables", nullable=True),
+        "event_log": Field(
+            STR,
+            "events.jsonl",
+            "JSON Lines event log (append; fsync on alarms); null disables",
+            nullable=True,
+        ),
         "stdout": Field(BOOL, True, "one log line per event on stdout (journald priorities)"),
-        "status_socket": Field(STR, "status.sock", "Unix socket serving the JSON status "
-                                                   "snapshot; null disables", nullable=True),
+        "status_socket": Field(
+            STR,
+            "status.sock",
+            "Unix socket serving the JSON status snapshot; null disables",
+            nullable=True,
+        ),
         "modbus_status": {
             "enabled": Field(BOOL, False, "serve the status registers over Modbus TCP"),
             "host": Field(STR, "127.0.0.1", "address to bind (loopback unless configured)"),
-            "port": Field(INT, 5020, "TCP port (0 = any free port, logged at start)",
-                          _port),
+            "port": Field(INT, 5020, "TCP port (0 = any free port, logged at start)", _port),
             "device_id": Field(INT, 1, "Modbus device id (unit) answered", _device_id),
         },
     },
     "recorder": {
         "enabled": Field(BOOL, True, "write the raw samples as rotating CSV recordings"),
         "dir": Field(STR, "recordings", "folder for the recordings"),
-        "rotate_seconds": Field(NUM, 3600.0, "start a new file after this many s of samples",
-                                _positive),
+        "rotate_seconds": Field(
+            NUM, 3600.0, "start a new file after this many s of samples", _positive
+        ),
         "rotate_bytes": Field(INT, 200_000_000, "or after this many bytes", _positive),
         "fsync_period_s": Field(NUM, 1.0, "flush + fsync period, <= 1 s", _fsync_period),
-        "keep_files": Field(INT, 0, "delete the oldest recordings beyond this many "
-                                    "(0 keeps all)", _non_negative),
+        "keep_files": Field(
+            INT, 0, "delete the oldest recordings beyond this many (0 keeps all)", _non_negative
+        ),
     },
     "service": {
-        "fs": Field(NUM, None, "sampling rate in Hz; null = the model's fs", _positive,
-                    nullable=True),
-        "deadline_s": Field(NUM, 0.05, "a tick finished later than this after its sample "
-                                       "time (paced by the device counter) is a deadline miss",
-                            _positive),
-        "status_period_s": Field(NUM, 0.1, "how often the status snapshot is refreshed",
-                                 _positive),
-        "queue_size": Field(INT, 4096, "bound of the queue to the sink thread (non-critical "
-                                       "items beyond it are dropped and counted)", _positive),
+        "fs": Field(
+            NUM, None, "sampling rate in Hz; null = the model's fs", _positive, nullable=True
+        ),
+        "deadline_s": Field(
+            NUM,
+            0.05,
+            "a tick finished later than this after its sample "
+            "time (paced by the device counter) is a deadline miss",
+            _positive,
+        ),
+        "status_period_s": Field(NUM, 0.1, "how often the status snapshot is refreshed", _positive),
+        "queue_size": Field(
+            INT,
+            4096,
+            "bound of the queue to the sink thread (non-critical "
+            "items beyond it are dropped and counted)",
+            _positive,
+        ),
         "read_timeout_s": Field(NUM, 0.05, "longest wait in one link read", _positive),
-        "state_dir": Field(STR, None, "base of relative output paths; null = "
-                                      "$STATE_DIRECTORY or else $XDG_STATE_HOME/fdi "
-                                      "(~/.local/state/fdi)", nullable=True),
+        "state_dir": Field(
+            STR,
+            None,
+            "base of relative output paths; null = "
+            "$STATE_DIRECTORY or else $XDG_STATE_HOME/fdi "
+            "(~/.local/state/fdi)",
+            nullable=True,
+        ),
     },
     "mqtt": {
         "enabled": Field(BOOL, False, "publish events and status to an MQTT broker"),
         "host": Field(STR, "127.0.0.1", "broker host"),
         "port": Field(INT, 1883, "broker port (8883 is the usual one with TLS)", _port),
         "site": Field(STR, "site", "first topic level: fdi/<site>/<rig>/...", _topic_level),
-        "rig": Field(STR, None, "second topic level; null = this host's name",
-                     _topic_level, nullable=True),
-        "client_id": Field(STR, None, "MQTT client id; null = fdi-<site>-<rig>",
-                           nullable=True),
-        "keepalive_s": Field(INT, 30, "MQTT keepalive (s); a silent daemon is declared "
-                                      "offline after 1.5 times this", _positive),
+        "rig": Field(
+            STR, None, "second topic level; null = this host's name", _topic_level, nullable=True
+        ),
+        "client_id": Field(STR, None, "MQTT client id; null = fdi-<site>-<rig>", nullable=True),
+        "keepalive_s": Field(
+            INT,
+            30,
+            "MQTT keepalive (s); a silent daemon is declared offline after 1.5 times this",
+            _positive,
+        ),
         "username": Field(STR, None, "user name for the broker", nullable=True),
-        "password_file": Field(STR, None, "file holding the password (first line), relative "
-                                          "to the config file", nullable=True),
-        "password_env": Field(STR, None, "environment variable holding the password",
-                              nullable=True),
+        "password_file": Field(
+            STR,
+            None,
+            "file holding the password (first line), relative to the config file",
+            nullable=True,
+        ),
+        "password_env": Field(
+            STR, None, "environment variable holding the password", nullable=True
+        ),
         "tls": {
             "enabled": Field(BOOL, False, "connect with TLS"),
-            "ca_file": Field(STR, None, "CA certificate(s) (PEM) to check the broker "
-                                        "with; null = the system's", nullable=True),
-            "cert_file": Field(STR, None, "client certificate (PEM) for mutual TLS",
-                               nullable=True),
-            "key_file": Field(STR, None, "the client certificate's key (PEM)",
-                              nullable=True),
+            "ca_file": Field(
+                STR,
+                None,
+                "CA certificate(s) (PEM) to check the broker with; null = the system's",
+                nullable=True,
+            ),
+            "cert_file": Field(STR, None, "client certificate (PEM) for mutual TLS", nullable=True),
+            "key_file": Field(STR, None, "the client certificate's key (PEM)", nullable=True),
         },
-        "status_period_s": Field(NUM, 1.0, "how often the retained status is published",
-                                 _positive),
-        "buffer_file": Field(STR, "mqtt-outbox.jsonl", "alarms waiting for the broker, on "
-                                                       "disk (relative to state_dir)"),
-        "buffer_max_messages": Field(INT, 10000, "bound of that buffer; beyond it the oldest "
-                                                 "alarm is dropped and counted", _positive),
+        "status_period_s": Field(NUM, 1.0, "how often the retained status is published", _positive),
+        "buffer_file": Field(
+            STR,
+            "mqtt-outbox.jsonl",
+            "alarms waiting for the broker, on disk (relative to state_dir)",
+        ),
+        "buffer_max_messages": Field(
+            INT,
+            10000,
+            "bound of that buffer; beyond it the oldest alarm is dropped and counted",
+            _positive,
+        ),
     },
     "metrics": {
-        "listen": Field(STR, None, "HOST:PORT of the Prometheus exporter; null = off",
-                        _listen, nullable=True),
+        "listen": Field(
+            STR, None, "HOST:PORT of the Prometheus exporter; null = off", _listen, nullable=True
+        ),
     },
     "alarms": {
-        "steps": Field((list,), _ALARM.steps, "friction levels above the baseline (units "
-                                                  "of the signature) that step the alarm "
-                                                  "priority up", _steps),
-        "deadband": Field(NUM, _ALARM.deadband, "a priority falls only below its step minus this",
-                          _non_negative),
-        "raise_delay_s": Field(NUM, _ALARM.raise_delay_s, "the level stays above a step this long before the "
-                                         "priority rises", _non_negative),
-        "lower_delay_s": Field(NUM, _ALARM.lower_delay_s, "... below step - deadband this long before it "
-                                           "falls", _non_negative),
-        "return_delay_s": Field(NUM, _ALARM.return_delay_s, "detector cleared and level back at the "
-                                            "baseline (moving time) this long before the "
-                                            "alarm returns to normal", _non_negative),
-        "return_level": Field(NUM, _ALARM.return_level, "level above the baseline under which the fault "
-                                        "counts as gone", _positive),
+        "steps": Field(
+            (list,),
+            _ALARM.steps,
+            "friction levels above the baseline (units "
+            "of the signature) that step the alarm "
+            "priority up",
+            _steps,
+        ),
+        "deadband": Field(
+            NUM, _ALARM.deadband, "a priority falls only below its step minus this", _non_negative
+        ),
+        "raise_delay_s": Field(
+            NUM,
+            _ALARM.raise_delay_s,
+            "the level stays above a step this long before the priority rises",
+            _non_negative,
+        ),
+        "lower_delay_s": Field(
+            NUM,
+            _ALARM.lower_delay_s,
+            "... below step - deadband this long before it falls",
+            _non_negative,
+        ),
+        "return_delay_s": Field(
+            NUM,
+            _ALARM.return_delay_s,
+            "detector cleared and level back at the "
+            "baseline (moving time) this long before the "
+            "alarm returns to normal",
+            _non_negative,
+        ),
+        "return_level": Field(
+            NUM,
+            _ALARM.return_level,
+            "level above the baseline under which the fault counts as gone",
+            _positive,
+        ),
         "max_shelve_s": Field(NUM, _ALARM.max_shelve_s, "longest shelving", _positive),
-        "smoothing_s": Field(NUM, _ALARM.smoothing_s, "time constant of the level smoothing the alarm "
-                                        "decides on", _non_negative),
-        "allow_remote_acknowledge": Field(BOOL, False, "accept acknowledge/shelve requests "
-                                                       "on the status socket and Modbus"),
-        "state_file": Field(STR, "state.json", "alarm state kept across restarts; null "
-                                               "disables", nullable=True),
-        "trend": Field(STR, "trend.sqlite", "friction trend, one row per minute; null "
-                                            "disables", nullable=True),
+        "smoothing_s": Field(
+            NUM,
+            _ALARM.smoothing_s,
+            "time constant of the level smoothing the alarm decides on",
+            _non_negative,
+        ),
+        "allow_remote_acknowledge": Field(
+            BOOL, False, "accept acknowledge/shelve requests on the status socket and Modbus"
+        ),
+        "state_file": Field(
+            STR, "state.json", "alarm state kept across restarts; null disables", nullable=True
+        ),
+        "trend": Field(
+            STR, "trend.sqlite", "friction trend, one row per minute; null disables", nullable=True
+        ),
     },
     "simulated_device": {
-        "transport": Field(STR, "modbus-tcp", "fake device protocol: modbus-tcp | "
-                                              "modbus-rtu | serial (pty)",
-                           _one_of(*SIM_TRANSPORTS)),
-        "scenario": Field(STR, None, "scenario YAML played by the rig (relative to the config "
-                                     "file); null = the fake device's default", nullable=True),
+        "transport": Field(
+            STR,
+            "modbus-tcp",
+            "fake device protocol: modbus-tcp | modbus-rtu | serial (pty)",
+            _one_of(*SIM_TRANSPORTS),
+        ),
+        "scenario": Field(
+            STR,
+            None,
+            "scenario YAML played by the rig (relative to the config "
+            "file); null = the fake device's default",
+            nullable=True,
+        ),
         "seed": Field(INT, 0, "seed of the simulated rig's noise"),
     },
 }
 
-TOP_LEVEL = ("link", "simulated_device", "model", "monitor", "sinks", "recorder", "service",
-             "mqtt", "metrics", "alarms")
+TOP_LEVEL = (
+    "link",
+    "simulated_device",
+    "model",
+    "monitor",
+    "sinks",
+    "recorder",
+    "service",
+    "mqtt",
+    "metrics",
+    "alarms",
+)
 #: keys that would put a secret into the YAML, refused with where to put it instead
 SECRET_KEYS = ("password", "passwd", "secret")
 
@@ -302,13 +412,13 @@ def load_config(path: str | Path | None = None) -> RigConfig:
     return config_from_dict(data, str(path), path.resolve().parent)
 
 
-def config_from_dict(data: Any, source: str = "config",
-                     base_dir: Path | None = None) -> RigConfig:
+def config_from_dict(data: Any, source: str = "config", base_dir: Path | None = None) -> RigConfig:
     """Validate a parsed config mapping; errors name ``source`` and the key path."""
     base_dir = base_dir or Path.cwd()
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: a rig config must be a mapping with sections "
-                          f"{', '.join(TOP_LEVEL)}")
+        raise ConfigError(
+            f"{source}: a rig config must be a mapping with sections {', '.join(TOP_LEVEL)}"
+        )
     _no_unknown(data, TOP_LEVEL, "", source)
     sim = _resolve_scenario(_simulated_device(data, source), base_dir)
     link = _resolve_replay_path(_link(data.get("link"), sim is not None, source), base_dir)
@@ -319,11 +429,19 @@ def config_from_dict(data: Any, source: str = "config",
     if not model_path.is_absolute():
         model_path = base_dir / model_path
     config = RigConfig(
-        source=source, base_dir=base_dir, link=link, simulated_device=sim,
-        model_path=model_path, monitor=_monitor(data.get("monitor"), source),
-        sinks=_section(data, "sinks", source), recorder=_section(data, "recorder", source),
-        service=_section(data, "service", source), mqtt=_mqtt(data, source, base_dir),
-        metrics=_section(data, "metrics", source), alarms=_alarms(data, source))
+        source=source,
+        base_dir=base_dir,
+        link=link,
+        simulated_device=sim,
+        model_path=model_path,
+        monitor=_monitor(data.get("monitor"), source),
+        sinks=_section(data, "sinks", source),
+        recorder=_section(data, "recorder", source),
+        service=_section(data, "service", source),
+        mqtt=_mqtt(data, source, base_dir),
+        metrics=_section(data, "metrics", source),
+        alarms=_alarms(data, source),
+    )
     check_files(config)
     return config
 
@@ -333,9 +451,11 @@ def _mqtt(data: Mapping, source: str, base_dir: Path) -> dict[str, Any]:
     given = data.get("mqtt")
     for key in SECRET_KEYS:
         if isinstance(given, dict) and key in given:
-            raise ConfigError(f"{source}: mqtt.{key}: secrets are not read from the config; "
-                              "put the password in a file (mqtt.password_file) or an "
-                              "environment variable (mqtt.password_env)")
+            raise ConfigError(
+                f"{source}: mqtt.{key}: secrets are not read from the config; "
+                "put the password in a file (mqtt.password_file) or an "
+                "environment variable (mqtt.password_env)"
+            )
     mqtt = _section(data, "mqtt", source)
     if mqtt["password_file"] is not None and mqtt["password_env"] is not None:
         raise ConfigError(f"{source}: mqtt.password_file and mqtt.password_env: set one")
@@ -358,20 +478,30 @@ def _alarms(data: Mapping, source: str) -> dict[str, Any]:
     alarms = _section(data, "alarms", source)
     alarms["steps"] = tuple(float(x) for x in alarms["steps"])
     try:
-        alarms["settings"] = AlarmSettings(**{k: alarms[k] for k in (
-            "steps", "deadband", "raise_delay_s", "lower_delay_s", "return_delay_s",
-            "max_shelve_s", "smoothing_s", "return_level")})
+        alarms["settings"] = AlarmSettings(
+            **{
+                k: alarms[k]
+                for k in (
+                    "steps",
+                    "deadband",
+                    "raise_delay_s",
+                    "lower_delay_s",
+                    "return_delay_s",
+                    "max_shelve_s",
+                    "smoothing_s",
+                    "return_level",
+                )
+            }
+        )
     except ValueError as exc:
         raise ConfigError(f"{source}: alarms: {exc}") from None
     return alarms
 
 
-def _no_unknown(data: Mapping, known: tuple[str, ...] | Mapping, prefix: str,
-                source: str) -> None:
+def _no_unknown(data: Mapping, known: tuple[str, ...] | Mapping, prefix: str, source: str) -> None:
     for key in data:
         if key not in known:
-            raise ConfigError(f"{source}: {prefix}{key}: unknown key "
-                              f"(known: {', '.join(known)})")
+            raise ConfigError(f"{source}: {prefix}{key}: unknown key (known: {', '.join(known)})")
 
 
 def _section(data: Mapping, name: str, source: str) -> dict[str, Any]:
@@ -383,8 +513,7 @@ def _section(data: Mapping, name: str, source: str) -> dict[str, Any]:
     return _fill(value, SCHEMA[name], f"{name}.", source)
 
 
-def _fill(value: Mapping, schema: Mapping[str, Any], prefix: str,
-          source: str) -> dict[str, Any]:
+def _fill(value: Mapping, schema: Mapping[str, Any], prefix: str, source: str) -> dict[str, Any]:
     _no_unknown(value, schema, prefix, source)
     out: dict[str, Any] = {}
     for key, spec in schema.items():
@@ -411,11 +540,9 @@ def _scalar(value: Any, spec: Field, path: str, source: str, present: bool) -> A
             raise ConfigError(f"{source}: {path} may not be null (default {spec.default!r})")
         return None
     if isinstance(value, bool) and bool not in spec.types:
-        raise ConfigError(f"{source}: {path} must be {_type_names(spec.types)}, "
-                          f"not {value!r}")
+        raise ConfigError(f"{source}: {path} must be {_type_names(spec.types)}, not {value!r}")
     if not isinstance(value, spec.types):
-        raise ConfigError(f"{source}: {path} must be {_type_names(spec.types)}, "
-                          f"not {value!r}")
+        raise ConfigError(f"{source}: {path} must be {_type_names(spec.types)}, not {value!r}")
     if spec.types == NUM:
         value = float(value)
     if spec.check is not None and (problem := spec.check(value)):
@@ -424,8 +551,14 @@ def _scalar(value: Any, spec: Field, path: str, source: str, present: bool) -> A
 
 
 def _type_names(types: tuple[type, ...]) -> str:
-    names = {int: "a whole number", float: "a number", str: "a string", bool: "true or false",
-             list: "a list", dict: "a mapping"}
+    names = {
+        int: "a whole number",
+        float: "a number",
+        str: "a string",
+        bool: "true or false",
+        list: "a list",
+        dict: "a mapping",
+    }
     if types == NUM:
         return "a number"
     return " or ".join(names[t] for t in types)
@@ -435,19 +568,24 @@ def _link(value: Any, simulated: bool, source: str) -> dict[str, Any]:
     if value is None:
         if simulated:
             return {}
-        raise ConfigError(f"{source}: link is required (a mapping with kind: "
-                          f"{' | '.join(LINK_KINDS)}), or a simulated_device section")
+        raise ConfigError(
+            f"{source}: link is required (a mapping with kind: "
+            f"{' | '.join(LINK_KINDS)}), or a simulated_device section"
+        )
     if not isinstance(value, dict):
         raise ConfigError(f"{source}: link must be a mapping with a kind")
     if simulated:
         if "kind" in value:
-            raise ConfigError(f"{source}: link.kind: set by simulated_device.transport; "
-                              "leave it out when simulated_device is given")
+            raise ConfigError(
+                f"{source}: link.kind: set by simulated_device.transport; "
+                "leave it out when simulated_device is given"
+            )
         return dict(value)
     kind = value.get("kind")
     if kind not in LINK_KINDS:
-        raise ConfigError(f"{source}: link.kind must be one of {', '.join(LINK_KINDS)} "
-                          f"(got {kind!r})")
+        raise ConfigError(
+            f"{source}: link.kind must be one of {', '.join(LINK_KINDS)} (got {kind!r})"
+        )
     check_link(value, source)
     return dict(value)
 
@@ -470,7 +608,7 @@ def check_link(link: Mapping[str, Any], source: str) -> None:
         raise ConfigError(f"{source}: {exc}") from None
 
 
-def check_files(config: "RigConfig") -> None:
+def check_files(config: RigConfig) -> None:
     """The daemon's output files (event log, status socket, alarm state, trend, MQTT outbox)
     are none of its inputs (the model, a replayed recording) and no two of them one file
     (`io.outputs.check_outputs`): an event log pointed at the replayed recording would
@@ -480,14 +618,19 @@ def check_files(config: "RigConfig") -> None:
     inputs = {"model.path": config.model_path}
     if config.link.get("kind") == "replay" and config.link.get("path"):
         inputs["link.path"] = Path(config.link["path"])
-    outputs = {"sinks.event_log": config.sinks["event_log"],
-               "sinks.status_socket": config.sinks["status_socket"],
-               "alarms.state_file": config.alarms["state_file"],
-               "alarms.trend": config.alarms["trend"],
-               "mqtt.buffer_file": config.mqtt["buffer_file"] if config.mqtt["enabled"] else None}
+    outputs = {
+        "sinks.event_log": config.sinks["event_log"],
+        "sinks.status_socket": config.sinks["status_socket"],
+        "alarms.state_file": config.alarms["state_file"],
+        "alarms.trend": config.alarms["trend"],
+        "mqtt.buffer_file": config.mqtt["buffer_file"] if config.mqtt["enabled"] else None,
+    }
     try:
-        check_outputs({key: config.output_path(value) for key, value in outputs.items()},
-                      inputs, new_dirs=True)
+        check_outputs(
+            {key: config.output_path(value) for key, value in outputs.items()},
+            inputs,
+            new_dirs=True,
+        )
     except UserError as exc:
         raise ConfigError(f"{config.source}: {exc}") from None
 
@@ -502,24 +645,28 @@ def _simulated_device(data: Mapping, source: str) -> dict[str, Any] | None:
     rest = {k: v for k, v in value.items() if k != "faults"}
     out = _fill(rest, SCHEMA["simulated_device"], "simulated_device.", source)
     if not isinstance(faults_given, list):
-        raise ConfigError(f"{source}: simulated_device.faults must be a list of "
-                          "{at_s: s, <fault>: value}")
+        raise ConfigError(
+            f"{source}: simulated_device.faults must be a list of {{at_s: s, <fault>: value}}"
+        )
     faults = []
     for i, fault in enumerate(faults_given):
         path = f"simulated_device.faults[{i}]"
         if not isinstance(fault, dict):
-            raise ConfigError(f"{source}: {path} must be a mapping like "
-                              "{at_s: 20, bearing_supply: 0.35}")
+            raise ConfigError(
+                f"{source}: {path} must be a mapping like {{at_s: 20, bearing_supply: 0.35}}"
+            )
         _no_unknown(fault, ("at_s",) + SIM_FAULT_KEYS, f"{path}.", source)
-        at = _scalar(fault.get("at_s"), Field(NUM, None, "", _non_negative), f"{path}.at_s",
-                     source, True)
+        at = _scalar(
+            fault.get("at_s"), Field(NUM, None, "", _non_negative), f"{path}.at_s", source, True
+        )
         if at is None:
             raise ConfigError(f"{source}: {path}.at_s is required (sample time of the fault)")
         settings = {k: v for k, v in fault.items() if k != "at_s"}
         if len(settings) != 1:
-            raise ConfigError(f"{source}: {path} must set exactly one of "
-                              f"{', '.join(SIM_FAULT_KEYS)}")
-        (name, setting), = settings.items()
+            raise ConfigError(
+                f"{source}: {path} must set exactly one of {', '.join(SIM_FAULT_KEYS)}"
+            )
+        ((name, setting),) = settings.items()
         check = _fraction if name == "bearing_supply" else None
         setting = _scalar(setting, Field(NUM, None, "", check), f"{path}.{name}", source, True)
         faults.append({"at_s": at, "name": name, "value": setting})

@@ -34,9 +34,17 @@ from fdi_daemon.service.config import RigConfig, check_link, load_config
 from fdi_daemon.service.loop import ServiceLoop
 from fdi_daemon.service.notify import Notifier, watchdog_period_s
 from fdi_daemon.service.recorder import Recorder
-from fdi_daemon.service.sinks import (EventLog, ModbusStatusServer, PriorityFormatter,
-                                      StatusBoard, StatusSocketServer, StdoutLog, Worker,
-                                      journald_attached, stamp_event)
+from fdi_daemon.service.sinks import (
+    EventLog,
+    ModbusStatusServer,
+    PriorityFormatter,
+    StatusBoard,
+    StatusSocketServer,
+    StdoutLog,
+    Worker,
+    journald_attached,
+    stamp_event,
+)
 from fdi_daemon.service.state_file import model_identity, read_state, write_state
 from fdi_daemon.service.trend import open_trend_store
 
@@ -63,8 +71,14 @@ class Sinks:
     (their libraries are the optional ``fleet`` extra).
     """
 
-    def __init__(self, config: RigConfig, fs_hz: float, link_kind: str,
-                 board: StatusBoard, keeper: AlarmKeeper | None = None) -> None:
+    def __init__(
+        self,
+        config: RigConfig,
+        fs_hz: float,
+        link_kind: str,
+        board: StatusBoard,
+        keeper: AlarmKeeper | None = None,
+    ) -> None:
         self.board = board
         sinks = config.sinks
         self.event_log = None
@@ -87,30 +101,51 @@ class Sinks:
             mb = sinks["modbus_status"]
             if mb["enabled"]:
                 self.modbus_server = ModbusStatusServer(
-                    board, mb["host"], mb["port"], mb["device_id"],
-                    requests=requests if config.alarms["allow_remote_acknowledge"] else None)
-                log.info("Modbus status registers on %s:%d (device id %d)", mb["host"],
-                         self.modbus_server.port, mb["device_id"])
+                    board,
+                    mb["host"],
+                    mb["port"],
+                    mb["device_id"],
+                    requests=requests if config.alarms["allow_remote_acknowledge"] else None,
+                )
+                log.info(
+                    "Modbus status registers on %s:%d (device id %d)",
+                    mb["host"],
+                    self.modbus_server.port,
+                    mb["device_id"],
+                )
             rec = config.recorder
             if rec["enabled"]:
                 self.recorder = Recorder(
-                    config.output_path(rec["dir"]), fs_hz, rec["rotate_seconds"],
-                    rec["rotate_bytes"], rec["fsync_period_s"], rec["keep_files"],
-                    meta={"link": link_kind, "config": config.source})
+                    config.output_path(rec["dir"]),
+                    fs_hz,
+                    rec["rotate_seconds"],
+                    rec["rotate_bytes"],
+                    rec["fsync_period_s"],
+                    rec["keep_files"],
+                    meta={"link": link_kind, "config": config.source},
+                )
             if config.mqtt["enabled"]:
                 from fdi_daemon.service.mqtt_sink import MqttSink
 
-                self.mqtt = MqttSink(config.mqtt, config.output_path(config.mqtt["buffer_file"]),
-                                     config.source, config.service["queue_size"])
+                self.mqtt = MqttSink(
+                    config.mqtt,
+                    config.output_path(config.mqtt["buffer_file"]),
+                    config.source,
+                    config.service["queue_size"],
+                )
             if config.metrics["listen"] is not None:
                 from fdi_daemon.service.metrics import MetricsServer
 
-                self.metrics = MetricsServer(board, config.metrics["listen"], self.mqtt,
-                                             config.source)
-            if keeper is not None and (path := config.output_path(
-                    config.alarms["trend"])) is not None:
+                self.metrics = MetricsServer(
+                    board, config.metrics["listen"], self.mqtt, config.source
+                )
+            if (
+                keeper is not None
+                and (path := config.output_path(config.alarms["trend"])) is not None
+            ):
                 self.trend_store = open_trend_store(
-                    path, {"steps": list(config.alarms["steps"]), "model": keeper.model})
+                    path, {"steps": list(config.alarms["steps"]), "model": keeper.model}
+                )
         except (OSError, sqlite3.Error) as exc:
             self.close()
             raise ConfigError(f"{config.source}: cannot open an output: {exc}") from None
@@ -144,8 +179,9 @@ class Sinks:
             self.worker.put(("trend", row), critical=True)
 
     def dropped(self) -> int:
-        return (sum(w.dropped for w in (self.worker, self.recorder_worker) if w is not None)
-                + (self.mqtt.dropped() if self.mqtt is not None else 0))
+        return sum(w.dropped for w in (self.worker, self.recorder_worker) if w is not None) + (
+            self.mqtt.dropped() if self.mqtt is not None else 0
+        )
 
     # --- worker threads
     def _handle(self, item: tuple[str, Any]) -> None:
@@ -162,8 +198,9 @@ class Sinks:
                 else:
                     self.trend_store.append(payload)
             except (OSError, sqlite3.Error) as exc:  # the disk failed: say so, go on
-                log.error("cannot write the %s: %s", "state file" if kind == "state"
-                          else "trend", exc)
+                log.error(
+                    "cannot write the %s: %s", "state file" if kind == "state" else "trend", exc
+                )
             return
         stamped = stamp_event(payload)
         if self.mqtt is not None:
@@ -185,8 +222,15 @@ class Sinks:
         for worker in (self.worker, self.recorder_worker):
             if worker is not None:
                 worker.close()
-        for thing in (self.recorder, self.event_log, self.status_server, self.modbus_server,
-                      self.mqtt, self.metrics, self.trend_store):
+        for thing in (
+            self.recorder,
+            self.event_log,
+            self.status_server,
+            self.modbus_server,
+            self.mqtt,
+            self.metrics,
+            self.trend_store,
+        ):
             if thing is not None:
                 try:
                     thing.close()
@@ -217,8 +261,10 @@ def model_with_overrides(config: RigConfig) -> FdiModel:
             setattr(model, key, {**getattr(model, key), **config.monitor[key]})
     fs = config.service["fs"]
     if fs is not None and abs(fs - model.fs) > 1e-9 * model.fs:
-        raise ConfigError(f"{config.source}: service.fs = {fs:g} Hz but the model "
-                          f"{config.model_path} was identified at {model.fs:g} Hz")
+        raise ConfigError(
+            f"{config.source}: service.fs = {fs:g} Hz but the model "
+            f"{config.model_path} was identified at {model.fs:g} Hz"
+        )
     return model
 
 
@@ -235,16 +281,22 @@ def start_simulated_device(settings: dict[str, Any]):
     try:
         device.start()
     except OSError as exc:
-        raise UserError(f"simulated_device: cannot start the {settings['transport']} "
-                        f"device: {exc}") from None
+        raise UserError(
+            f"simulated_device: cannot start the {settings['transport']} device: {exc}"
+        ) from None
     return device
 
 
 class Daemon:
     """`fdi run`: one config, one loop; signals for stop and reload."""
 
-    def __init__(self, config_path: str | Path | None = None, echo=print,
-                 state_dir: str | Path | None = None, hangup_stops: bool = False) -> None:
+    def __init__(
+        self,
+        config_path: str | Path | None = None,
+        echo=print,
+        state_dir: str | Path | None = None,
+        hangup_stops: bool = False,
+    ) -> None:
         self.config_path = config_path
         self.state_dir = state_dir  # `fdi run --state-dir`: wins over service.state_dir
         self.hangup_stops = hangup_stops  # `fdi run --dashboard`: SIGHUP = terminal gone
@@ -271,9 +323,15 @@ class Daemon:
         monitor = Monitor(model)
         # numba compiles the kernels once after an install or an update (about a minute) and
         # caches them: say so when it takes long, so a first run does not look hung
-        notice = threading.Timer(COMPILE_NOTICE_S, self.echo, ("compiling the monitor's kernels "
-                                 "(once after an install or an update: about a minute; cached "
-                                 "for later runs) ...",))
+        notice = threading.Timer(
+            COMPILE_NOTICE_S,
+            self.echo,
+            (
+                "compiling the monitor's kernels "
+                "(once after an install or an update: about a minute; cached "
+                "for later runs) ...",
+            ),
+        )
         notice.daemon = True
         notice.start()
         try:
@@ -282,8 +340,9 @@ class Daemon:
             notice.cancel()
         return model, monitor, self.link_config(config)
 
-    def assemble(self, config: RigConfig, model: FdiModel, monitor: Any,
-                 link_config: dict[str, Any]) -> tuple[ServiceLoop, Sinks, Any]:
+    def assemble(
+        self, config: RigConfig, model: FdiModel, monitor: Any, link_config: dict[str, Any]
+    ) -> tuple[ServiceLoop, Sinks, Any]:
         """Open the sinks and make the link and the loop of a prepared config."""
         from fdi_daemon.io.links.base import make_reconnecting_link
 
@@ -293,11 +352,19 @@ class Daemon:
         model_info = {"path": str(config.model_path), "provenance": model.provenance}
         counts = self.loop.event_counts if self.loop is not None else keeper.event_counts
         loop = ServiceLoop(
-            link, monitor, sinks, fs_hz=model.fs, deadline_s=config.service["deadline_s"],
+            link,
+            monitor,
+            sinks,
+            fs_hz=model.fs,
+            deadline_s=config.service["deadline_s"],
             read_timeout_s=config.service["read_timeout_s"],
-            status_period_s=config.service["status_period_s"], model_info=model_info,
-            notifier=self.notifier, watchdog_period_s=watchdog_period_s(), alarms=keeper,
-            event_counts=counts)
+            status_period_s=config.service["status_period_s"],
+            model_info=model_info,
+            notifier=self.notifier,
+            watchdog_period_s=watchdog_period_s(),
+            alarms=keeper,
+            event_counts=counts,
+        )
         self.keeper = keeper
         if sinks.metrics is not None:
             sinks.metrics.watch(loop)
@@ -310,8 +377,10 @@ class Daemon:
             config.service["state_dir"] = str(self.state_dir)
         if config.state_dir.exists() and not config.state_dir.is_dir():
             # it was "cannot open an output: [Errno 17] File exists", blaming the config
-            raise ConfigError(f"state directory {config.state_dir} (--state-dir or "
-                              f"service.state_dir) is a file, not a directory")
+            raise ConfigError(
+                f"state directory {config.state_dir} (--state-dir or "
+                f"service.state_dir) is a file, not a directory"
+            )
         return config
 
     def alarm_keeper(self, config: RigConfig, model: FdiModel) -> AlarmKeeper:
@@ -324,17 +393,24 @@ class Daemon:
             keeper.reconfigure(alarms["settings"], alarms["allow_remote_acknowledge"])
             return keeper
         if keeper is not None:
-            log.warning("the reloaded model gives the friction level another unit (fs, plant "
-                        "or fault filter changed): the alarm state starts afresh")
+            log.warning(
+                "the reloaded model gives the friction level another unit (fs, plant "
+                "or fault filter changed): the alarm state starts afresh"
+            )
         path = config.output_path(alarms["state_file"])
         stored = read_state(path, identity) if path is not None else None
         try:
-            keeper = AlarmKeeper(alarms["settings"], identity, stored=stored,
-                                 allow_remote=alarms["allow_remote_acknowledge"])
+            keeper = AlarmKeeper(
+                alarms["settings"],
+                identity,
+                stored=stored,
+                allow_remote=alarms["allow_remote_acknowledge"],
+            )
         except ValueError as exc:
             log.warning("state file %s: %s: refused, starting with a fresh state", path, exc)
-            return AlarmKeeper(alarms["settings"], identity,
-                               allow_remote=alarms["allow_remote_acknowledge"])
+            return AlarmKeeper(
+                alarms["settings"], identity, allow_remote=alarms["allow_remote_acknowledge"]
+            )
         if stored is not None and (trend := config.output_path(alarms["trend"])) is not None:
             keeper.recall_trend(trend)  # the same model: its last hours
         return keeper
@@ -344,10 +420,17 @@ class Daemon:
             return dict(config.link)
         if self.device is None:
             self.device = start_simulated_device(config.simulated_device)
-            faults = ", ".join(f"{f['name']}={f['value']:g} at t={f['at_s']:g} s"
-                               for f in config.simulated_device["faults"]) or "none"
-            self.echo(f"simulated rig: {self.device.transport} device at {self.device.where}; "
-                      f"scheduled faults: {faults}")
+            faults = (
+                ", ".join(
+                    f"{f['name']}={f['value']:g} at t={f['at_s']:g} s"
+                    for f in config.simulated_device["faults"]
+                )
+                or "none"
+            )
+            self.echo(
+                f"simulated rig: {self.device.transport} device at {self.device.where}; "
+                f"scheduled faults: {faults}"
+            )
         link = {**self.device.link_config, **config.link}
         check_link(link, config.source)
         return link
@@ -356,8 +439,9 @@ class Daemon:
     def run(self, duration_s: float | None = None) -> int:
         self.config = self.load_config()
         try:
-            self.loop, self.sinks, self.link = self.assemble(self.config,
-                                                             *self.prepare(self.config))
+            self.loop, self.sinks, self.link = self.assemble(
+                self.config, *self.prepare(self.config)
+            )
         except BaseException:
             self._stop_device()
             raise
@@ -388,21 +472,31 @@ class Daemon:
     def announce(self) -> None:
         assert self.config is not None and self.sinks is not None
         sinks = self.sinks
-        lines = [f"fdi run: config {self.config.source}", f"  model   {self.config.model_path}",
-                 f"  link    {self.link.describe()}", f"  state   {self.config.state_dir}/"]
+        lines = [
+            f"fdi run: config {self.config.source}",
+            f"  model   {self.config.model_path}",
+            f"  link    {self.link.describe()}",
+            f"  state   {self.config.state_dir}/",
+        ]
         if sinks.event_log is not None:
             lines.append(f"  events  {sinks.event_log.path}")
         if sinks.recorder is not None:
             lines.append(f"  records {sinks.recorder.directory}/")
         if sinks.status_server is not None:
-            lines.append(f"  status  {sinks.status_server.path}  (fdi dashboard --connect "
-                         f"{sinks.status_server.path})")
+            lines.append(
+                f"  status  {sinks.status_server.path}  (fdi dashboard --connect "
+                f"{sinks.status_server.path})"
+            )
         if sinks.modbus_server is not None:
-            lines.append(f"  modbus  {sinks.modbus_server.host}:{sinks.modbus_server.port} "
-                         f"(status registers, docs/status_registers.md)")
+            lines.append(
+                f"  modbus  {sinks.modbus_server.host}:{sinks.modbus_server.port} "
+                f"(status registers, docs/status_registers.md)"
+            )
         if sinks.mqtt is not None:
-            lines.append(f"  mqtt    {sinks.mqtt.where} {sinks.mqtt.prefix}/event, "
-                         f"{sinks.mqtt.prefix}/status")
+            lines.append(
+                f"  mqtt    {sinks.mqtt.where} {sinks.mqtt.prefix}/event, "
+                f"{sinks.mqtt.prefix}/status"
+            )
         if sinks.metrics is not None:
             lines.append(f"  metrics {sinks.metrics.url}")
         self.echo("\n".join(lines))
@@ -428,10 +522,12 @@ class Daemon:
             self.loop, self.sinks, self.link = self.assemble(config, *prepared)
             self.config = config
         except (UserError, OSError) as exc:
-            log.error("reload failed while opening the outputs, back to the previous "
-                      "config: %s", exc)
-            self.loop, self.sinks, self.link = self.assemble(self.config,
-                                                             *self.prepare(self.config))
+            log.error(
+                "reload failed while opening the outputs, back to the previous config: %s", exc
+            )
+            self.loop, self.sinks, self.link = self.assemble(
+                self.config, *self.prepare(self.config)
+            )
         freeze_heap()
         self.link.open()
         self.notifier.ready(f"reloaded; link {self.link.describe()}")
@@ -458,23 +554,27 @@ class Daemon:
         lat = loop.tick_latency.summary()
         late = loop.lateness.summary()
         counts = ", ".join(f"{k} {v}" for k, v in sorted(loop.event_counts.items())) or "none"
-        return (f"fdi run: {loop.samples} samples, {loop.gaps} gaps, {loop.duplicates} "
-                f"duplicates; tick latency p50 {lat['p50']:.0f} µs p99 {lat['p99']:.0f} µs "
-                f"max {lat['max']:.0f} µs; lateness p50 {late['p50'] / 1e3:.1f} ms p99 "
-                f"{late['p99'] / 1e3:.1f} ms; deadline misses {loop.deadline_misses} "
-                f"(> {loop.deadline_s * 1e3:g} ms; {loop.late_arrivals} arrived late); "
-                f"dropped outputs "
-                f"{self.sinks.dropped() if self.sinks else 0}; events since the alarm state "
-                f"began (kept across restarts): {counts}")
+        return (
+            f"fdi run: {loop.samples} samples, {loop.gaps} gaps, {loop.duplicates} "
+            f"duplicates; tick latency p50 {lat['p50']:.0f} µs p99 {lat['p99']:.0f} µs "
+            f"max {lat['max']:.0f} µs; lateness p50 {late['p50'] / 1e3:.1f} ms p99 "
+            f"{late['p99'] / 1e3:.1f} ms; deadline misses {loop.deadline_misses} "
+            f"(> {loop.deadline_s * 1e3:g} ms; {loop.late_arrivals} arrived late); "
+            f"dropped outputs "
+            f"{self.sinks.dropped() if self.sinks else 0}; events since the alarm state "
+            f"began (kept across restarts): {counts}"
+        )
 
     # ------------------------------------------------------------------ signals
     def _install_signals(self) -> dict:
         if threading.current_thread() is not threading.main_thread():
             return {}
         previous = {}
-        for signum, handler in ((signal.SIGTERM, self._on_stop), (signal.SIGINT, self._on_stop),
-                                (signal.SIGHUP, self._on_stop if self.hangup_stops
-                                 else self._on_reload)):
+        for signum, handler in (
+            (signal.SIGTERM, self._on_stop),
+            (signal.SIGINT, self._on_stop),
+            (signal.SIGHUP, self._on_stop if self.hangup_stops else self._on_reload),
+        ):
             previous[signum] = signal.signal(signum, handler)
         return previous
 

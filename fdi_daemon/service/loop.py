@@ -103,8 +103,12 @@ class LatencyHistogram:
         return self.max_us
 
     def summary(self) -> dict[str, float]:
-        return {"p50": self.percentile(50), "p99": self.percentile(99), "max": self.max_us,
-                "count": self.total}
+        return {
+            "p50": self.percentile(50),
+            "p99": self.percentile(99),
+            "max": self.max_us,
+            "count": self.total,
+        }
 
 
 class WindowedMin:
@@ -153,12 +157,23 @@ class Outputs(Protocol):
 class ServiceLoop:
     """Read, check, monitor, hand over; count and time every tick."""
 
-    def __init__(self, link: Any, monitor: MonitorLike, outputs: Outputs, *, fs_hz: float,
-                 deadline_s: float = 0.05, read_timeout_s: float = 0.05,
-                 status_period_s: float = 0.1, model_info: dict | None = None,
-                 notifier: Any = None, watchdog_period_s: float | None = None,
-                 alarms: Any = None, event_counts: dict[str, int] | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        link: Any,
+        monitor: MonitorLike,
+        outputs: Outputs,
+        *,
+        fs_hz: float,
+        deadline_s: float = 0.05,
+        read_timeout_s: float = 0.05,
+        status_period_s: float = 0.1,
+        model_info: dict | None = None,
+        notifier: Any = None,
+        watchdog_period_s: float | None = None,
+        alarms: Any = None,
+        event_counts: dict[str, int] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.link = link
         self.monitor = monitor
         self.outputs = outputs
@@ -281,10 +296,15 @@ class ServiceLoop:
             self.late_arrivals += arrived_late_s > self.deadline_s
             if done >= self._next_miss_log:
                 self._next_miss_log = done + MISS_LOG_PERIOD_S
-                log.warning("deadline miss: sample %d done %.1f ms after its due time, arrived "
-                            "%.1f ms after it (misses %d, late arrivals %d)", sample.seq,
-                            late_s * 1e3, arrived_late_s * 1e3, self.deadline_misses,
-                            self.late_arrivals)
+                log.warning(
+                    "deadline miss: sample %d done %.1f ms after its due time, arrived "
+                    "%.1f ms after it (misses %d, late arrivals %d)",
+                    sample.seq,
+                    late_s * 1e3,
+                    arrived_late_s * 1e3,
+                    self.deadline_misses,
+                    self.late_arrivals,
+                )
 
     def _emit(self, event: dict) -> None:
         kind = event.get("kind")
@@ -351,10 +371,16 @@ class ServiceLoop:
                 "restarts": self.restarts,
                 "crc_errors": int(counters.get("crc_errors", 0)),
                 "bad_samples": int(counters.get("bad_samples", 0)) + self.bad_samples,
-                "tick_latency_us": {"p50": latency["p50"], "p99": latency["p99"],
-                                    "max": latency["max"]},
-                "lateness_us": {"p50": lateness["p50"], "p99": lateness["p99"],
-                                "max": lateness["max"]},
+                "tick_latency_us": {
+                    "p50": latency["p50"],
+                    "p99": latency["p99"],
+                    "max": latency["max"],
+                },
+                "lateness_us": {
+                    "p50": lateness["p50"],
+                    "p99": lateness["p99"],
+                    "max": lateness["max"],
+                },
                 "deadline_misses": self.deadline_misses,
                 "late_arrivals": self.late_arrivals,
                 "deadline_s": self.deadline_s,

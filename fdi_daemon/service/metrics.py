@@ -33,37 +33,60 @@ class StatusCollector:
     """A prometheus_client collector over the status board (and the loop, once watched)."""
 
     GAUGES = (  # name, help, snapshot path
-        ("fdi_friction_level", "friction level (1 = the calibrated fault): median over the "
-         "last seconds of trusted windows of the residual's multiple of g1 + gamma_f g2",
-         ("monitor", "friction_level")),
+        (
+            "fdi_friction_level",
+            "friction level (1 = the calibrated fault): median over the "
+            "last seconds of trusted windows of the residual's multiple of g1 + gamma_f g2",
+            ("monitor", "friction_level"),
+        ),
         ("fdi_theta1", "θ1 estimate (Coulomb term, eq. 15)", ("monitor", "theta1")),
         ("fdi_theta2", "θ2 estimate (viscous term, eq. 15)", ("monitor", "theta2")),
         ("fdi_statistic", "detection statistic", ("monitor", "statistic")),
         ("fdi_threshold", "detection threshold of the statistic", ("monitor", "threshold")),
-        ("fdi_residual_rms", "RMS of the model residual r = ẍ - x̂̈ (eq. 3), m/s²",
-         ("monitor", "residual_rms")),
+        (
+            "fdi_residual_rms",
+            "RMS of the model residual r = ẍ - x̂̈ (eq. 3), m/s²",
+            ("monitor", "residual_rms"),
+        ),
         ("fdi_link_connected", "1 while the data link is up", ("link", "connected")),
         ("fdi_sample_rate_hz", "samples per second over the last ~2 s", ("link", "rate_hz")),
-        ("fdi_uptime_seconds", "seconds since the loop started (restarts on reload)",
-         ("uptime_s",)),
+        (
+            "fdi_uptime_seconds",
+            "seconds since the loop started (restarts on reload)",
+            ("uptime_s",),
+        ),
         ("fdi_sample_time_seconds", "sample time t of the last sample, s", ("t",)),
     )
     COUNTERS = (  # name (without _total), help, snapshot path
         ("fdi_samples", "samples received", ("link", "samples")),
         ("fdi_gaps", "data gaps (sequence jumps)", ("link", "gaps")),
         ("fdi_missing_samples", "samples missing in those gaps", ("link", "missing_samples")),
-        ("fdi_duplicate_samples", "repeated or backward samples skipped",
-         ("link", "duplicates")),
-        ("fdi_bad_samples", "samples rejected as bad (non-finite, saturated, CRC)",
-         ("link", "bad_samples")),
-        ("fdi_deadline_misses", "ticks finished later than service.deadline_s after their "
-                                "due time", ("link", "deadline_misses")),
-        ("fdi_late_arrivals", "deadline misses whose sample already arrived late",
-         ("link", "late_arrivals")),
-        ("fdi_alarm_episodes", "alarm episodes (fault_detected events)",
-         ("counters", "fault_detected")),
-        ("fdi_dropped_outputs", "non-critical sink items dropped (queue full)",
-         ("dropped_outputs",)),
+        ("fdi_duplicate_samples", "repeated or backward samples skipped", ("link", "duplicates")),
+        (
+            "fdi_bad_samples",
+            "samples rejected as bad (non-finite, saturated, CRC)",
+            ("link", "bad_samples"),
+        ),
+        (
+            "fdi_deadline_misses",
+            "ticks finished later than service.deadline_s after their due time",
+            ("link", "deadline_misses"),
+        ),
+        (
+            "fdi_late_arrivals",
+            "deadline misses whose sample already arrived late",
+            ("link", "late_arrivals"),
+        ),
+        (
+            "fdi_alarm_episodes",
+            "alarm episodes (fault_detected events)",
+            ("counters", "fault_detected"),
+        ),
+        (
+            "fdi_dropped_outputs",
+            "non-critical sink items dropped (queue full)",
+            ("dropped_outputs",),
+        ),
     )
 
     def __init__(self, board: StatusBoard, mqtt: Any = None) -> None:
@@ -72,8 +95,11 @@ class StatusCollector:
         self.loop = None
 
     def collect(self):
-        from prometheus_client.core import (CounterMetricFamily, GaugeMetricFamily,
-                                            HistogramMetricFamily)
+        from prometheus_client.core import (
+            CounterMetricFamily,
+            GaugeMetricFamily,
+            HistogramMetricFamily,
+        )
 
         snap = self.board.snapshot()
         for name, doc, path in self.GAUGES:
@@ -81,9 +107,11 @@ class StatusCollector:
         for name, doc, path in self.COUNTERS:
             yield CounterMetricFamily(name, doc, value=_number(_get(snap, path) or 0))
         state = snap.get("state", "starting")
-        yield GaugeMetricFamily("fdi_state", "monitor state: " + ", ".join(
-            f"{code} {name}" for name, code in STATE_CODES.items()),
-            value=STATE_CODES.get(state, 0))
+        yield GaugeMetricFamily(
+            "fdi_state",
+            "monitor state: " + ", ".join(f"{code} {name}" for name, code in STATE_CODES.items()),
+            value=STATE_CODES.get(state, 0),
+        )
         events = CounterMetricFamily("fdi_events", "events by kind", labels=["kind"])
         for kind, count in sorted((snap.get("counters") or {}).items()):
             events.add_metric([str(kind)], count)
@@ -91,12 +119,21 @@ class StatusCollector:
         if self.loop is not None:
             yield self._tick_latency(HistogramMetricFamily)
         if self.mqtt is not None:
-            yield GaugeMetricFamily("fdi_mqtt_connected", "1 while the MQTT broker is "
-                                    "connected", value=float(self.mqtt.connected))
-            yield GaugeMetricFamily("fdi_mqtt_buffered_alarms", "alarms waiting on disk for "
-                                    "the broker", value=len(self.mqtt.outbox))
-            yield CounterMetricFamily("fdi_mqtt_lost_alarms", "alarms dropped from the full "
-                                      "MQTT buffer", value=self.mqtt.outbox.lost)
+            yield GaugeMetricFamily(
+                "fdi_mqtt_connected",
+                "1 while the MQTT broker is connected",
+                value=float(self.mqtt.connected),
+            )
+            yield GaugeMetricFamily(
+                "fdi_mqtt_buffered_alarms",
+                "alarms waiting on disk for the broker",
+                value=len(self.mqtt.outbox),
+            )
+            yield CounterMetricFamily(
+                "fdi_mqtt_lost_alarms",
+                "alarms dropped from the full MQTT buffer",
+                value=self.mqtt.outbox.lost,
+            )
 
     def _tick_latency(self, family):
         """The loop's tick latency (link delivery to the end of Monitor.step), seconds."""
@@ -111,8 +148,12 @@ class StatusCollector:
                 buckets.append((f"{hist.upper_edge_us(index) * 1e-6:.6g}", seen))
                 edge = next(edges, None)
         buckets.append(("+Inf", sum(counts)))
-        return family("fdi_tick_latency_seconds", "tick latency: link delivery to the end "
-                      "of Monitor.step, s", buckets=buckets, sum_value=hist.sum_us * 1e-6)
+        return family(
+            "fdi_tick_latency_seconds",
+            "tick latency: link delivery to the end of Monitor.step, s",
+            buckets=buckets,
+            sum_value=hist.sum_us * 1e-6,
+        )
 
 
 def _get(snapshot: dict, path: tuple[str, ...]) -> Any:
@@ -125,21 +166,24 @@ def _get(snapshot: dict, path: tuple[str, ...]) -> Any:
 class MetricsServer:
     """HTTP ``/metrics`` on ``listen`` (``HOST:PORT``; port 0 picks a free one)."""
 
-    def __init__(self, board: StatusBoard, listen: str, mqtt: Any = None,
-                 source: str = "config") -> None:
+    def __init__(
+        self, board: StatusBoard, listen: str, mqtt: Any = None, source: str = "config"
+    ) -> None:
         try:
             from prometheus_client import CollectorRegistry, start_http_server
         except ImportError:
-            raise ConfigError(f"{source}: metrics.listen needs prometheus_client: "
-                              "pip install 'fdi[fleet]'") from None
+            raise ConfigError(
+                f"{source}: metrics.listen needs prometheus_client: pip install 'fdi[fleet]'"
+            ) from None
         host, _, port = listen.rpartition(":")
         self.host = host.strip("[]")
         self.collector = StatusCollector(board, mqtt)
         self.registry = CollectorRegistry(auto_describe=True)
         self.registry.register(self.collector)
         try:
-            self._server, self._thread = start_http_server(int(port), addr=self.host,
-                                                           registry=self.registry)
+            self._server, self._thread = start_http_server(
+                int(port), addr=self.host, registry=self.registry
+            )
         except OSError as exc:
             raise OSError(f"metrics exporter on {listen}: {exc.strerror or exc}") from None
         self.port = self._server.server_address[1]

@@ -64,14 +64,17 @@ def read_password(settings: dict[str, Any], source: str = "config") -> str | Non
         try:
             lines = path.read_text(encoding="utf-8").splitlines()
         except OSError as exc:
-            raise ConfigError(f"{source}: mqtt.password_file: cannot read {path}: "
-                              f"{exc.strerror or exc}") from None
+            raise ConfigError(
+                f"{source}: mqtt.password_file: cannot read {path}: {exc.strerror or exc}"
+            ) from None
         password = lines[0] if lines else ""
     elif settings["password_env"] is not None:
         password = os.environ.get(settings["password_env"])
         if password is None:
-            raise ConfigError(f"{source}: mqtt.password_env: the environment variable "
-                              f"{settings['password_env']} is not set")
+            raise ConfigError(
+                f"{source}: mqtt.password_env: the environment variable "
+                f"{settings['password_env']} is not set"
+            )
     else:
         return None
     if settings["username"] is None:
@@ -174,8 +177,11 @@ class AlarmOutbox:
         for message_id in self._sent:
             self.pending[message_id]["dup"] = True
         if self.pending:
-            log.info("%s: %d alarm(s) from before the restart wait for the broker",
-                     self.path, len(self.pending))
+            log.info(
+                "%s: %d alarm(s) from before the restart wait for the broker",
+                self.path,
+                len(self.pending),
+            )
 
     def _rewrite(self) -> None:
         """Replace the file by the pending alarms only (atomic rename, fsynced)."""
@@ -200,8 +206,9 @@ class AlarmOutbox:
         self._lines += 1
 
 
-def status_payload(snapshot: dict[str, Any], outbox: AlarmOutbox | None = None,
-                   skipped_events: int = 0) -> dict[str, Any]:
+def status_payload(
+    snapshot: dict[str, Any], outbox: AlarmOutbox | None = None, skipped_events: int = 0
+) -> dict[str, Any]:
     """The retained status message from a status snapshot (docs/service.md, MQTT)."""
     link = snapshot.get("link") or {}
     monitor = snapshot.get("monitor") or {}
@@ -224,21 +231,30 @@ def status_payload(snapshot: dict[str, Any], outbox: AlarmOutbox | None = None,
         "alarm_episodes": counters.get("fault_detected", 0),
     }
     if outbox is not None:
-        payload["mqtt"] = {"buffered": len(outbox), "lost": outbox.lost,
-                           "skipped_events": skipped_events}
+        payload["mqtt"] = {
+            "buffered": len(outbox),
+            "lost": outbox.lost,
+            "skipped_events": skipped_events,
+        }
     return payload
 
 
 class MqttSink:
     """Publishes events and the status of one rig (see the module doc)."""
 
-    def __init__(self, settings: dict[str, Any], outbox_path: str | Path,
-                 source: str = "config", queue_size: int = 4096) -> None:
+    def __init__(
+        self,
+        settings: dict[str, Any],
+        outbox_path: str | Path,
+        source: str = "config",
+        queue_size: int = 4096,
+    ) -> None:
         try:
             import paho.mqtt.client as mqtt
         except ImportError:
-            raise ConfigError(f"{source}: mqtt.enabled needs paho-mqtt: "
-                              "pip install 'fdi[fleet]'") from None
+            raise ConfigError(
+                f"{source}: mqtt.enabled needs paho-mqtt: pip install 'fdi[fleet]'"
+            ) from None
 
         self.settings = settings
         self.prefix = topic_prefix(settings)
@@ -262,8 +278,9 @@ class MqttSink:
             if tls["key_file"] and not tls["cert_file"]:
                 raise ConfigError(f"{source}: mqtt.tls.key_file needs mqtt.tls.cert_file")
             try:
-                client.tls_set(ca_certs=tls["ca_file"], certfile=tls["cert_file"],
-                               keyfile=tls["key_file"])
+                client.tls_set(
+                    ca_certs=tls["ca_file"], certfile=tls["cert_file"], keyfile=tls["key_file"]
+                )
             except (OSError, ValueError) as exc:
                 raise ConfigError(f"{source}: mqtt.tls: {exc}") from None
         client.will_set(self.status_topic, json.dumps(OFFLINE), qos=1, retain=True)
@@ -296,8 +313,9 @@ class MqttSink:
     # --- paho's network thread: only queue
     def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
         if reason_code.is_failure:
-            self.worker.put(("down", f"the broker refused the connection: {reason_code}"),
-                            critical=True)
+            self.worker.put(
+                ("down", f"the broker refused the connection: {reason_code}"), critical=True
+            )
         else:
             self.worker.put(("connected", None), critical=True)
 
@@ -326,15 +344,23 @@ class MqttSink:
         elif kind == "connected":
             self.connected = True
             self._outage_logged = False
-            log.info("MQTT connected to %s (topics %s/#); %d alarm(s) waiting", self.where,
-                     self.prefix, len(self.outbox))
+            log.info(
+                "MQTT connected to %s (topics %s/#); %d alarm(s) waiting",
+                self.where,
+                self.prefix,
+                len(self.outbox),
+            )
             self._publish(self.status_topic, self._status(), qos=1, retain=True)
         elif kind in ("disconnected", "down"):
             if not self._outage_logged:
                 self._outage_logged = True
-                log.warning("MQTT broker %s: %s (%s); retrying, alarms wait on disk in %s",
-                            self.where, "connection lost" if self.connected else "no connection",
-                            value, self.outbox.path)
+                log.warning(
+                    "MQTT broker %s: %s (%s); retrying, alarms wait on disk in %s",
+                    self.where,
+                    "connection lost" if self.connected else "no connection",
+                    value,
+                    self.outbox.path,
+                )
             self.connected = False
         self._pump()
 
@@ -348,9 +374,15 @@ class MqttSink:
         in_flight = self._in_flight[0] if self._in_flight else None
         _, dropped = self.outbox.add(event, in_flight)
         for lost in dropped:
-            log.warning("MQTT alarm buffer full (%d): dropped alarm id %d (%s at t=%s); "
-                        "%d lost since start", self.outbox.max_messages, lost["id"],
-                        lost.get("kind"), lost.get("t"), self.outbox.lost)
+            log.warning(
+                "MQTT alarm buffer full (%d): dropped alarm id %d (%s at t=%s); "
+                "%d lost since start",
+                self.outbox.max_messages,
+                lost["id"],
+                lost.get("kind"),
+                lost.get("t"),
+                self.outbox.lost,
+            )
 
     def _pump(self) -> None:
         """Hand the oldest waiting alarm to the client when none is in flight."""
@@ -365,8 +397,7 @@ class MqttSink:
             self.outbox.mark_sent(message["id"])
 
     def _publish(self, topic: str, payload: dict, qos: int, retain: bool = False):
-        info = self.client.publish(topic, json_line(payload).rstrip("\n"), qos=qos,
-                                   retain=retain)
+        info = self.client.publish(topic, json_line(payload).rstrip("\n"), qos=qos, retain=retain)
         if info.rc == self._mqtt.MQTT_ERR_SUCCESS:
             return info
         if info.rc != self._mqtt.MQTT_ERR_NO_CONN:
@@ -384,9 +415,12 @@ class MqttSink:
             time.sleep(0.05)
         self.worker.close()
         if self.connected:
-            info = self.client.publish(self.status_topic,
-                                       json.dumps({**OFFLINE, "time": rfc3339(time.time())}),
-                                       qos=1, retain=True)
+            info = self.client.publish(
+                self.status_topic,
+                json.dumps({**OFFLINE, "time": rfc3339(time.time())}),
+                qos=1,
+                retain=True,
+            )
             if info.rc == self._mqtt.MQTT_ERR_SUCCESS:
                 info.wait_for_publish(max(0.1, deadline - time.monotonic()))
         self.client.disconnect()

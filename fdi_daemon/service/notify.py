@@ -32,8 +32,11 @@ class Notifier:
         self._logged: set[str] = set()
         if self.address is not None:
             if not (self.address.startswith("/") or self.address.startswith("@")):
-                log.error("NOTIFY_SOCKET=%r is neither a path nor an abstract '@' name; "
-                          "sd_notify disabled", self.address)
+                log.error(
+                    "NOTIFY_SOCKET=%r is neither a path nor an abstract '@' name; "
+                    "sd_notify disabled",
+                    self.address,
+                )
                 self.address = None
             else:
                 self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
@@ -60,8 +63,12 @@ class Notifier:
             kind = type(exc).__name__
             if kind not in self._logged:
                 self._logged.add(kind)
-                log.error("sd_notify to %s failed: %s (further %s failures are counted, "
-                          "not logged)", self.address, exc, kind)
+                log.error(
+                    "sd_notify to %s failed: %s (further %s failures are counted, not logged)",
+                    self.address,
+                    exc,
+                    kind,
+                )
             return False
         self.sent += 1
         return True

@@ -52,8 +52,12 @@ class RecentTrend:
         if int(row["minute"]) <= self._last_minute:
             return
         self._last_minute = int(row["minute"])
-        if mean is None or high is None or not readings or not (math.isfinite(mean)
-                                                                and math.isfinite(high)):
+        if (
+            mean is None
+            or high is None
+            or not readings
+            or not (math.isfinite(mean) and math.isfinite(high))
+        ):
             return
         number = int(row["minute"]) * 60 // self.bucket_s
         acc = self._buckets.setdefault(number, [0, 0.0, -math.inf])
@@ -76,12 +80,20 @@ class RecentTrend:
             log.warning("trend %s: cannot read the last hours for the status (%s)", path, exc)
             return 0
         minutes = rows["period_s"] == 60
-        for t, mean, high, readings in zip(rows["time_unix"][minutes],
-                                           rows["level_mean"][minutes],
-                                           rows["level_max"][minutes],
-                                           rows["readings"][minutes]):
-            self.add({"minute": int(t // 60), "level_mean": float(mean),
-                      "level_max": float(high), "readings": int(readings)})
+        for t, mean, high, readings in zip(
+            rows["time_unix"][minutes],
+            rows["level_mean"][minutes],
+            rows["level_max"][minutes],
+            rows["readings"][minutes],
+        ):
+            self.add(
+                {
+                    "minute": int(t // 60),
+                    "level_mean": float(mean),
+                    "level_max": float(high),
+                    "readings": int(readings),
+                }
+            )
         return int(minutes.sum())
 
     def summary(self, now: float) -> dict[str, Any] | None:
@@ -92,6 +104,9 @@ class RecentTrend:
         if not any(n in self._buckets for n in numbers):
             return None
         rows = [self._buckets.get(n) for n in numbers]
-        return {"bucket_s": self.bucket_s, "end": (last + 1) * self.bucket_s,
-                "mean": [None if r is None else round(r[1] / r[0], DECIMALS) for r in rows],
-                "max": [None if r is None else round(r[2], DECIMALS) for r in rows]}
+        return {
+            "bucket_s": self.bucket_s,
+            "end": (last + 1) * self.bucket_s,
+            "mean": [None if r is None else round(r[1] / r[0], DECIMALS) for r in rows],
+            "max": [None if r is None else round(r[2], DECIMALS) for r in rows],
+        }

@@ -36,9 +36,16 @@ PREFIX = "rec-"
 class Recorder:
     """Append samples to rotating CSV recordings under ``directory``."""
 
-    def __init__(self, directory: str | Path, fs_hz: float, rotate_seconds: float = 3600.0,
-                 rotate_bytes: int = 200_000_000, fsync_period_s: float = 1.0,
-                 keep_files: int = 0, meta: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        directory: str | Path,
+        fs_hz: float,
+        rotate_seconds: float = 3600.0,
+        rotate_bytes: int = 200_000_000,
+        fsync_period_s: float = 1.0,
+        keep_files: int = 0,
+        meta: dict[str, str] | None = None,
+    ) -> None:
         if not 0 < fsync_period_s <= 1.0:
             raise ValueError("fsync_period_s must be in (0, 1]")
         self.directory = Path(directory)
@@ -87,17 +94,24 @@ class Recorder:
         self._close_file()
 
     def _needs_rotation(self, s: Sample) -> bool:
-        return (s.t - self._file_t0 >= self.rotate_seconds
-                or self._file_bytes >= self.rotate_bytes
-                or (self._last_seq is not None and s.seq <= self._last_seq))
+        return (
+            s.t - self._file_t0 >= self.rotate_seconds
+            or self._file_bytes >= self.rotate_bytes
+            or (self._last_seq is not None and s.seq <= self._last_seq)
+        )
 
     def _open_file(self, first: Sample) -> None:
         stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S.%fZ")
         path = self.directory / f"{PREFIX}{stamp}-seq{first.seq}.csv"
-        meta = {"fs": f"{self.fs_hz:g}", "source": "fdi run recorder",
-                "started_utc": stamp, **self.meta}
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND
-                           | os.O_CLOEXEC, 0o640)
+        meta = {
+            "fs": f"{self.fs_hz:g}",
+            "source": "fdi run recorder",
+            "started_utc": stamp,
+            **self.meta,
+        }
+        self._fd = os.open(
+            path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND | os.O_CLOEXEC, 0o640
+        )
         self._path = path
         self._file_t0 = first.t
         self._file_bytes = 0
@@ -140,7 +154,7 @@ class Recorder:
         if self.keep_files <= 0:
             return
         files = sorted(self.directory.glob(f"{PREFIX}*.csv"))
-        for old in files[:-self.keep_files]:
+        for old in files[: -self.keep_files]:
             try:
                 old.unlink()
                 log.info("deleted old recording %s (keep_files=%d)", old, self.keep_files)

@@ -54,11 +54,23 @@ log = logging.getLogger("fdi.sinks")
 #: events that are alarms: fsynced at once, never dropped, logged as warnings
 ALARM_KINDS = frozenset(EVENT_ALARM_KINDS) | frozenset(LIFECYCLE_KINDS)
 #: syslog priorities for the journald prefix
-PRIORITY = {"fault_detected": 4, "friction_isolated": 4, "other_fault": 4, "link_lost": 4,
-            "cleared": 5, "link_restored": 5, "data_gap": 5, "bad_sample": 5,
-            "calibrated": 6, "alarm_raised": 4, "alarm_priority": 4,
-            "alarm_acknowledged": 5, "alarm_shelved": 5, "alarm_unshelved": 5,
-            "alarm_returned": 5}
+PRIORITY = {
+    "fault_detected": 4,
+    "friction_isolated": 4,
+    "other_fault": 4,
+    "link_lost": 4,
+    "cleared": 5,
+    "link_restored": 5,
+    "data_gap": 5,
+    "bad_sample": 5,
+    "calibrated": 6,
+    "alarm_raised": 4,
+    "alarm_priority": 4,
+    "alarm_acknowledged": 5,
+    "alarm_shelved": 5,
+    "alarm_unshelved": 5,
+    "alarm_returned": 5,
+}
 
 
 def json_line(value: Any) -> str:
@@ -228,8 +240,11 @@ def format_event(event: dict) -> str:
         if isinstance(value, (int, float)) and math.isfinite(value):
             parts.append(f"{label}={value:+.4g}")
     for key, value in event.items():
-        if (key in ("t", "kind", "theta1", "theta2", "time") or value is None
-                or isinstance(value, (dict, list))):
+        if (
+            key in ("t", "kind", "theta1", "theta2", "time")
+            or value is None
+            or isinstance(value, (dict, list))
+        ):
             continue
         if isinstance(value, float):
             value = f"{value:.4g}"
@@ -256,12 +271,18 @@ class StdoutLog:
 class PriorityFormatter(logging.Formatter):
     """Log records as ``<N>message`` (journald) or ``time level message`` (a terminal)."""
 
-    LEVELS = {logging.CRITICAL: 2, logging.ERROR: 3, logging.WARNING: 4, logging.INFO: 6,
-              logging.DEBUG: 7}
+    LEVELS = {
+        logging.CRITICAL: 2,
+        logging.ERROR: 3,
+        logging.WARNING: 4,
+        logging.INFO: 6,
+        logging.DEBUG: 7,
+    }
 
     def __init__(self, priorities: bool) -> None:
-        super().__init__("%(message)s" if priorities else
-                         "%(asctime)s %(levelname)s %(name)s: %(message)s")
+        super().__init__(
+            "%(message)s" if priorities else "%(asctime)s %(levelname)s %(name)s: %(message)s"
+        )
         self.priorities = priorities
 
     def format(self, record: logging.LogRecord) -> str:
@@ -307,8 +328,13 @@ class StatusSocketServer:
 
     CLIENT_TIMEOUT_S = 30.0
 
-    def __init__(self, path: str | Path, board: StatusBoard, mode: int = 0o660,
-                 requests: Callable[[dict[str, Any]], dict[str, Any]] | None = None) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        board: StatusBoard,
+        mode: int = 0o660,
+        requests: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
+    ) -> None:
         self.path = Path(path)
         self.board = board
         self.requests_handler = requests
@@ -316,8 +342,11 @@ class StatusSocketServer:
         if self.path.is_socket():
             self.path.unlink()  # a stale socket from a previous run
         elif self.path.exists():  # bind would say "Address already in use"
-            raise FileExistsError(errno.EEXIST, "a file of that name is there, not a socket "
-                                  "(left as it is)", str(self.path))
+            raise FileExistsError(
+                errno.EEXIST,
+                "a file of that name is there, not a socket (left as it is)",
+                str(self.path),
+            )
         self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
         self._sock.bind(str(self.path))
         os.chmod(self.path, mode)
@@ -325,8 +354,7 @@ class StatusSocketServer:
         self._sock.settimeout(0.2)
         self._stop = threading.Event()
         self.requests = 0
-        self._thread = threading.Thread(target=self._serve, name="fdi-status-socket",
-                                        daemon=True)
+        self._thread = threading.Thread(target=self._serve, name="fdi-status-socket", daemon=True)
         self._thread.start()
 
     def _serve(self) -> None:
@@ -340,8 +368,9 @@ class StatusSocketServer:
                     log.error("status socket %s: accept failed: %s", self.path, exc)
                     time.sleep(0.2)
                 continue
-            threading.Thread(target=self._client, args=(conn,), name="fdi-status-client",
-                             daemon=True).start()
+            threading.Thread(
+                target=self._client, args=(conn,), name="fdi-status-client", daemon=True
+            ).start()
 
     def _client(self, conn: socket.socket) -> None:
         conn.settimeout(self.CLIENT_TIMEOUT_S)
@@ -374,14 +403,22 @@ class StatusSocketServer:
             request = json.loads(line)
             action = request["request"]
         except (ValueError, TypeError, KeyError):
-            return json_line({"ok": False, "error": "a request is a JSON object with "
-                                                    "\"request\": acknowledge | shelve | "
-                                                    "unshelve"}).encode()
+            return json_line(
+                {
+                    "ok": False,
+                    "error": "a request is a JSON object with "
+                    "\"request\": acknowledge | shelve | "
+                    "unshelve",
+                }
+            ).encode()
         if self.requests_handler is None:
             return json_line({"ok": False, "error": "this daemon takes no requests"}).encode()
         duration = request.get("duration_s")
-        return json_line(self.requests_handler(
-            {"request": action, "duration_s": duration, "by": "status socket"})).encode()
+        return json_line(
+            self.requests_handler(
+                {"request": action, "duration_s": duration, "by": "status socket"}
+            )
+        ).encode()
 
     def close(self) -> None:
         self._stop.set()
@@ -396,15 +433,26 @@ class StatusSocketServer:
 # ----------------------------------------------------------------------------- Modbus status
 
 #: state name -> code in register `state`
-STATE_CODES = {"starting": 0, "calibrating": 1, "monitoring": 2, "fault_detected": 3,
-               "friction_isolated": 4, "other_fault": 5}
+STATE_CODES = {
+    "starting": 0,
+    "calibrating": 1,
+    "monitoring": 2,
+    "fault_detected": 3,
+    "friction_isolated": 4,
+    "other_fault": 5,
+}
 
 #: (name, first register, type, meaning). Types: u16; u32/f32 in 2 registers and f64 in 4,
 #: high word first; bytes within a register big endian (Modbus). NaN: value not available.
 STATUS_REGISTERS: tuple[tuple[str, int, str, str], ...] = (
     ("map_version", 0, "u16", "version of this register map (2)"),
-    ("state", 1, "u16", "0 starting, 1 calibrating, 2 monitoring, 3 fault_detected, "
-                        "4 friction_isolated, 5 other_fault"),
+    (
+        "state",
+        1,
+        "u16",
+        "0 starting, 1 calibrating, 2 monitoring, 3 fault_detected, "
+        "4 friction_isolated, 5 other_fault",
+    ),
     ("link_connected", 2, "u16", "1 while the data link is up"),
     ("heartbeat", 3, "u16", "+1 at every status refresh (10 Hz by default), wraps at 65536"),
     ("alarm_active", 4, "u16", "1 while an alarm is raised and not shelved"),
@@ -427,16 +475,33 @@ STATUS_REGISTERS: tuple[tuple[str, int, str, str], ...] = (
     ("link_lost_count", 39, "u32", "link_lost events since start"),
     ("uptime_s", 41, "u32", "seconds since the daemon started"),
     ("dropped_outputs", 43, "u32", "non-critical sink items dropped (queue full)"),
-    ("baseline_level", 45, "f32", "fault-free friction level of the model's baseline, "
-                                  "units of the signature (NaN: the model has none)"),
-    ("alarm_state", 47, "u16", "0 normal, 1 unacknowledged, 2 acknowledged, "
-                               "3 returned unacknowledged, 4 shelved"),
+    (
+        "baseline_level",
+        45,
+        "f32",
+        "fault-free friction level of the model's baseline, "
+        "units of the signature (NaN: the model has none)",
+    ),
+    (
+        "alarm_state",
+        47,
+        "u16",
+        "0 normal, 1 unacknowledged, 2 acknowledged, 3 returned unacknowledged, 4 shelved",
+    ),
     ("alarm_priority", 48, "u16", "0 none, 1..3: alarm steps crossed (alarms.steps)"),
     ("alarm_id", 49, "u32", "number of the current (or last) alarm; +1 at every new alarm"),
-    ("alarm_command", 51, "u16", "write 1 = acknowledge, 2 = unshelve (if "
-                                 "alarms.allow_remote_acknowledge); reads 0"),
-    ("shelve_minutes", 52, "u16", "write N = shelve the alarm N minutes; reads the "
-                                  "minutes of shelving left"),
+    (
+        "alarm_command",
+        51,
+        "u16",
+        "write 1 = acknowledge, 2 = unshelve (if alarms.allow_remote_acknowledge); reads 0",
+    ),
+    (
+        "shelve_minutes",
+        52,
+        "u16",
+        "write N = shelve the alarm N minutes; reads the minutes of shelving left",
+    ),
 )
 STATUS_REGISTER_COUNT = 53
 #: writable registers: name -> address
@@ -444,8 +509,12 @@ COMMAND_REGISTERS = {"alarm_command": 51, "shelve_minutes": 52}
 _SIZES = {"u16": 1, "u32": 2, "f32": 2, "f64": 4}
 _DATATYPE = ModbusClientMixin.DATATYPE
 #: register type -> pymodbus data type (its conversion: high word first, big-endian bytes)
-_DATATYPES = {"u16": _DATATYPE.UINT16, "u32": _DATATYPE.UINT32, "f32": _DATATYPE.FLOAT32,
-              "f64": _DATATYPE.FLOAT64}
+_DATATYPES = {
+    "u16": _DATATYPE.UINT16,
+    "u32": _DATATYPE.UINT32,
+    "f32": _DATATYPE.FLOAT32,
+    "f64": _DATATYPE.FLOAT64,
+}
 
 
 def status_values(snapshot: dict[str, Any], heartbeat: int) -> dict[str, float | int]:
@@ -462,8 +531,11 @@ def status_values(snapshot: dict[str, Any], heartbeat: int) -> dict[str, float |
         "state": STATE_CODES.get(state, 0),
         "link_connected": int(bool(link.get("connected"))),
         "heartbeat": heartbeat,
-        "alarm_active": (int(bool(alarm.get("annunciated"))) if alarm else
-                         int(state in ("fault_detected", "friction_isolated", "other_fault"))),
+        "alarm_active": (
+            int(bool(alarm.get("annunciated")))
+            if alarm
+            else int(state in ("fault_detected", "friction_isolated", "other_fault"))
+        ),
         "theta1": monitor.get("theta1"),
         "theta2": monitor.get("theta2"),
         "friction_level": monitor.get("friction_level"),
@@ -488,8 +560,11 @@ def status_values(snapshot: dict[str, Any], heartbeat: int) -> dict[str, float |
         "alarm_priority": (alarm or {}).get("priority", 0),
         "alarm_id": (alarm or {}).get("alarm_id", 0),
         "alarm_command": 0,
-        "shelve_minutes": (math.ceil(max(0.0, shelved_until - snapshot.get("time", 0)) / 60)
-                           if isinstance(shelved_until, (int, float)) else 0),
+        "shelve_minutes": (
+            math.ceil(max(0.0, shelved_until - snapshot.get("time", 0)) / 60)
+            if isinstance(shelved_until, (int, float))
+            else 0
+        ),
     }
 
 
@@ -504,7 +579,7 @@ def encode_status(values: dict[str, Any]) -> list[int]:
             value = 0 if not isinstance(value, (int, float)) or not math.isfinite(value) else value
             value = min(max(int(value), 0), (1 << (16 * _SIZES[kind])) - 1)
         words = ModbusClientMixin.convert_to_registers(value, _DATATYPES[kind], "big")
-        regs[address:address + len(words)] = words
+        regs[address : address + len(words)] = words
     return regs
 
 
@@ -512,7 +587,7 @@ def decode_status(regs: list[int]) -> dict[str, float | int]:
     """Inverse of `encode_status` (what an independent client does with the map)."""
     out: dict[str, float | int] = {}
     for name, address, kind, _ in STATUS_REGISTERS:
-        words = list(regs[address:address + _SIZES[kind]])
+        words = list(regs[address : address + _SIZES[kind]])
         out[name] = ModbusClientMixin.convert_from_registers(words, _DATATYPES[kind], "big")
     return out
 
@@ -551,9 +626,14 @@ class ModbusStatusServer:
     directly); any other id gets exception 11.
     """
 
-    def __init__(self, board: StatusBoard, host: str = "127.0.0.1", port: int = 5020,
-                 device_id: int = 1,
-                 requests: Callable[[dict[str, Any]], dict[str, Any]] | None = None) -> None:
+    def __init__(
+        self,
+        board: StatusBoard,
+        host: str = "127.0.0.1",
+        port: int = 5020,
+        device_id: int = 1,
+        requests: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
+    ) -> None:
         self.board = board
         self.requests_handler = requests
         self.host = host
@@ -564,8 +644,7 @@ class ModbusStatusServer:
         self._server = None
         self._started = threading.Event()
         self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name="fdi-modbus-status",
-                                        daemon=True)
+        self._thread = threading.Thread(target=self._run, name="fdi-modbus-status", daemon=True)
         self._thread.start()
         self._started.wait(15.0)
         if self._error is not None:
@@ -574,13 +653,11 @@ class ModbusStatusServer:
             raise OSError(f"Modbus status server on {host}:{port} did not start")
 
     @staticmethod
-    async def _other_device(function_code, start_address, address, count, registers,
-                            set_values):
+    async def _other_device(function_code, start_address, address, count, registers, set_values):
         """Requests to any other device id: 'gateway target failed to respond'."""
         return ExcCodes.GATEWAY_NO_RESPONSE
 
-    async def _refresh(self, function_code, start_address, address, count, registers,
-                       set_values):
+    async def _refresh(self, function_code, start_address, address, count, registers, set_values):
         if set_values is not None:  # registers are written with 6 and 16 only (not coils)
             if function_code not in (6, 16):
                 return ExcCodes.ILLEGAL_FUNCTION
@@ -593,8 +670,11 @@ class ModbusStatusServer:
     def _command(self, address: int, values: list[int]):
         """A write to the command registers (see the class docstring)."""
         commands = {COMMAND_REGISTERS["alarm_command"]: {1: "acknowledge", 2: "unshelve"}}
-        if self.requests_handler is None or len(values) != 1 \
-                or address not in COMMAND_REGISTERS.values():
+        if (
+            self.requests_handler is None
+            or len(values) != 1
+            or address not in COMMAND_REGISTERS.values()
+        ):
             return ExcCodes.ILLEGAL_FUNCTION
         value = int(values[0])
         if address == COMMAND_REGISTERS["shelve_minutes"]:
@@ -606,8 +686,7 @@ class ModbusStatusServer:
             return ExcCodes.ILLEGAL_VALUE
         answer = self.requests_handler({**request, "by": "modbus"})
         if not answer.get("ok"):
-            log.info("Modbus alarm request %s refused: %s", request["request"],
-                     answer.get("error"))
+            log.info("Modbus alarm request %s refused: %s", request["request"], answer.get("error"))
             return ExcCodes.ILLEGAL_VALUE
         return None
 
@@ -629,15 +708,17 @@ class ModbusStatusServer:
         from pymodbus.simulator import DataType, SimData, SimDevice
 
         def block() -> list:
-            return [SimData(0, count=STATUS_REGISTER_COUNT, values=0,
-                            datatype=DataType.REGISTERS)]
+            return [SimData(0, count=STATUS_REGISTER_COUNT, values=0, datatype=DataType.REGISTERS)]
 
         served = dict.fromkeys((self.device_id, DIRECT_DEVICE_ID))
         devices = [SimDevice(id=i, simdata=block(), action=self._refresh) for i in served]
         if 0 not in served:  # pymodbus answers unknown ids from device 0
             devices.append(SimDevice(id=0, simdata=block(), action=self._other_device))
-        server = ModbusTcpServer(devices, address=(self.host, self.port),
-                                 custom_pdu=[_RefusedReadCoils, _RefusedReadDiscreteInputs])
+        server = ModbusTcpServer(
+            devices,
+            address=(self.host, self.port),
+            custom_pdu=[_RefusedReadCoils, _RefusedReadDiscreteInputs],
+        )
         await server.serve_forever(background=True)
         if server.transport is None:
             raise OSError("cannot listen (address in use?)")

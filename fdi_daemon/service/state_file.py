@@ -44,8 +44,11 @@ def write_state(path: str | Path, state: dict[str, Any]) -> None:
     """Write ``state`` (plus format and version) atomically; OSError if the disk fails."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps({"format": STATE_FORMAT, "version": STATE_VERSION, **state},
-                      allow_nan=False, separators=(",", ":"))
+    text = json.dumps(
+        {"format": STATE_FORMAT, "version": STATE_VERSION, **state},
+        allow_nan=False,
+        separators=(",", ":"),
+    )
     tmp = path.with_name(f".{path.name}.tmp")
     with open(tmp, "w", encoding="utf-8") as fh:
         fh.write(text + "\n")
@@ -67,8 +70,11 @@ def read_state(path: str | Path, model: str) -> dict[str, Any] | None:
     except FileNotFoundError:
         return None
     except OSError as exc:
-        log.error("state file %s: cannot read it (%s); starting with a fresh state", path,
-                  exc.strerror or exc)
+        log.error(
+            "state file %s: cannot read it (%s); starting with a fresh state",
+            path,
+            exc.strerror or exc,
+        )
         return None
     try:
         data = json.loads(text)
@@ -89,6 +95,7 @@ def _refuse(path: Path, why: str) -> None:
         os.replace(path, aside)
     except OSError:
         aside = path
-    log.warning("state file %s %s: refused, starting with a fresh state (kept as %s)",
-                path, why, aside.name)
+    log.warning(
+        "state file %s %s: refused, starting with a fresh state (kept as %s)", path, why, aside.name
+    )
     return None

@@ -45,13 +45,19 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MinuteAggregator", "TrendStore", "open_trend_store", "read_trend", "trend_meta",
-           "TREND_FILE"]
+__all__ = [
+    "MinuteAggregator",
+    "TrendStore",
+    "open_trend_store",
+    "read_trend",
+    "trend_meta",
+    "TREND_FILE",
+]
 
 log = logging.getLogger("fdi.trend")
 
 TREND_FILE = "trend.sqlite"
-LEVEL_SCALE = 1000.0   # stored unit: 1/1000 of the signature
+LEVEL_SCALE = 1000.0  # stored unit: 1/1000 of the signature
 COMMAND_SCALE = 1000.0  # stored unit: mV
 
 _SCHEMA = """
@@ -92,8 +98,18 @@ INSERT OR REPLACE INTO trend_hour SELECT minute / 60,
 FROM trend_minute AS m WHERE minute < ? GROUP BY minute / 60
 """
 KEEP_MINUTES_DAYS = 90.0
-COLUMNS = ("minute", "level_mean", "level_min", "level_max", "baseline", "command_rms_v",
-           "readings", "samples", "priority", "alarm_state")
+COLUMNS = (
+    "minute",
+    "level_mean",
+    "level_min",
+    "level_max",
+    "baseline",
+    "command_rms_v",
+    "readings",
+    "samples",
+    "priority",
+    "alarm_state",
+)
 
 
 @dataclass
@@ -155,13 +171,18 @@ class MinuteAggregator:
 
     def _row(self, cur: _Minute) -> dict[str, Any]:
         has = cur.count > 0
-        return {"minute": cur.minute, "level_mean": cur.total / cur.count if has else None,
-                "level_min": cur.low if has else None, "level_max": cur.high if has else None,
-                "baseline": self.baseline,
-                "command_rms_v": math.sqrt(cur.command_sq / cur.samples) if cur.samples
-                else None,
-                "readings": cur.count, "samples": cur.samples, "priority": self.priority,
-                "alarm_state": self.alarm_state}
+        return {
+            "minute": cur.minute,
+            "level_mean": cur.total / cur.count if has else None,
+            "level_min": cur.low if has else None,
+            "level_max": cur.high if has else None,
+            "baseline": self.baseline,
+            "command_rms_v": math.sqrt(cur.command_sq / cur.samples) if cur.samples else None,
+            "readings": cur.count,
+            "samples": cur.samples,
+            "priority": self.priority,
+            "alarm_state": self.alarm_state,
+        }
 
 
 def open_trend_store(path: str | Path, meta: dict[str, Any]) -> TrendStore:
@@ -172,8 +193,12 @@ def open_trend_store(path: str | Path, meta: dict[str, Any]) -> TrendStore:
     except sqlite3.DatabaseError as exc:
         aside = Path(f"{path}.refused")
         os.replace(path, aside)
-        log.warning("trend %s is not a trend database (%s): kept as %s, starting a new one",
-                    path, exc, aside.name)
+        log.warning(
+            "trend %s is not a trend database (%s): kept as %s, starting a new one",
+            path,
+            exc,
+            aside.name,
+        )
         return TrendStore(path, meta)
 
 
@@ -188,8 +213,12 @@ def _scaled(value: float | None, scale: float) -> int | None:
 class TrendStore:
     """``trend.sqlite``: append rows (one transaction each: a row a minute)."""
 
-    def __init__(self, path: str | Path, meta: dict[str, Any] | None = None,
-                 keep_minutes_days: float = KEEP_MINUTES_DAYS) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        meta: dict[str, Any] | None = None,
+        keep_minutes_days: float = KEEP_MINUTES_DAYS,
+    ) -> None:
         self.path = Path(path)
         self.keep_minutes = int(round(keep_minutes_days * 1440))
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -203,18 +232,26 @@ class TrendStore:
         with self._db:
             self._db.executescript(_SCHEMA)
             for key, value in (meta or {}).items():
-                self._db.execute("INSERT OR REPLACE INTO trend_meta VALUES (?, ?)",
-                                 (key, json.dumps(value)))
+                self._db.execute(
+                    "INSERT OR REPLACE INTO trend_meta VALUES (?, ?)", (key, json.dumps(value))
+                )
         self.written = 0
 
     def append(self, row: dict[str, Any]) -> None:
         """One minute; a second row for the same minute (a restart within it) replaces it
         only if it saw more readings."""
-        values = (row["minute"], _scaled(row["level_mean"], LEVEL_SCALE),
-                  _scaled(row["level_min"], LEVEL_SCALE), _scaled(row["level_max"], LEVEL_SCALE),
-                  _scaled(row["baseline"], LEVEL_SCALE),
-                  _scaled(row["command_rms_v"], COMMAND_SCALE), int(row["readings"]),
-                  int(row["samples"]), int(row["priority"]), int(row["alarm_state"]))
+        values = (
+            row["minute"],
+            _scaled(row["level_mean"], LEVEL_SCALE),
+            _scaled(row["level_min"], LEVEL_SCALE),
+            _scaled(row["level_max"], LEVEL_SCALE),
+            _scaled(row["baseline"], LEVEL_SCALE),
+            _scaled(row["command_rms_v"], COMMAND_SCALE),
+            int(row["readings"]),
+            int(row["samples"]),
+            int(row["priority"]),
+            int(row["alarm_state"]),
+        )
         with self._db:
             self._db.execute(
                 "INSERT INTO trend_minute VALUES (?,?,?,?,?,?,?,?,?,?) ON CONFLICT(minute) "
@@ -223,7 +260,9 @@ class TrendStore:
                 "baseline_m=excluded.baseline_m, command_rms_mv=excluded.command_rms_mv, "
                 "readings=excluded.readings, samples=excluded.samples, "
                 "priority=excluded.priority, alarm_state=excluded.alarm_state "
-                "WHERE excluded.readings > trend_minute.readings", values)
+                "WHERE excluded.readings > trend_minute.readings",
+                values,
+            )
             if row["minute"] % 60 == 0:  # once an hour: fold what is past retention
                 cutoff = (row["minute"] - self.keep_minutes) // 60 * 60
                 self._db.execute(_ROLL_UP, (cutoff,))
@@ -244,7 +283,9 @@ def read_trend(path: str | Path, since_unix: float | None = None) -> dict[str, n
             "SELECT time_unix, period_s, level_mean, level_min, level_max, baseline, "
             "command_rms_v, "
             "readings, samples, priority, alarm_state FROM trend WHERE time_unix >= ? "
-            "ORDER BY time_unix", (-math.inf if since_unix is None else since_unix,)).fetchall()
+            "ORDER BY time_unix",
+            (-math.inf if since_unix is None else since_unix,),
+        ).fetchall()
     finally:
         db.close()
     names = ("time_unix", "period_s") + COLUMNS[1:]

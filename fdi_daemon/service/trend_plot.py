@@ -20,16 +20,25 @@ __all__ = ["plot_trend"]
 STEP_COLOURS = ("tab:olive", "tab:orange", "tab:red", "tab:purple", "tab:brown")
 
 
-def plot_trend(path: str | Path, data: dict[str, np.ndarray], steps: list[float],
-               title: str = "") -> Path:
+def plot_trend(
+    path: str | Path, data: dict[str, np.ndarray], steps: list[float], title: str = ""
+) -> Path:
     plt = pyplot()
     import matplotlib.dates as mdates
 
     t = np.array([datetime.fromtimestamp(x, timezone.utc) for x in data["time_unix"]])
-    fig, (ax, ax_p) = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True,
-                                   gridspec_kw={"height_ratios": [3, 1.3]})
-    ax.fill_between(t, data["level_min"], data["level_max"], color="tab:blue", alpha=0.18,
-                    lw=0, label="level min-max per minute")
+    fig, (ax, ax_p) = plt.subplots(
+        2, 1, figsize=(11, 6.5), sharex=True, gridspec_kw={"height_ratios": [3, 1.3]}
+    )
+    ax.fill_between(
+        t,
+        data["level_min"],
+        data["level_max"],
+        color="tab:blue",
+        alpha=0.18,
+        lw=0,
+        label="level min-max per minute",
+    )
     ax.plot(t, data["level_mean"], color="tab:blue", lw=0.8, label="level, mean per minute")
     base = data["baseline"]
     has_base = np.isfinite(base).any()
@@ -38,16 +47,26 @@ def plot_trend(path: str | Path, data: dict[str, np.ndarray], steps: list[float]
         ax.plot(t, base, color="k", ls="--", lw=1.0, label="fault-free baseline")
     for i, step in enumerate(steps):
         colour = STEP_COLOURS[i % len(STEP_COLOURS)]
-        ax.plot(t, reference + step, color=colour, ls=":", lw=1.2,
-                label=f"alarm step {i + 1}: +{step:g}" + (" above baseline" if has_base else ""))
+        ax.plot(
+            t,
+            reference + step,
+            color=colour,
+            ls=":",
+            lw=1.2,
+            label=f"alarm step {i + 1}: +{step:g}" + (" above baseline" if has_base else ""),
+        )
     priority = data["priority"]
     rises = np.flatnonzero(np.diff(priority) > 0) + 1
     if priority.size and priority[0] > 0:
         rises = np.concatenate([[0], rises])
     for k, i in enumerate(rises):
-        ax.axvline(t[i], color=STEP_COLOURS[(int(priority[i]) - 1) % len(STEP_COLOURS)],
-                   lw=1.0, alpha=0.8,
-                   label="priority rises" if k == 0 else None)
+        ax.axvline(
+            t[i],
+            color=STEP_COLOURS[(int(priority[i]) - 1) % len(STEP_COLOURS)],
+            lw=1.0,
+            alpha=0.8,
+            label="priority rises" if k == 0 else None,
+        )
         ax_p.axvline(t[i], color="0.6", lw=0.6)
     ax.set_ylabel("friction level (units of the signature)")
     ax.set_title(title or "Friction trend")
@@ -58,13 +77,20 @@ def plot_trend(path: str | Path, data: dict[str, np.ndarray], steps: list[float]
     ax_p.set_yticks(range(0, len(steps) + 1))
     ax_p.set_ylim(-0.2, len(steps) + 0.3)
     ax_c = ax_p.twinx()
-    ax_c.plot(t, data["command_rms_v"], color="tab:gray", lw=0.5, alpha=0.7,
-              label="valve command RMS")
+    ax_c.plot(
+        t, data["command_rms_v"], color="tab:gray", lw=0.5, alpha=0.7, label="valve command RMS"
+    )
     ax_c.set_ylabel("command RMS (V)")
     lines = ax_p.get_legend_handles_labels()
     more = ax_c.get_legend_handles_labels()
-    ax_p.legend(lines[0] + more[0], lines[1] + more[1], loc="upper left",
-                bbox_to_anchor=(1.07, 1.0), fontsize=8, frameon=False)
+    ax_p.legend(
+        lines[0] + more[0],
+        lines[1] + more[1],
+        loc="upper left",
+        bbox_to_anchor=(1.07, 1.0),
+        fontsize=8,
+        frameon=False,
+    )
     ax_p.xaxis.set_major_formatter(mdates.DateFormatter("%m-%d\n%H:%M"))
     ax_p.set_xlabel("time (UTC)")
     fig.tight_layout()

@@ -32,9 +32,12 @@ def handle_command(device: SimulatedDevice, line: str) -> dict[str, Any]:
                 device.set_fault(name, float(value))
             return {"ok": True, "faults": device.rt.faults()}
         if "inject" in cmd:
-            device.inject(str(cmd["inject"]), count=int(cmd.get("count", 0)),
-                          seconds=float(cmd.get("seconds", 0.0)),
-                          rate=float(cmd.get("rate", 0.0)))
+            device.inject(
+                str(cmd["inject"]),
+                count=int(cmd.get("count", 0)),
+                seconds=float(cmd.get("seconds", 0.0)),
+                rate=float(cmd.get("rate", 0.0)),
+            )
             return {"ok": True}
         if "status" in cmd:
             return {"ok": True, "status": device.status()}

@@ -28,8 +28,13 @@ from hil_sim.devices.realtime import DeviceSample, RealtimeRig
 class RegisterImage:
     """Device-side register contents: header + FIFO of encoded slots + fault registers."""
 
-    def __init__(self, rt: RealtimeRig, word_order: mm.WordOrder = "big", fifo_depth: int = 256,
-                 scales: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> None:
+    def __init__(
+        self,
+        rt: RealtimeRig,
+        word_order: mm.WordOrder = "big",
+        fifo_depth: int = 256,
+        scales: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    ) -> None:
         if not 1 <= fifo_depth <= (65536 - mm.HEADER_REGS) // mm.WORDS_PER_SAMPLE:
             raise ValueError(f"fifo_depth {fifo_depth} does not fit the register space")
         self.rt = rt
@@ -48,8 +53,9 @@ class RegisterImage:
         wo = self.word_order
         sv, sa, sp = self.scales
         for s in samples:
-            self._fifo.appendleft(mm.encode_slot(s.seq, s.v_in / sv, s.accel / sa,
-                                                 s.position / sp, wo))
+            self._fifo.appendleft(
+                mm.encode_slot(s.seq, s.v_in / sv, s.accel / sa, s.position / sp, wo)
+            )
             self.counter = s.seq + 1
         if samples:
             self._saturated = samples[-1].saturated
@@ -60,8 +66,16 @@ class RegisterImage:
             status |= mm.STATUS_SATURATED
         if self.rt.fault_injected:
             status |= mm.STATUS_FAULT_INJECTED
-        return mm.Header(self.counter, int(round(self.rt.fs_hz)), status, self.fifo_depth,
-                         len(self._fifo), mm.MAP_VERSION, mm.WORDS_PER_SAMPLE, *self.scales)
+        return mm.Header(
+            self.counter,
+            int(round(self.rt.fs_hz)),
+            status,
+            self.fifo_depth,
+            len(self._fifo),
+            mm.MAP_VERSION,
+            mm.WORDS_PER_SAMPLE,
+            *self.scales,
+        )
 
     def fill_inputs(self, registers: list[int], offset: int, count: int) -> None:
         """Write the live values of input registers [offset, offset + count) into ``registers``."""
@@ -77,21 +91,24 @@ class RegisterImage:
             slot = self._fifo[j] if j < len(self._fifo) else empty
             base = mm.slot_address(j)
             lo, hi = max(offset, base), min(end, base + mm.WORDS_PER_SAMPLE)
-            registers[lo:hi] = slot[lo - base:hi - base]
+            registers[lo:hi] = slot[lo - base : hi - base]
 
     def fill_holding(self, registers: list[int]) -> None:
-        registers[0:mm.FAULT_REGS] = mm.encode_faults(self.rt.faults(), self.word_order)
+        registers[0 : mm.FAULT_REGS] = mm.encode_faults(self.rt.faults(), self.word_order)
 
     def write_holding(self, offset: int, values: list[int]) -> bool:
         """Apply a fault-control write; False (and nothing applied) if a value is invalid."""
         if offset < 0 or offset + len(values) > mm.FAULT_REGS:
             return False
         image = mm.encode_faults(self.rt.faults(), self.word_order)
-        image[offset:offset + len(values)] = values
+        image[offset : offset + len(values)] = values
         new = mm.decode_faults(image, self.word_order)
         end = offset + len(values)
-        changed = {name: new[name] for name, (reg, _) in mm.FAULT_REGISTERS.items()
-                   if reg < end and offset < reg + 2}  # the values this write touched
+        changed = {
+            name: new[name]
+            for name, (reg, _) in mm.FAULT_REGISTERS.items()
+            if reg < end and offset < reg + 2
+        }  # the values this write touched
         for name, value in changed.items():
             if not math.isfinite(value) or (value < 0 and name != "accel_bias"):
                 return False
@@ -126,8 +143,14 @@ class ModbusDevice:
     ``start_rtu(link_path=None)`` -> slave path of the pty to open; ``stop()``.
     """
 
-    def __init__(self, rt: RealtimeRig, device_id: int = 1, word_order: mm.WordOrder = "big",
-                 fifo_depth: int = 256, scales: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> None:
+    def __init__(
+        self,
+        rt: RealtimeRig,
+        device_id: int = 1,
+        word_order: mm.WordOrder = "big",
+        fifo_depth: int = 256,
+        scales: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    ) -> None:
         if not 1 <= device_id <= 247:
             raise ValueError(f"device id {device_id} is not in 1..247")
         self.rt = rt
@@ -195,10 +218,12 @@ class ModbusDevice:
 
         bits = [SimData(0, values=[False] * 16, datatype=DataType.BITS)]
         holding = [SimData(0, count=mm.FAULT_REGS, values=0, datatype=DataType.REGISTERS)]
-        inputs = [SimData(0, count=image.input_size, values=0, datatype=DataType.REGISTERS,
-                          readonly=True)]
-        return SimDevice(id=self.device_id, simdata=(bits, list(bits), holding, inputs),
-                         action=action)
+        inputs = [
+            SimData(0, count=image.input_size, values=0, datatype=DataType.REGISTERS, readonly=True)
+        ]
+        return SimDevice(
+            id=self.device_id, simdata=(bits, list(bits), holding, inputs), action=action
+        )
 
     async def _tick(self) -> None:
         rt = self.rt

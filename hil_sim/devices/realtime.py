@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+
 def rig_faults() -> dict:
     """The rig's non-friction faults: name -> (control index, neutral value, meaning)."""
     from hil_sim.rig import FAULTS
@@ -28,8 +29,14 @@ def rig_faults() -> dict:
 
 
 #: names a fault schedule or a fault-control register may set
-FAULT_NAMES = ("bearing_supply", "accel_bias", "valve_gain", "supply_pressure",
-               "accel_dropout", "accel_saturation")
+FAULT_NAMES = (
+    "bearing_supply",
+    "accel_bias",
+    "valve_gain",
+    "supply_pressure",
+    "accel_dropout",
+    "accel_saturation",
+)
 
 
 @dataclass(frozen=True)
@@ -57,9 +64,14 @@ class DeviceSample:
 class RealtimeRig:
     """A `hil_sim.rig.Rig` advanced by the wall clock at its sampling rate."""
 
-    def __init__(self, rig, excitation: np.ndarray, schedule: Sequence[ScheduledFault] = (),
-                 clock: Callable[[], float] = time.monotonic,
-                 max_ticks_per_call: int = 2560) -> None:
+    def __init__(
+        self,
+        rig,
+        excitation: np.ndarray,
+        schedule: Sequence[ScheduledFault] = (),
+        clock: Callable[[], float] = time.monotonic,
+        max_ticks_per_call: int = 2560,
+    ) -> None:
         for item in schedule:
             if item.name not in FAULT_NAMES:
                 raise ValueError(f"unknown fault {item.name!r} (known: {', '.join(FAULT_NAMES)})")
@@ -70,16 +82,22 @@ class RealtimeRig:
             raise ValueError("the excitation must be a non-empty array of finite volts")
         # (tick, name, value), applied before the tick is stepped
         self._schedule = sorted(
-            ((max(0, math.ceil(f.t_s * self.fs_hz - 1e-9)), f.name, float(f.value))
-             for f in schedule), key=lambda item: item[0])
+            (
+                (max(0, math.ceil(f.t_s * self.fs_hz - 1e-9)), f.name, float(f.value))
+                for f in schedule
+            ),
+            key=lambda item: item[0],
+        )
         self._clock = clock
         self.max_ticks_per_call = int(max_ticks_per_call)
         self._t0: float | None = None
         self._lock = threading.Lock()
         self._pending: dict[str, float] = {}
         self._faults = {name: self._current(name) for name in FAULT_NAMES}
-        self._neutral = {"bearing_supply": 1.0,
-                         **{name: neutral for name, (_, neutral, _) in rig_faults().items()}}
+        self._neutral = {
+            "bearing_supply": 1.0,
+            **{name: neutral for name, (_, neutral, _) in rig_faults().items()},
+        }
 
     # ------------------------------------------------------------------ faults
     def set_bearing_supply(self, fraction: float) -> None:
@@ -167,21 +185,35 @@ class RealtimeRig:
         lsb = 2.0 * self.rig.params.accel_range_m_per_s2 / 65536.0
         saturated = np.abs(cols["accel"]) >= limit - 1.5 * lsb
         injected = self.fault_injected
-        return [DeviceSample(int(cols["seq"][i]), float(cols["t"][i]), float(cols["v_in"][i]),
-                             float(cols["accel"][i]), float(cols["position"][i]),
-                             bool(saturated[i]), injected) for i in range(n)]
+        return [
+            DeviceSample(
+                int(cols["seq"][i]),
+                float(cols["t"][i]),
+                float(cols["v_in"][i]),
+                float(cols["accel"][i]),
+                float(cols["position"][i]),
+                bool(saturated[i]),
+                injected,
+            )
+            for i in range(n)
+        ]
 
 
 #: the device's scenario when none is given: the paper's test case 1 (1.4 V, 8 Hz sine)
 DEFAULT_SCENARIO = {
-    "name": "device_default", "duration_s": 60.0, "centring_gain_v_per_m": 30.0,
+    "name": "device_default",
+    "duration_s": 60.0,
+    "centring_gain_v_per_m": 30.0,
     "excitation": [{"kind": "sine", "amplitude_v": 1.4, "frequency_hz": 8.0}],
 }
 
 
-def realtime_rig(scenario=None, seed: int | None = None,
-                 faults: Sequence[ScheduledFault] = (),
-                 clock: Callable[[], float] = time.monotonic) -> RealtimeRig:
+def realtime_rig(
+    scenario=None,
+    seed: int | None = None,
+    faults: Sequence[ScheduledFault] = (),
+    clock: Callable[[], float] = time.monotonic,
+) -> RealtimeRig:
     """A real-time rig playing ``scenario`` (a `Scenario`, a YAML path, or None for
     `DEFAULT_SCENARIO`) with its events plus ``faults``; the excitation loops."""
     from hil_sim.excitation import build_program
@@ -195,12 +227,19 @@ def realtime_rig(scenario=None, seed: int | None = None,
         scenario = load_scenario(scenario)
     seed = scenario.seed if seed is None else int(seed)
     fs = scenario.rig.fs_hz
-    program = build_program(scenario.excitation, fs, int(round(scenario.duration_s * fs)),
-                            np.random.default_rng([seed, 0x5EED]))
+    program = build_program(
+        scenario.excitation,
+        fs,
+        int(round(scenario.duration_s * fs)),
+        np.random.default_rng([seed, 0x5EED]),
+    )
     compile_kernel(scenario.rig)  # before the device serves: no multi-second first tick
     rig = Rig(scenario.rig, seed=seed)
     rig.set_centring(scenario.centring_gain_v_per_m)
-    schedule = [ScheduledFault(ev["t_s"], "bearing_supply", ev["bearing_supply"])
-                if "bearing_supply" in ev else ScheduledFault(ev["t_s"], ev["fault"], ev["value"])
-                for ev in scenario.events]
+    schedule = [
+        ScheduledFault(ev["t_s"], "bearing_supply", ev["bearing_supply"])
+        if "bearing_supply" in ev
+        else ScheduledFault(ev["t_s"], ev["fault"], ev["value"])
+        for ev in scenario.events
+    ]
     return RealtimeRig(rig, program, [*schedule, *faults], clock=clock)

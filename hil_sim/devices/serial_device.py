@@ -33,7 +33,13 @@ import tty
 import numpy as np
 
 from fdi_daemon.io.serial_frames import (
-    FLAG_FAULT_INJECTED, FLAG_SATURATED, FRAME_SIZE, SYNC, VERSION, Frame, encode_frame,
+    FLAG_FAULT_INJECTED,
+    FLAG_SATURATED,
+    FRAME_SIZE,
+    SYNC,
+    VERSION,
+    Frame,
+    encode_frame,
 )
 from hil_sim.devices.realtime import DeviceSample, RealtimeRig
 
@@ -61,9 +67,17 @@ class SerialDevice:
         self._todo = {"corrupt": 0, "truncate": 0, "garbage": 0}
         self._stall_until = 0.0
         self._noise_rate = 0.0
-        self._counts = {"frames_sent": 0, "corrupted_frames": 0, "truncated_frames": 0,
-                        "garbage_bytes": 0, "garbage_dropped_bytes": 0, "stalled_frames": 0,
-                        "noisy_frames": 0, "flipped_bytes": 0, "tx_dropped": 0}
+        self._counts = {
+            "frames_sent": 0,
+            "corrupted_frames": 0,
+            "truncated_frames": 0,
+            "garbage_bytes": 0,
+            "garbage_dropped_bytes": 0,
+            "stalled_frames": 0,
+            "noisy_frames": 0,
+            "flipped_bytes": 0,
+            "tx_dropped": 0,
+        }
 
     # ------------------------------------------------------------------ public
     def start(self) -> str:
@@ -113,8 +127,9 @@ class SerialDevice:
                     raise ValueError(f"{kind}: count must be >= 0")
                 self._todo[kind] += int(count)
             else:
-                raise ValueError(f"unknown injection {kind!r} "
-                                 "(corrupt, truncate, garbage, stall, noise)")
+                raise ValueError(
+                    f"unknown injection {kind!r} (corrupt, truncate, garbage, stall, noise)"
+                )
 
     def injected(self) -> dict[str, int]:
         """What was sent and injected so far (counts of executed injections)."""
@@ -140,8 +155,9 @@ class SerialDevice:
             return []
         out = []
         for s in samples:
-            flags = (FLAG_SATURATED if s.saturated else 0) | \
-                (FLAG_FAULT_INJECTED if s.fault_injected else 0)
+            flags = (FLAG_SATURATED if s.saturated else 0) | (
+                FLAG_FAULT_INJECTED if s.fault_injected else 0
+            )
             frame = encode_frame(Frame(s.seq, s.v_in, s.accel, s.position, flags))
             if self._todo["garbage"]:
                 burst = min(self._todo["garbage"], GARBAGE_PER_GAP)
@@ -152,7 +168,7 @@ class SerialDevice:
                 self._todo["corrupt"] -= 1
                 self._counts["corrupted_frames"] += 1
             elif self._todo["truncate"]:
-                frame = frame[:FRAME_SIZE // 2]
+                frame = frame[: FRAME_SIZE // 2]
                 self._todo["truncate"] -= 1
                 self._counts["truncated_frames"] += 1
             elif self._noise_rate > 0.0:
@@ -188,12 +204,14 @@ class SerialDevice:
     def _send(self, wire: list[tuple[bytes, bool]]) -> None:
         for chunk, is_frame in wire:
             if len(self._pending) + len(chunk) > MAX_PENDING_BYTES:
-                self._counts["tx_dropped" if is_frame else "garbage_dropped_bytes"] += \
+                self._counts["tx_dropped" if is_frame else "garbage_dropped_bytes"] += (
                     1 if is_frame else len(chunk)
+                )
                 continue
             self._pending += chunk
-            self._counts["frames_sent" if is_frame else "garbage_bytes"] += \
+            self._counts["frames_sent" if is_frame else "garbage_bytes"] += (
                 1 if is_frame else len(chunk)
+            )
         if not self._pending:
             return
         try:

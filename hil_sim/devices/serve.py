@@ -28,9 +28,19 @@ class SimulatedDevice:
     word_order, fifo_depth: the Modbus register map's settings.
     """
 
-    def __init__(self, transport: str, rt: RealtimeRig, *, host: str = "127.0.0.1",
-                 port: int = 0, link_path: str | None = None, device_id: int = 1,
-                 word_order: str = "big", fifo_depth: int = 256, seed: int = 0) -> None:
+    def __init__(
+        self,
+        transport: str,
+        rt: RealtimeRig,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        link_path: str | None = None,
+        device_id: int = 1,
+        word_order: str = "big",
+        fifo_depth: int = 256,
+        seed: int = 0,
+    ) -> None:
         if transport not in TRANSPORTS:
             raise ValueError(f"transport {transport!r} is not one of {', '.join(TRANSPORTS)}")
         self.transport = transport
@@ -42,8 +52,12 @@ class SimulatedDevice:
         if transport == "serial":
             self.serial = SerialDevice(rt, link_path=link_path, seed=seed)
         else:
-            self.modbus = ModbusDevice(rt, device_id=device_id, word_order=word_order,  # type: ignore[arg-type]
-                                       fifo_depth=fifo_depth)
+            self.modbus = ModbusDevice(
+                rt,
+                device_id=device_id,
+                word_order=word_order,  # type: ignore[arg-type]
+                fifo_depth=fifo_depth,
+            )
         self.link_config: dict[str, Any] = {}
 
     def start(self) -> dict[str, Any]:
@@ -51,13 +65,22 @@ class SimulatedDevice:
         if self.transport == "modbus-tcp":
             assert self.modbus is not None
             host, port = self.modbus.start_tcp(self.host, self.port)
-            self.link_config = {"kind": "modbus-tcp", "host": host, "port": port,
-                                "device_id": self.device_id, "word_order": self.word_order}
+            self.link_config = {
+                "kind": "modbus-tcp",
+                "host": host,
+                "port": port,
+                "device_id": self.device_id,
+                "word_order": self.word_order,
+            }
         elif self.transport == "modbus-rtu":
             assert self.modbus is not None
             path = self.modbus.start_rtu(self.link_path)
-            self.link_config = {"kind": "modbus-rtu", "port": self.link_path or path,
-                                "device_id": self.device_id, "word_order": self.word_order}
+            self.link_config = {
+                "kind": "modbus-rtu",
+                "port": self.link_path or path,
+                "device_id": self.device_id,
+                "word_order": self.word_order,
+            }
         else:
             assert self.serial is not None
             path = self.serial.start()
@@ -81,10 +104,14 @@ class SimulatedDevice:
         self.serial.inject(kind, count=count, seconds=seconds, rate=rate)
 
     def status(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"transport": self.transport, "where": self.where,
-                               "seq": self.rt.rig.seq, "fs_hz": self.rt.fs_hz,
-                               "tick0_monotonic_s": self.rt.tick0_time,
-                               "faults": self.rt.faults()}
+        out: dict[str, Any] = {
+            "transport": self.transport,
+            "where": self.where,
+            "seq": self.rt.rig.seq,
+            "fs_hz": self.rt.fs_hz,
+            "tick0_monotonic_s": self.rt.tick0_time,
+            "faults": self.rt.faults(),
+        }
         if self.serial is not None:
             out["injected"] = self.serial.injected()
         return out
@@ -95,7 +122,7 @@ class SimulatedDevice:
         if self.modbus is not None:
             self.modbus.stop()
 
-    def __enter__(self) -> "SimulatedDevice":
+    def __enter__(self) -> SimulatedDevice:
         self.start()
         return self
 
@@ -124,14 +151,16 @@ def serve_until_signalled(device: SimulatedDevice, stdin, stdout) -> None:
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
     stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set())
-                for sig in (signal.SIGTERM, signal.SIGINT)}
+    previous = {
+        sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGTERM, signal.SIGINT)
+    }
     try:
         device.start()
         stdout.write(device.where + "\n")
         stdout.flush()
-        threading.Thread(target=serve_commands, args=(device, stdin, stdout), daemon=True,
-                         name="device-control").start()
+        threading.Thread(
+            target=serve_commands, args=(device, stdin, stdout), daemon=True, name="device-control"
+        ).start()
         while not stop.wait(0.5):
             pass
     finally:

@@ -26,8 +26,22 @@ def stribeck_level(speed, coulomb, static, stribeck_velocity):
 
 
 @jit(nrt=True)
-def mechanics_step(x, v, stuck, f_drive, mass, dt,
-                   seal_fc, seal_fs, seal_vs, normal_n, mu_k, mu_s, bearing_vs, visc_per_n):
+def mechanics_step(
+    x,
+    v,
+    stuck,
+    f_drive,
+    mass,
+    dt,
+    seal_fc,
+    seal_fs,
+    seal_vs,
+    normal_n,
+    mu_k,
+    mu_s,
+    bearing_vs,
+    visc_per_n,
+):
     """One semi-implicit Euler step of m·ẍ = F_drive - F_seal - F_bearing with stick-slip.
 
     f_drive: every non-friction force (pressure, bumpers, linear damping, process noise) (N).
@@ -53,7 +67,9 @@ def mechanics_step(x, v, stuck, f_drive, mass, dt,
         s = -1.0
     speed = abs(v)
     f_seal = s * stribeck_level(speed, seal_fc, seal_fs, seal_vs)
-    f_bear = s * normal_n * stribeck_level(speed, mu_k, mu_s, bearing_vs) + normal_n * visc_per_n * v
+    f_bear = (
+        s * normal_n * stribeck_level(speed, mu_k, mu_s, bearing_vs) + normal_n * visc_per_n * v
+    )
     a = (f_drive - f_seal - f_bear) / mass
     v_new = v + a * dt
     if v_new * s <= 0.0 and abs(f_drive) <= breakaway:

@@ -138,7 +138,7 @@ class RigParams:
     @property
     def piston_area_m2(self) -> float:
         """Annular piston area seen by each chamber (m²)."""
-        return math.pi / 4.0 * (self.bore_m ** 2 - self.rod_diameter_m ** 2)
+        return math.pi / 4.0 * (self.bore_m**2 - self.rod_diameter_m**2)
 
     @property
     def moving_mass_kg(self) -> float:
@@ -165,8 +165,9 @@ def validate_params(params: RigParams) -> None:
     if params.rod_diameter_m >= params.bore_m:
         raise ValueError("rig parameter rod_diameter_m must be smaller than bore_m")
     if not params.critical_pressure_ratio < params.laminar_pressure_ratio < 1.0:
-        raise ValueError("rig parameter laminar_pressure_ratio must lie between "
-                         "critical_pressure_ratio and 1")
+        raise ValueError(
+            "rig parameter laminar_pressure_ratio must lie between critical_pressure_ratio and 1"
+        )
     if params.flapper_travel_max >= 1.0:
         raise ValueError("rig parameter flapper_travel_max must be below 1 (nozzle closed)")
     if params.bearing_mu_static < params.bearing_mu_kinetic:
@@ -176,21 +177,21 @@ def validate_params(params: RigParams) -> None:
 
 
 # ---------------------------------------------------------------- packed parameter vector
-P_DT = 0                 # internal step (s)
+P_DT = 0  # internal step (s)
 P_SUBSTEPS = 1
-P_AREA = 2               # piston area (m²)
+P_AREA = 2  # piston area (m²)
 P_HALF_STROKE = 3
 P_DEAD_VOLUME = 4
-P_SUPPLY = 5             # nominal supply, abs (Pa)
+P_SUPPLY = 5  # nominal supply, abs (Pa)
 P_ATM = 6
-P_R = 7                  # gas constant
-P_N = 8                  # polytropic index
-P_FLOW_CONST = 9         # Cd * sqrt(κ/R) * (2/(κ+1))^((κ+1)/(2(κ-1)))
-P_B = 10                 # critical pressure ratio
+P_R = 7  # gas constant
+P_N = 8  # polytropic index
+P_FLOW_CONST = 9  # Cd * sqrt(κ/R) * (2/(κ+1))^((κ+1)/(2(κ-1)))
+P_B = 10  # critical pressure ratio
 P_PR_LAM = 11
-P_PHI_LAM = 12           # ISO 6358 flow function at the laminar ratio
+P_PHI_LAM = 12  # ISO 6358 flow function at the laminar ratio
 P_LEAK = 13
-P_VALVE_W = 14           # rad/s
+P_VALVE_W = 14  # rad/s
 P_VALVE_Z = 15
 P_VALVE_K = 16
 P_FLAPPER_MAX = 17
@@ -204,9 +205,9 @@ P_FORCE_NOISE = 24
 P_SEAL_FC = 25
 P_SEAL_FS = 26
 P_SEAL_VS = 27
-P_BEARING_P = 28         # nominal bearing supply, gauge (Pa)
-P_BEARING_ALPHA = 29     # 1 - exp(-dt/tau)
-P_WEIGHT = 30            # bearing block weight (N)
+P_BEARING_P = 28  # nominal bearing supply, gauge (Pa)
+P_BEARING_ALPHA = 29  # 1 - exp(-dt/tau)
+P_WEIGHT = 30  # bearing block weight (N)
 P_LIFT_AREA = 31
 P_MU_K = 32
 P_MU_S = 33
@@ -220,18 +221,18 @@ P_LVDT_RANGE = 40
 P_LVDT_NOISE = 41
 P_ADC_RANGE = 42
 P_ADC_NOISE = 43
-P_LEVELS = 44            # 2**bits
+P_LEVELS = 44  # 2**bits
 N_PARAMS = 45
 
 # ---------------------------------------------------------------- run-time controls
-C_BEARING_SUPPLY = 0     # fraction of nominal bearing supply (1 = floating)
-C_SUPPLY = 1             # supply pressure fraction (fault x drift)
-C_TEMPERATURE = 2        # air temperature (K)
-C_VALVE_GAIN = 3         # valve gain fraction (fault)
-C_ACCEL_BIAS = 4         # extra accelerometer bias (fault) (m/s²)
-C_ACCEL_DROPOUT = 5      # 1: accelerometer reads 0
-C_ACCEL_RANGE = 6        # accelerometer range fraction (fault)
-C_CENTRING = 7           # position-centring gain (V/m), 0 = off
+C_BEARING_SUPPLY = 0  # fraction of nominal bearing supply (1 = floating)
+C_SUPPLY = 1  # supply pressure fraction (fault x drift)
+C_TEMPERATURE = 2  # air temperature (K)
+C_VALVE_GAIN = 3  # valve gain fraction (fault)
+C_ACCEL_BIAS = 4  # extra accelerometer bias (fault) (m/s²)
+C_ACCEL_DROPOUT = 5  # 1: accelerometer reads 0
+C_ACCEL_RANGE = 6  # accelerometer range fraction (fault)
+C_CENTRING = 7  # position-centring gain (V/m), 0 = off
 N_CONTROLS = 8
 
 
@@ -249,7 +250,8 @@ def pack_params(params: RigParams) -> np.ndarray:
     dt = 1.0 / (params.fs_hz * params.substeps)
     kappa = params.heat_ratio
     sonic = math.sqrt(kappa / GAS_CONSTANT_J_PER_KG_K) * (2.0 / (kappa + 1.0)) ** (
-        (kappa + 1.0) / (2.0 * (kappa - 1.0)))
+        (kappa + 1.0) / (2.0 * (kappa - 1.0))
+    )
     p[P_DT] = dt
     p[P_SUBSTEPS] = params.substeps
     p[P_AREA] = params.piston_area_m2

@@ -15,9 +15,25 @@ import numpy as np
 from hil_sim.rig import kernel as K
 from hil_sim.rig.chambers import orifice_flow
 from hil_sim.rig.params import (
-    C_ACCEL_BIAS, C_ACCEL_DROPOUT, C_ACCEL_RANGE, C_BEARING_SUPPLY, C_CENTRING, C_SUPPLY,
-    C_TEMPERATURE, C_VALVE_GAIN, P_ATM, P_B, P_FLOW_CONST, P_NOZZLE_AREA, P_PHI_LAM, P_PR_LAM,
-    P_SUPPLY, P_SUPPLY_AREA, RigParams, new_controls, pack_params,
+    C_ACCEL_BIAS,
+    C_ACCEL_DROPOUT,
+    C_ACCEL_RANGE,
+    C_BEARING_SUPPLY,
+    C_CENTRING,
+    C_SUPPLY,
+    C_TEMPERATURE,
+    C_VALVE_GAIN,
+    P_ATM,
+    P_B,
+    P_FLOW_CONST,
+    P_NOZZLE_AREA,
+    P_PHI_LAM,
+    P_PR_LAM,
+    P_SUPPLY,
+    P_SUPPLY_AREA,
+    RigParams,
+    new_controls,
+    pack_params,
 )
 
 #: fault name -> (control index, neutral value, meaning)
@@ -96,7 +112,7 @@ class NoiseStream:
                 self._block = self._rng.standard_normal((self._block_samples, self._channels))
                 self._pos = 0
             got = min(need, len(self._block) - self._pos)
-            parts.append(self._block[self._pos:self._pos + got])
+            parts.append(self._block[self._pos : self._pos + got])
             self._pos += got
             need -= got
         if not parts:
@@ -111,8 +127,9 @@ def null_pressure_pa(packed: np.ndarray, supply_fraction: float, temperature_k: 
     lo, hi = packed[P_ATM], p_sup
     for _ in range(200):
         mid = 0.5 * (lo + hi)
-        net = (orifice_flow(p_sup, mid, packed[P_SUPPLY_AREA], *args)
-               - orifice_flow(mid, packed[P_ATM], packed[P_NOZZLE_AREA], *args))
+        net = orifice_flow(p_sup, mid, packed[P_SUPPLY_AREA], *args) - orifice_flow(
+            mid, packed[P_ATM], packed[P_NOZZLE_AREA], *args
+        )
         if net > 0.0:
             lo = mid
         else:
@@ -225,10 +242,14 @@ class Rig:
         seq, out = self._advance(np.array([u]))
         row = out[0].tolist()
         values = {name: row[j] for name, j in OUTPUT_COLUMNS.items()}
-        return RigOutput(seq=seq, t=seq / self.params.fs_hz,
-                         fault_active=1.0 if values["contact_force"] > 0.0 else 0.0,
-                         other_fault_active=float(self.other_fault_active),
-                         bearing_supply=self.bearing_supply, **values)
+        return RigOutput(
+            seq=seq,
+            t=seq / self.params.fs_hz,
+            fault_active=1.0 if values["contact_force"] > 0.0 else 0.0,
+            other_fault_active=float(self.other_fault_active),
+            bearing_supply=self.bearing_supply,
+            **values,
+        )
 
     def _advance(self, u: np.ndarray) -> tuple[int, np.ndarray]:
         """Run the kernel over ``u``; returns (seq of the first sample, output matrix)."""

@@ -79,7 +79,7 @@ class Link(abc.ABC):
         """Where this link reads from, for log lines and the status snapshot."""
         return self.kind
 
-    def __enter__(self) -> "Link":
+    def __enter__(self) -> Link:
         self.open()
         return self
 
@@ -99,10 +99,16 @@ class ReconnectingLink(Link):
     next attempt or ``timeout_s``, whichever is first.
     """
 
-    def __init__(self, factory: Callable[[], Link], backoff_initial_s: float = 0.1,
-                 backoff_max_s: float = 5.0, stall_timeout_s: float | None = 3.0,
-                 clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep, kind: str | None = None) -> None:
+    def __init__(
+        self,
+        factory: Callable[[], Link],
+        backoff_initial_s: float = 0.1,
+        backoff_max_s: float = 5.0,
+        stall_timeout_s: float | None = 3.0,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+        kind: str | None = None,
+    ) -> None:
         if not backoff_initial_s > 0 or backoff_max_s < backoff_initial_s:
             raise ValueError("need 0 < backoff_initial_s <= backoff_max_s")
         self._factory = factory
@@ -172,12 +178,18 @@ class ReconnectingLink(Link):
                 self._delivered_since_connect = True
                 self._delay_s = self.backoff_initial_s
                 if self._down_since is not None:  # restored only once data flow again
-                    self._event("link_restored", down_s=round(now - self._down_since, 3),
-                                attempts=self._down_attempts)
+                    self._event(
+                        "link_restored",
+                        down_s=round(now - self._down_since, 3),
+                        attempts=self._down_attempts,
+                    )
                     self._down_since = None
                     self._down_attempts = 0
-        elif (self.stall_timeout_s is not None and not self._link.finished
-              and now - self._last_data > self.stall_timeout_s):
+        elif (
+            self.stall_timeout_s is not None
+            and not self._link.finished
+            and now - self._last_data > self.stall_timeout_s
+        ):
             self._stats["stalls"] += 1
             self._lose(f"no samples for {self.stall_timeout_s:g} s")
         return samples
@@ -247,8 +259,16 @@ class ReconnectingLink(Link):
             link.close()
 
     def _event(self, kind: str, **extra: Any) -> None:
-        self._events.append({"t": self._last_t, "kind": kind, "link": self.kind,
-                             "where": self._where, "time": time.time(), **extra})
+        self._events.append(
+            {
+                "t": self._last_t,
+                "kind": kind,
+                "link": self.kind,
+                "where": self._where,
+                "time": time.time(),
+                **extra,
+            }
+        )
 
 
 # ------------------------------------------------------------------------ factory
@@ -264,14 +284,16 @@ _MODBUS_COMMON: dict[str, tuple[type | tuple[type, ...], Any]] = {
     "timeout_s": ((int, float), 1.0),
 }
 LINK_KEYS: dict[str, dict[str, tuple[type | tuple[type, ...], Any]]] = {
-    "serial": {"port": (str, REQUIRED), "baudrate": (int, 115200),
-               "fs_hz": ((int, float), 256.0)},
+    "serial": {"port": (str, REQUIRED), "baudrate": (int, 115200), "fs_hz": ((int, float), 256.0)},
     "modbus-tcp": {"host": (str, "127.0.0.1"), "port": (int, 502), **_MODBUS_COMMON},
     "modbus-rtu": {"port": (str, REQUIRED), "baudrate": (int, 115200), **_MODBUS_COMMON},
-    "replay": {"path": (str, REQUIRED), "realtime": (bool, True),
-               "speed": ((int, float), 1.0), "loop": (bool, False)},
-    "sim": {"scenario": ((str, type(None)), None), "seed": (int, 0),
-            "realtime": (bool, True)},
+    "replay": {
+        "path": (str, REQUIRED),
+        "realtime": (bool, True),
+        "speed": ((int, float), 1.0),
+        "loop": (bool, False),
+    },
+    "sim": {"scenario": ((str, type(None)), None), "seed": (int, 0), "realtime": (bool, True)},
 }
 RECONNECT_KEYS: dict[str, tuple[type | tuple[type, ...], Any]] = {
     "backoff_initial_s": ((int, float), 0.1),
@@ -293,7 +315,8 @@ def _validated(config: Mapping[str, Any], keys: dict, where: str) -> dict[str, A
             continue
         value = config[key]
         bad_bool = isinstance(value, bool) and bool not in (
-            types if isinstance(types, tuple) else (types,))
+            types if isinstance(types, tuple) else (types,)
+        )
         if bad_bool or not isinstance(value, types):
             names = "/".join(t.__name__ for t in (types if isinstance(types, tuple) else (types,)))
             raise ConfigError(f"{where}.{key}: expected {names}, got {value!r}")
@@ -325,8 +348,7 @@ def link_settings(config: Mapping[str, Any], where: str = "link") -> tuple[str, 
     return kind, settings, reconnect
 
 
-def make_link(config: Mapping[str, Any], where: str = "link",
-              fs_hz: float | None = None) -> Link:
+def make_link(config: Mapping[str, Any], where: str = "link", fs_hz: float | None = None) -> Link:
     """Build one (unopened) link from a config mapping with ``kind`` and its settings;
     ``fs_hz``: the rate the monitor runs at, which a replayed recording must have."""
     kind, s, _ = link_settings(config, where)
@@ -337,24 +359,30 @@ def make_link(config: Mapping[str, Any], where: str = "link",
     if kind in ("modbus-tcp", "modbus-rtu"):
         from fdi_daemon.io.links.modbus_link import ModbusLink
 
-        common = dict(device_id=s["device_id"], word_order=s["word_order"],
-                      input_base=s["input_base"], poll_interval_s=float(s["poll_interval_s"]),
-                      timeout_s=float(s["timeout_s"]))
+        common = dict(
+            device_id=s["device_id"],
+            word_order=s["word_order"],
+            input_base=s["input_base"],
+            poll_interval_s=float(s["poll_interval_s"]),
+            timeout_s=float(s["timeout_s"]),
+        )
         if kind == "modbus-tcp":
             return ModbusLink.tcp(s["host"], s["port"], **common)
         return ModbusLink.rtu(s["port"], baudrate=s["baudrate"], **common)
     if kind == "replay":
         from fdi_daemon.io.links.replay_link import ReplayLink
 
-        return ReplayLink(s["path"], realtime=s["realtime"], speed=float(s["speed"]),
-                          loop=s["loop"], fs_hz=fs_hz)
+        return ReplayLink(
+            s["path"], realtime=s["realtime"], speed=float(s["speed"]), loop=s["loop"], fs_hz=fs_hz
+        )
     from fdi_daemon.io.links.sim_link import SimLink
 
     return SimLink(scenario=s["scenario"], seed=s["seed"], realtime=s["realtime"])
 
 
-def make_reconnecting_link(config: Mapping[str, Any], where: str = "link",
-                           fs_hz: float | None = None) -> ReconnectingLink:
+def make_reconnecting_link(
+    config: Mapping[str, Any], where: str = "link", fs_hz: float | None = None
+) -> ReconnectingLink:
     """``ReconnectingLink`` around ``make_link(config, where, fs_hz)``, backoff from
     ``config["reconnect"]``."""
     kind, _, reconnect = link_settings(config, where)

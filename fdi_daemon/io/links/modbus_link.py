@@ -34,9 +34,18 @@ def _behind(newest_raw: int, seq_raw: int) -> int:
 class ModbusLink(Link):
     """Poll the register map through a pymodbus sync client made by ``client_factory``."""
 
-    def __init__(self, kind: str, where: str, client_factory: Callable[[], Any], *,
-                 device_id: int = 1, word_order: mm.WordOrder = "big", input_base: int = 0,
-                 poll_interval_s: float = 0.01, timeout_s: float = 1.0) -> None:
+    def __init__(
+        self,
+        kind: str,
+        where: str,
+        client_factory: Callable[[], Any],
+        *,
+        device_id: int = 1,
+        word_order: mm.WordOrder = "big",
+        input_base: int = 0,
+        poll_interval_s: float = 0.01,
+        timeout_s: float = 1.0,
+    ) -> None:
         if word_order not in ("big", "little"):
             raise ValueError(f"word order {word_order!r} is not 'big' or 'little'")
         self.kind = kind
@@ -53,31 +62,49 @@ class ModbusLink(Link):
         self._unwrap = SeqUnwrapper(32)
         self._last_seq: int | None = None  # unwrapped seq of the last delivered sample
         self._next_poll = 0.0
-        self._counts = {"samples": 0, "polls": 0, "requests": 0, "samples_lost": 0,
-                        "fifo_overruns": 0, "counter_resets": 0}
+        self._counts = {
+            "samples": 0,
+            "polls": 0,
+            "requests": 0,
+            "samples_lost": 0,
+            "fifo_overruns": 0,
+            "counter_resets": 0,
+        }
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def tcp(cls, host: str, port: int, **kwargs: Any) -> "ModbusLink":
+    def tcp(cls, host: str, port: int, **kwargs: Any) -> ModbusLink:
         from pymodbus.client import ModbusTcpClient
 
         timeout_s = float(kwargs.get("timeout_s", 1.0))
-        return cls("modbus-tcp", f"modbus-tcp {host}:{port}",
-                   lambda: ModbusTcpClient(host, port=port, timeout=timeout_s, retries=1,
-                                           reconnect_delay=0.0),
-                   **kwargs)
+        return cls(
+            "modbus-tcp",
+            f"modbus-tcp {host}:{port}",
+            lambda: ModbusTcpClient(
+                host, port=port, timeout=timeout_s, retries=1, reconnect_delay=0.0
+            ),
+            **kwargs,
+        )
 
     @classmethod
-    def rtu(cls, port: str, baudrate: int = 115200, **kwargs: Any) -> "ModbusLink":
+    def rtu(cls, port: str, baudrate: int = 115200, **kwargs: Any) -> ModbusLink:
         from pymodbus.client import ModbusSerialClient
         from pymodbus.framer import FramerType
 
         timeout_s = float(kwargs.get("timeout_s", 1.0))
-        return cls("modbus-rtu", f"modbus-rtu {port} @ {baudrate} Bd",
-                   lambda: ModbusSerialClient(port, framer=FramerType.RTU, baudrate=baudrate,
-                                              timeout=timeout_s, retries=1,
-                                              reconnect_delay=0.0),
-                   **kwargs)
+        return cls(
+            "modbus-rtu",
+            f"modbus-rtu {port} @ {baudrate} Bd",
+            lambda: ModbusSerialClient(
+                port,
+                framer=FramerType.RTU,
+                baudrate=baudrate,
+                timeout=timeout_s,
+                retries=1,
+                reconnect_delay=0.0,
+            ),
+            **kwargs,
+        )
 
     # ------------------------------------------------------------------ Link
     def describe(self) -> str:
@@ -97,10 +124,12 @@ class ModbusLink(Link):
         header = mm.decode_header(regs, self.word_order)
         if header.map_version != mm.MAP_VERSION or header.words_per_sample != mm.WORDS_PER_SAMPLE:
             self.close()
-            raise LinkError(f"{self._where}: register map version {header.map_version} with "
-                            f"{header.words_per_sample} words per sample is not supported "
-                            f"(expected {mm.MAP_VERSION}, {mm.WORDS_PER_SAMPLE}); "
-                            "check input_base and device_id")
+            raise LinkError(
+                f"{self._where}: register map version {header.map_version} with "
+                f"{header.words_per_sample} words per sample is not supported "
+                f"(expected {mm.MAP_VERSION}, {mm.WORDS_PER_SAMPLE}); "
+                "check input_base and device_id"
+            )
         if header.fs_hz <= 0 or header.fifo_depth <= 0:
             self.close()
             raise LinkError(f"{self._where}: implausible header {header}")
@@ -143,37 +172,50 @@ class ModbusLink(Link):
             self._last_seq = None
         valid = min(header.fifo_valid, header.fifo_depth)
         got: dict[int, mm.SlotSample] = {}
-        self._collect(mm.decode_slots(regs[mm.HEADER_REGS:mm.slot_address(min(first, valid))],
-                                      self.word_order, self._scales), newest_raw, newest, got)
+        self._collect(
+            mm.decode_slots(
+                regs[mm.HEADER_REGS : mm.slot_address(min(first, valid))],
+                self.word_order,
+                self._scales,
+            ),
+            newest_raw,
+            newest,
+            got,
+        )
         if self._last_seq is None:
             self._last_seq = newest - 1  # start live: deliver the newest sample only
         start, filled = first, valid  # filled: FIFO slots that hold a sample, a lower bound
         while got and min(got) > self._last_seq + 1 and start < filled:
             count = min(mm.SLOTS_PER_READ, header.fifo_depth - start)
-            block = mm.decode_slots(self._read(mm.slot_address(start),
-                                               count * mm.WORDS_PER_SAMPLE),
-                                    self.word_order, self._scales)
+            block = mm.decode_slots(
+                self._read(mm.slot_address(start), count * mm.WORDS_PER_SAMPLE),
+                self.word_order,
+                self._scales,
+            )
             # Slot `start` holds a sample (start < filled); how much newer it is than what
             # sat there when the header was read is how far the FIFO has moved on since.
             published = start - _behind(newest_raw, block[0].seq)
             filled = min(valid + published, header.fifo_depth)
-            self._collect(block[:filled - start], newest_raw, newest, got)
+            self._collect(block[: filled - start], newest_raw, newest, got)
             start += count
         wanted = sorted(seq for seq in got if seq > self._last_seq)
         if wanted and wanted[0] > self._last_seq + 1:
             self._counts["fifo_overruns"] += 1
             self._counts["samples_lost"] += wanted[0] - self._last_seq - 1
         fs = float(header.fs_hz)
-        out = [Sample(seq, seq / fs, got[seq].v_in, got[seq].accel, got[seq].position)
-               for seq in wanted]
+        out = [
+            Sample(seq, seq / fs, got[seq].v_in, got[seq].accel, got[seq].position)
+            for seq in wanted
+        ]
         if out:
             self._last_seq = out[-1].seq
         self._counts["samples"] += len(out)
         return out
 
     @staticmethod
-    def _collect(slots: list[mm.SlotSample], newest_raw: int, newest: int,
-                 got: dict[int, mm.SlotSample]) -> None:
+    def _collect(
+        slots: list[mm.SlotSample], newest_raw: int, newest: int, got: dict[int, mm.SlotSample]
+    ) -> None:
         for slot in slots:
             behind = _behind(newest_raw, slot.seq)
             if behind < 0:
@@ -185,13 +227,16 @@ class ModbusLink(Link):
 
         self._counts["requests"] += 1
         try:
-            rr = self._client.read_input_registers(self.input_base + offset, count=count,
-                                                   device_id=self.device_id)
+            rr = self._client.read_input_registers(
+                self.input_base + offset, count=count, device_id=self.device_id
+            )
         except (ModbusException, OSError) as exc:
             self.close()
             raise LinkError(f"{self._where}: {exc}") from None
         if rr.isError():
             self.close()
-            raise LinkError(f"{self._where}: device answered {rr} to a read of {count} "
-                            f"input registers at {self.input_base + offset}")
+            raise LinkError(
+                f"{self._where}: device answered {rr} to a read of {count} "
+                f"input registers at {self.input_base + offset}"
+            )
         return list(rr.registers)

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fdi_daemon.io.links.base import Link
 from fdi_daemon.errors import RecordingError
+from fdi_daemon.io.links.base import Link
 from fdi_daemon.io.recordings import read_recording, same_rate
 from fdi_daemon.io.sample import Sample
 
@@ -27,9 +27,15 @@ from fdi_daemon.io.sample import Sample
 class ReplayLink(Link):
     kind = "replay"
 
-    def __init__(self, path: str | Path, realtime: bool = True, speed: float = 1.0,
-                 loop: bool = False, chunk_samples: int = 256,
-                 fs_hz: float | None = None) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        realtime: bool = True,
+        speed: float = 1.0,
+        loop: bool = False,
+        chunk_samples: int = 256,
+        fs_hz: float | None = None,
+    ) -> None:
         if not speed > 0:
             raise ValueError("speed must be > 0")
         self.path = Path(path)
@@ -55,14 +61,20 @@ class ReplayLink(Link):
         rec = read_recording(self.path, strict=False)
         if self.fs_hz is not None and not same_rate(rec.fs, self.fs_hz):
             # as `fdi replay`: run at the model's rate, its times would be wrong throughout
-            raise RecordingError(f"{self.path}: sampled at {rec.fs:g} Hz but the model is for "
-                                 f"{self.fs_hz:g} Hz")
+            raise RecordingError(
+                f"{self.path}: sampled at {rec.fs:g} Hz but the model is for {self.fs_hz:g} Hz"
+            )
         n = len(rec)
         seq = rec.columns.get("seq")
         seq = np.arange(n, dtype=np.int64) if seq is None else seq.astype(np.int64)
         position = rec.columns.get("position", np.full(n, math.nan))
-        self._cols = (seq, rec.t.astype(float), rec.v_in.astype(float),
-                      rec.accel.astype(float), np.asarray(position, dtype=float))
+        self._cols = (
+            seq,
+            rec.t.astype(float),
+            rec.v_in.astype(float),
+            rec.accel.astype(float),
+            np.asarray(position, dtype=float),
+        )
         dt = 1.0 / rec.fs
         self._span_s = float(rec.t[-1] - rec.t[0]) + dt
         self._span_seq = int(seq[-1] - seq[0]) + 1
@@ -88,8 +100,9 @@ class ReplayLink(Link):
             elapsed = (now - self._t0_wall) * self.speed - self._pass * self._span_s
             stop = int(np.searchsorted(t - t[0], elapsed, side="right"))
             if stop <= self._pos:
-                due_in = ((t[self._pos] - t[0]) + self._pass * self._span_s) / self.speed \
-                    - (now - self._t0_wall)
+                due_in = ((t[self._pos] - t[0]) + self._pass * self._span_s) / self.speed - (
+                    now - self._t0_wall
+                )
                 time.sleep(max(0.0, min(timeout_s, due_in)))
                 return []
         else:
@@ -97,8 +110,16 @@ class ReplayLink(Link):
         lo, self._pos = self._pos, stop
         dseq = self._pass * self._span_seq
         dt = self._pass * self._span_s
-        out = [Sample(int(seq[i]) + dseq, float(t[i]) + dt, float(v_in[i]), float(accel[i]),
-                      float(position[i])) for i in range(lo, stop)]
+        out = [
+            Sample(
+                int(seq[i]) + dseq,
+                float(t[i]) + dt,
+                float(v_in[i]),
+                float(accel[i]),
+                float(position[i]),
+            )
+            for i in range(lo, stop)
+        ]
         if self._pos >= n and not self.loop:
             self.finished = True
         self._samples += len(out)

@@ -63,4 +63,3 @@ class SerialLink(Link):
 
     def counters(self) -> dict[str, int]:
         return {"samples": self._samples, "bytes": self._bytes, **self.decoder.counters()}
-

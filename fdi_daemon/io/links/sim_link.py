@@ -16,8 +16,13 @@ from fdi_daemon.io.sample import Sample
 class SimLink(Link):
     kind = "sim"
 
-    def __init__(self, scenario: str | None = None, seed: int = 0, realtime: bool = True,
-                 chunk_samples: int = 256) -> None:
+    def __init__(
+        self,
+        scenario: str | None = None,
+        seed: int = 0,
+        realtime: bool = True,
+        chunk_samples: int = 256,
+    ) -> None:
         self.scenario = scenario
         self.seed = int(seed)
         self.realtime = realtime

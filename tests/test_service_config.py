@@ -5,7 +5,8 @@ from pathlib import Path
 import pytest
 
 from fdi_daemon.errors import ConfigError
-from fdi_daemon.service.config import SCHEMA, config_from_dict, default_config_path, load_config
+from fdi_daemon.service.config import SECTIONS, config_from_dict, default_config_path, load_config
+from fdi_daemon.service.config_models import Section
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -157,19 +158,19 @@ def test_shipped_configs_are_valid(path):
     assert cfg.model_path.name.endswith(".yaml")
 
 
-def leaf_keys(fields, prefix=""):
-    for key, spec in fields.items():
-        if isinstance(spec, dict):
-            yield from leaf_keys(spec, f"{prefix}{key}.")
+def leaf_keys(model, prefix=""):
+    for key, field in model.model_fields.items():
+        if isinstance(field.annotation, type) and issubclass(field.annotation, Section):
+            yield from leaf_keys(field.annotation, f"{prefix}{key}.")
         else:
             yield f"{prefix}{key}"
 
 
 def test_schema_fields_are_documented():
     doc = (ROOT / "docs" / "service.md").read_text()
-    for section, fields in SCHEMA.items():
+    for section, model in SECTIONS.items():
         assert f"`{section}:`" in doc
-        for key in leaf_keys(fields):
+        for key in leaf_keys(model):
             assert f"| `{key}` |" in doc, f"{section}.{key} is not in docs/service.md"
 
 
@@ -233,3 +234,86 @@ def test_an_output_that_is_an_input_or_another_output_is_refused(tmp_path, secti
     (tmp_path / "rec.csv").write_text("t,v_in,accel\n")
     with pytest.raises(ConfigError, match=message.format(dir=tmp_path, state=state)):
         config_from_dict(data, "rig.yaml", tmp_path)
+
+
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        (
+            {"service": {"deadlin_s": 1}},
+            "service.deadlin_s: unknown key (did you mean 'deadline_s'?)",
+        ),
+        (
+            {"mqtt": {"tls": {"ca_fle": "x"}}},
+            "mqtt.tls.ca_fle: unknown key (did you mean 'ca_file'?)",
+        ),
+        ({"recorder": {"keep": 1}}, "recorder.keep: unknown key (known: enabled, dir, "),
+        ({"aalarms": {}}, "aalarms: unknown key (did you mean 'alarms'?)"),
+    ],
+)
+def test_unknown_keys_suggest_the_key_meant(data, message):
+    with pytest.raises(ConfigError) as info:
+        config_from_dict(minimal(**data), "rig.yaml")
+    assert str(info.value).startswith(f"rig.yaml: {message}")
+
+
+def test_link_typos_suggest_the_key_meant():
+    """Issue 47: `link.wrd_order` named every known key but not the one meant."""
+    data = minimal()
+    data["link"] = {**data["link"], "wrd_order": "big"}
+    with pytest.raises(
+        ConfigError,
+        match=r"^rig.yaml: link.wrd_order: unknown key \(did you mean 'word_order'\?\)$",
+    ):
+        config_from_dict(data, "rig.yaml")
+
+
+def test_null_sections_take_their_defaults_and_settings_are_typed():
+    cfg = config_from_dict(minimal(sinks={"modbus_status": None}, mqtt={"tls": None}), "rig.yaml")
+    assert cfg.sinks["modbus_status"]["port"] == 5020 and cfg.mqtt["tls"]["enabled"] is False
+    assert cfg.settings.sinks.modbus_status.port == 5020  # the typed view of the same values
+    assert cfg.settings.service.deadline_s == cfg.service["deadline_s"] == 0.05
+
+
+def test_several_problems_are_counted_on_one_line():
+    with pytest.raises(ConfigError) as info:
+        config_from_dict(minimal(service={"fs": -1, "queue_size": 0}), "rig.yaml")
+    assert str(info.value) == (
+        "rig.yaml: service.fs must be a positive number (got -1) (and 1 more problem(s))"
+    )
+
+
+def test_the_shipped_json_schema_is_the_generated_one():
+    """fdi_daemon/data/config.schema.json: regenerate with python -m fdi_daemon.service.config_schema."""
+    from fdi_daemon.service.config_schema import SCHEMA_PATH, schema_text
+
+    assert SCHEMA_PATH.read_text() == schema_text()
+
+
+@pytest.mark.parametrize(
+    "path",
+    [default_config_path()] + sorted((ROOT / "configs").glob("rig_*.yaml")),
+    ids=lambda p: p.name,
+)
+def test_shipped_configs_satisfy_the_json_schema(path):
+    """What an editor checks: the shipped configs pass, a typo and a wrong type do not."""
+    jsonschema = pytest.importorskip("jsonschema")
+    import json
+
+    import yaml
+
+    from fdi_daemon.service.config_schema import SCHEMA_PATH
+
+    schema = json.loads(SCHEMA_PATH.read_text())
+    data = yaml.safe_load(path.read_text())
+    jsonschema.validate(data, schema)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate({**data, "sinks": {"stdot": True}}, schema)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate({**data, "recorder": {"rotate_bytes": "1 GB"}}, schema)
+
+
+def test_a_simulated_fault_entry_takes_every_fault_of_the_fake_device():
+    from fdi_daemon.service.config_models import SIM_FAULT_KEYS, SimFault
+
+    assert set(SimFault.model_fields) == {"at_s", *SIM_FAULT_KEYS}

@@ -13,9 +13,15 @@ from typing import Any
 
 from fdi_daemon.errors import ConfigError
 
-__all__ = ["known_settings", "split_known"]
+__all__ = ["close_match", "known_settings", "split_known"]
 
 log = logging.getLogger("fdi.model")
+
+
+def close_match(key: object, known: Iterable[str]) -> str | None:
+    """The known key that ``key`` is most likely a typo of (difflib ratio >= 0.8), or None."""
+    close = difflib.get_close_matches(str(key), [str(k) for k in known], n=1, cutoff=0.8)
+    return close[0] if close else None
 
 
 def split_known(
@@ -35,9 +41,9 @@ def split_known(
         if key in known:
             inside[key] = value
             continue
-        close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.8)
+        close = close_match(key, known)
         if close:
-            raise ConfigError(f"{where}: unknown {noun} {key!r} (did you mean {close[0]!r}?)")
+            raise ConfigError(f"{where}: unknown {noun} {key!r} (did you mean {close!r}?)")
         log.warning("%s: %s %s %r, which this version does not know", where, fate, noun, key)
         outside[key] = value
     return inside, outside

@@ -19,6 +19,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.known_keys import close_match
 from fdi_daemon.io.sample import Sample
 
 
@@ -306,7 +307,9 @@ def _validated(config: Mapping[str, Any], keys: dict, where: str) -> dict[str, A
     out = {}
     for key in config:
         if key not in keys:
-            raise ConfigError(f"{where}.{key}: unknown key (known: {', '.join(sorted(keys))})")
+            close = close_match(key, keys)
+            hint = f"did you mean {close!r}?" if close else f"known: {', '.join(sorted(keys))}"
+            raise ConfigError(f"{where}.{key}: unknown key ({hint})")
     for key, (types, default) in keys.items():
         if key not in config:
             if default is REQUIRED:

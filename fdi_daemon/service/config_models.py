@@ -1,0 +1,328 @@
+"""The rig config's sections as pydantic models: types, defaults, ranges, doc lines.
+
+Strict (``"502"`` is not a port, ``true`` is not a number, an int is a number), unknown keys
+forbidden. `fdi_daemon.service.config` turns a validation error into one line naming the
+key path; ``fdi_daemon/data/config.schema.json`` is `RigFile`'s JSON Schema (for editors).
+The ``link`` mapping is the links' own (`fdi_daemon.io.links.base.link_settings`) and the
+``monitor`` sections the model file's, so both are free mappings here.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
+
+from fdi_daemon.alarms.lifecycle import AlarmSettings
+from hil_sim.devices.realtime import FAULT_NAMES
+
+__all__ = ["RigFile", "SIM_TRANSPORTS", "SIM_FAULT_KEYS", "SECTIONS"]
+
+SIM_TRANSPORTS = ("modbus-tcp", "modbus-rtu", "serial")
+#: the faults a simulated_device.faults entry may set (the fake device's own list)
+SIM_FAULT_KEYS = FAULT_NAMES
+
+
+def _positive(v: float) -> float:
+    if not (v > 0 and math.isfinite(v)):
+        raise ValueError("must be a positive number")
+    return v
+
+
+def _non_negative(v: float) -> float:
+    if not (v >= 0 and math.isfinite(v)):
+        raise ValueError("must be >= 0")
+    return v
+
+
+def _port(v: int) -> int:
+    if not 0 <= v <= 65535:
+        raise ValueError("must be a TCP port 0..65535 (0 = any free port)")
+    return v
+
+
+def _device_id(v: int) -> int:
+    if not 0 <= v <= 247:
+        raise ValueError("must be a Modbus device id 0..247")
+    return v
+
+
+def _fsync_period(v: float) -> float:
+    if not 0 < v <= 1.0:
+        raise ValueError("must be in (0, 1] s (a SIGKILL may lose at most 1 s)")
+    return v
+
+
+def _fraction(v: float) -> float:
+    if not 0 <= v <= 1:
+        raise ValueError("must be a fraction in [0, 1]")
+    return v
+
+
+def _topic_level(v: str) -> str:
+    if not v or any(c in v for c in "/+#\0"):
+        raise ValueError("must be a non-empty MQTT topic level without / + #")
+    return v
+
+
+def _listen(v: str) -> str:
+    host, sep, port = v.rpartition(":")
+    if not (sep and host and port.isdigit() and int(port) <= 65535):
+        raise ValueError("must be HOST:PORT, e.g. 127.0.0.1:9108 (port 0 = any free port)")
+    return v
+
+
+def _steps(v: list[float]) -> list[float]:
+    if not v or not all(0 < x < math.inf for x in v) or any(a >= b for a, b in zip(v, v[1:])):
+        raise ValueError("must be a list of positive, increasing levels")
+    return v
+
+
+def _transport(v: str) -> str:
+    if v not in SIM_TRANSPORTS:
+        raise ValueError(f"must be one of {', '.join(SIM_TRANSPORTS)}")
+    return v
+
+
+Positive = Annotated[float, AfterValidator(_positive)]
+PositiveInt = Annotated[int, AfterValidator(_positive)]
+NonNegative = Annotated[float, AfterValidator(_non_negative)]
+Port = Annotated[int, AfterValidator(_port)]
+TopicLevel = Annotated[str, AfterValidator(_topic_level)]
+
+
+class Section(BaseModel):
+    """A config section: strict types, no unknown keys, ``null`` = all defaults."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _null_is_empty(cls, data: Any) -> Any:
+        return {} if data is None else data
+
+
+class ModelSection(Section):
+    path: str | None = Field(
+        None,
+        description="model file (YAML) from `fdi identify` + `fdi signature`; "
+        "relative to the config file",
+    )
+
+
+class ModbusStatus(Section):
+    enabled: bool = Field(False, description="serve the status registers over Modbus TCP")
+    host: str = Field("127.0.0.1", description="address to bind (loopback unless configured)")
+    port: Port = Field(5020, description="TCP port (0 = any free port, logged at start)")
+    device_id: Annotated[int, AfterValidator(_device_id)] = Field(
+        1, description="Modbus device id (unit) answered"
+    )
+
+
+class Sinks(Section):
+    event_log: str | None = Field(
+        "events.jsonl", description="JSON Lines event log (append; fsync on alarms); null disables"
+    )
+    stdout: bool = Field(True, description="one log line per event on stdout (journald priorities)")
+    status_socket: str | None = Field(
+        "status.sock", description="Unix socket serving the JSON status snapshot; null disables"
+    )
+    modbus_status: ModbusStatus = Field(default_factory=ModbusStatus)
+
+
+class Recorder(Section):
+    enabled: bool = Field(True, description="write the raw samples as rotating CSV recordings")
+    dir: str = Field("recordings", description="folder for the recordings")
+    rotate_seconds: Positive = Field(
+        3600.0, description="start a new file after this many s of samples"
+    )
+    rotate_bytes: PositiveInt = Field(200_000_000, description="or after this many bytes")
+    fsync_period_s: Annotated[float, AfterValidator(_fsync_period)] = Field(
+        1.0, description="flush + fsync period, <= 1 s"
+    )
+    keep_files: Annotated[int, AfterValidator(_non_negative)] = Field(
+        0, description="delete the oldest recordings beyond this many (0 keeps all)"
+    )
+
+
+class ServiceSection(Section):
+    fs: Positive | None = Field(None, description="sampling rate in Hz; null = the model's fs")
+    deadline_s: Positive = Field(
+        0.05,
+        description="a tick finished later than this after its sample time (paced by the "
+        "device counter) is a deadline miss",
+    )
+    status_period_s: Positive = Field(0.1, description="how often the status snapshot is refreshed")
+    queue_size: PositiveInt = Field(
+        4096,
+        description="bound of the queue to the sink thread (non-critical items beyond it are "
+        "dropped and counted)",
+    )
+    read_timeout_s: Positive = Field(0.05, description="longest wait in one link read")
+    state_dir: str | None = Field(
+        None,
+        description="base of relative output paths; null = $STATE_DIRECTORY or else "
+        "$XDG_STATE_HOME/fdi (~/.local/state/fdi)",
+    )
+
+
+class MqttTls(Section):
+    enabled: bool = Field(False, description="connect with TLS")
+    ca_file: str | None = Field(
+        None, description="CA certificate(s) (PEM) to check the broker with; null = the system's"
+    )
+    cert_file: str | None = Field(None, description="client certificate (PEM) for mutual TLS")
+    key_file: str | None = Field(None, description="the client certificate's key (PEM)")
+
+
+class Mqtt(Section):
+    enabled: bool = Field(False, description="publish events and status to an MQTT broker")
+    host: str = Field("127.0.0.1", description="broker host")
+    port: Port = Field(1883, description="broker port (8883 is the usual one with TLS)")
+    site: TopicLevel = Field("site", description="first topic level: fdi/<site>/<rig>/...")
+    rig: TopicLevel | None = Field(None, description="second topic level; null = this host's name")
+    client_id: str | None = Field(None, description="MQTT client id; null = fdi-<site>-<rig>")
+    keepalive_s: PositiveInt = Field(
+        30,
+        description="MQTT keepalive (s); a silent daemon is declared offline after 1.5 times this",
+    )
+    username: str | None = Field(None, description="user name for the broker")
+    password_file: str | None = Field(
+        None, description="file holding the password (first line), relative to the config file"
+    )
+    password_env: str | None = Field(None, description="environment variable holding the password")
+    tls: MqttTls = Field(default_factory=MqttTls)
+    status_period_s: Positive = Field(1.0, description="how often the retained status is published")
+    buffer_file: str = Field(
+        "mqtt-outbox.jsonl",
+        description="alarms waiting for the broker, on disk (relative to state_dir)",
+    )
+    buffer_max_messages: PositiveInt = Field(
+        10000, description="bound of that buffer; beyond it the oldest alarm is dropped and counted"
+    )
+
+
+class Metrics(Section):
+    listen: Annotated[str, AfterValidator(_listen)] | None = Field(
+        None, description="HOST:PORT of the Prometheus exporter; null = off"
+    )
+
+
+_ALARM = AlarmSettings()  # the alarm defaults
+
+
+class Alarms(Section):
+    steps: Annotated[list[float], AfterValidator(_steps)] = Field(
+        list(_ALARM.steps),
+        description="friction levels above the baseline (units of the signature) that step "
+        "the alarm priority up",
+    )
+    deadband: NonNegative = Field(
+        _ALARM.deadband, description="a priority falls only below its step minus this"
+    )
+    raise_delay_s: NonNegative = Field(
+        _ALARM.raise_delay_s,
+        description="the level stays above a step this long before the priority rises",
+    )
+    lower_delay_s: NonNegative = Field(
+        _ALARM.lower_delay_s, description="... below step - deadband this long before it falls"
+    )
+    return_delay_s: NonNegative = Field(
+        _ALARM.return_delay_s,
+        description="detector cleared and level back at the baseline (moving time) this long "
+        "before the alarm returns to normal",
+    )
+    return_level: Positive = Field(
+        _ALARM.return_level,
+        description="level above the baseline under which the fault counts as gone",
+    )
+    max_shelve_s: Positive = Field(_ALARM.max_shelve_s, description="longest shelving")
+    smoothing_s: NonNegative = Field(
+        _ALARM.smoothing_s, description="time constant of the level smoothing the alarm decides on"
+    )
+    allow_remote_acknowledge: bool = Field(
+        False, description="accept acknowledge/shelve requests on the status socket and Modbus"
+    )
+    state_file: str | None = Field(
+        "state.json", description="alarm state kept across restarts; null disables"
+    )
+    trend: str | None = Field(
+        "trend.sqlite", description="friction trend, one row per minute; null disables"
+    )
+
+
+class SimFault(Section):
+    """One fault of the simulated rig: its sample time and exactly one setting."""
+
+    at_s: NonNegative = Field(description="sample time of the fault (s)")
+    bearing_supply: Annotated[float, AfterValidator(_fraction)] | None = None
+    accel_bias: float | None = None
+    valve_gain: float | None = None
+    supply_pressure: float | None = None
+    accel_dropout: float | None = None
+    accel_saturation: float | None = None
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> SimFault:
+        if sum(getattr(self, k) is not None for k in SIM_FAULT_KEYS) != 1:
+            raise ValueError(f"must set exactly one of {', '.join(SIM_FAULT_KEYS)}")
+        return self
+
+    def setting(self) -> tuple[str, float]:
+        """(name, value) of the fault's one setting."""
+        return next((k, v) for k in SIM_FAULT_KEYS if (v := getattr(self, k)) is not None)
+
+
+class SimulatedDevice(Section):
+    transport: Annotated[str, AfterValidator(_transport)] = Field(
+        "modbus-tcp", description="fake device protocol: modbus-tcp | modbus-rtu | serial (pty)"
+    )
+    scenario: str | None = Field(
+        None,
+        description="scenario YAML played by the rig (relative to the config file); null = "
+        "the fake device's default",
+    )
+    seed: int = Field(0, description="seed of the simulated rig's noise")
+    faults: list[SimFault] = Field(
+        default_factory=list, description="faults injected: [{at_s: 20, bearing_supply: 0.35}]"
+    )
+
+
+class Monitor(Section):
+    detector: dict[str, Any] | None = Field(None, description="overrides the model's detector")
+    velocity: dict[str, Any] | None = Field(None, description="overrides the model's velocity")
+
+
+class RigFile(BaseModel):
+    """A rig config file of `fdi run` (YAML)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, title="fdi rig config")
+
+    link: dict[str, Any] | None = Field(
+        None,
+        description="the field link: kind serial | modbus-tcp | modbus-rtu | replay | sim and "
+        "its settings (docs/service.md); left out with simulated_device",
+    )
+    simulated_device: SimulatedDevice | None = None
+    model: ModelSection = Field(default_factory=ModelSection)
+    monitor: Monitor = Field(default_factory=Monitor)
+    sinks: Sinks = Field(default_factory=Sinks)
+    recorder: Recorder = Field(default_factory=Recorder)
+    service: ServiceSection = Field(default_factory=ServiceSection)
+    mqtt: Mqtt = Field(default_factory=Mqtt)
+    metrics: Metrics = Field(default_factory=Metrics)
+    alarms: Alarms = Field(default_factory=Alarms)
+
+
+#: the sections with documented keys (docs/service.md has a table per section)
+SECTIONS: dict[str, type[Section]] = {
+    "model": ModelSection,
+    "sinks": Sinks,
+    "recorder": Recorder,
+    "service": ServiceSection,
+    "mqtt": Mqtt,
+    "metrics": Metrics,
+    "alarms": Alarms,
+    "simulated_device": SimulatedDevice,
+}

@@ -307,6 +307,7 @@ def test_shipped_configs_satisfy_the_json_schema(path):
     schema = json.loads(SCHEMA_PATH.read_text())
     data = yaml.safe_load(path.read_text())
     jsonschema.validate(data, schema)
+    jsonschema.validate({**data, "sinks": None}, schema)  # an empty section: the defaults
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate({**data, "sinks": {"stdot": True}}, schema)
     with pytest.raises(jsonschema.ValidationError):

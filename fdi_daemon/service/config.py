@@ -1,8 +1,9 @@
 """The rig config of `fdi run` (YAML), validated key by key.
 
-Every key is checked: an unknown key, a wrong type or a value out of range is a
-`ConfigError` naming the key path (``sinks.modbus_status.port``). Defaults are listed in
-`SCHEMA` below and in ``docs/service.md``.
+Every key is checked by the pydantic models of `config_models` (types, defaults, ranges): an
+unknown key, a wrong type or a value out of range is a `ConfigError` of one line naming the
+key path (``sinks.modbus_status.port``; `config_errors`), with the key meant for a typo.
+Defaults are in the models, ``docs/service.md`` and ``data/config.schema.json``.
 
 Paths. ``model.path`` is relative to the config file's folder. Output paths (event log,
 recorder folder, status socket) are relative to ``service.state_dir``, whose default is

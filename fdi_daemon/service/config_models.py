@@ -92,10 +92,17 @@ Port = Annotated[int, AfterValidator(_port)]
 TopicLevel = Annotated[str, AfterValidator(_topic_level)]
 
 
+def _nullable_object(schema: dict[str, Any]) -> None:
+    """A section's JSON Schema: an empty section (``sinks:``, YAML null) is allowed."""
+    schema["type"] = ["object", "null"]
+
+
 class Section(BaseModel):
     """A config section: strict types, no unknown keys, ``null`` = all defaults."""
 
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+    model_config = ConfigDict(
+        extra="forbid", strict=True, frozen=True, json_schema_extra=_nullable_object
+    )
 
     @model_validator(mode="before")
     @classmethod
@@ -105,107 +112,132 @@ class Section(BaseModel):
 
 class ModelSection(Section):
     path: str | None = Field(
-        None,
+        default=None,
         description="model file (YAML) from `fdi identify` + `fdi signature`; "
         "relative to the config file",
     )
 
 
 class ModbusStatus(Section):
-    enabled: bool = Field(False, description="serve the status registers over Modbus TCP")
-    host: str = Field("127.0.0.1", description="address to bind (loopback unless configured)")
-    port: Port = Field(5020, description="TCP port (0 = any free port, logged at start)")
+    enabled: bool = Field(default=False, description="serve the status registers over Modbus TCP")
+    host: str = Field(
+        default="127.0.0.1", description="address to bind (loopback unless configured)"
+    )
+    port: Port = Field(default=5020, description="TCP port (0 = any free port, logged at start)")
     device_id: Annotated[int, AfterValidator(_device_id)] = Field(
-        1, description="Modbus device id (unit) answered"
+        default=1, description="Modbus device id (unit) answered"
     )
 
 
 class Sinks(Section):
     event_log: str | None = Field(
-        "events.jsonl", description="JSON Lines event log (append; fsync on alarms); null disables"
+        default="events.jsonl",
+        description="JSON Lines event log (append; fsync on alarms); null disables",
     )
-    stdout: bool = Field(True, description="one log line per event on stdout (journald priorities)")
+    stdout: bool = Field(
+        default=True, description="one log line per event on stdout (journald priorities)"
+    )
     status_socket: str | None = Field(
-        "status.sock", description="Unix socket serving the JSON status snapshot; null disables"
+        default="status.sock",
+        description="Unix socket serving the JSON status snapshot; null disables",
     )
-    modbus_status: ModbusStatus = Field(default_factory=ModbusStatus)
+    modbus_status: ModbusStatus = ModbusStatus()
 
 
 class Recorder(Section):
-    enabled: bool = Field(True, description="write the raw samples as rotating CSV recordings")
-    dir: str = Field("recordings", description="folder for the recordings")
-    rotate_seconds: Positive = Field(
-        3600.0, description="start a new file after this many s of samples"
+    enabled: bool = Field(
+        default=True, description="write the raw samples as rotating CSV recordings"
     )
-    rotate_bytes: PositiveInt = Field(200_000_000, description="or after this many bytes")
+    dir: str = Field(default="recordings", description="folder for the recordings")
+    rotate_seconds: Positive = Field(
+        default=3600.0, description="start a new file after this many s of samples"
+    )
+    rotate_bytes: PositiveInt = Field(default=200_000_000, description="or after this many bytes")
     fsync_period_s: Annotated[float, AfterValidator(_fsync_period)] = Field(
-        1.0, description="flush + fsync period, <= 1 s"
+        default=1.0, description="flush + fsync period, <= 1 s"
     )
     keep_files: Annotated[int, AfterValidator(_non_negative)] = Field(
-        0, description="delete the oldest recordings beyond this many (0 keeps all)"
+        default=0, description="delete the oldest recordings beyond this many (0 keeps all)"
     )
 
 
 class ServiceSection(Section):
-    fs: Positive | None = Field(None, description="sampling rate in Hz; null = the model's fs")
+    fs: Positive | None = Field(
+        default=None, description="sampling rate in Hz; null = the model's fs"
+    )
     deadline_s: Positive = Field(
-        0.05,
+        default=0.05,
         description="a tick finished later than this after its sample time (paced by the "
         "device counter) is a deadline miss",
     )
-    status_period_s: Positive = Field(0.1, description="how often the status snapshot is refreshed")
+    status_period_s: Positive = Field(
+        default=0.1, description="how often the status snapshot is refreshed"
+    )
     queue_size: PositiveInt = Field(
-        4096,
+        default=4096,
         description="bound of the queue to the sink thread (non-critical items beyond it are "
         "dropped and counted)",
     )
-    read_timeout_s: Positive = Field(0.05, description="longest wait in one link read")
+    read_timeout_s: Positive = Field(default=0.05, description="longest wait in one link read")
     state_dir: str | None = Field(
-        None,
+        default=None,
         description="base of relative output paths; null = $STATE_DIRECTORY or else "
         "$XDG_STATE_HOME/fdi (~/.local/state/fdi)",
     )
 
 
 class MqttTls(Section):
-    enabled: bool = Field(False, description="connect with TLS")
+    enabled: bool = Field(default=False, description="connect with TLS")
     ca_file: str | None = Field(
-        None, description="CA certificate(s) (PEM) to check the broker with; null = the system's"
+        default=None,
+        description="CA certificate(s) (PEM) to check the broker with; null = the system's",
     )
-    cert_file: str | None = Field(None, description="client certificate (PEM) for mutual TLS")
-    key_file: str | None = Field(None, description="the client certificate's key (PEM)")
+    cert_file: str | None = Field(
+        default=None, description="client certificate (PEM) for mutual TLS"
+    )
+    key_file: str | None = Field(default=None, description="the client certificate's key (PEM)")
 
 
 class Mqtt(Section):
-    enabled: bool = Field(False, description="publish events and status to an MQTT broker")
-    host: str = Field("127.0.0.1", description="broker host")
-    port: Port = Field(1883, description="broker port (8883 is the usual one with TLS)")
-    site: TopicLevel = Field("site", description="first topic level: fdi/<site>/<rig>/...")
-    rig: TopicLevel | None = Field(None, description="second topic level; null = this host's name")
-    client_id: str | None = Field(None, description="MQTT client id; null = fdi-<site>-<rig>")
+    enabled: bool = Field(default=False, description="publish events and status to an MQTT broker")
+    host: str = Field(default="127.0.0.1", description="broker host")
+    port: Port = Field(default=1883, description="broker port (8883 is the usual one with TLS)")
+    site: TopicLevel = Field(default="site", description="first topic level: fdi/<site>/<rig>/...")
+    rig: TopicLevel | None = Field(
+        default=None, description="second topic level; null = this host's name"
+    )
+    client_id: str | None = Field(
+        default=None, description="MQTT client id; null = fdi-<site>-<rig>"
+    )
     keepalive_s: PositiveInt = Field(
-        30,
+        default=30,
         description="MQTT keepalive (s); a silent daemon is declared offline after 1.5 times this",
     )
-    username: str | None = Field(None, description="user name for the broker")
+    username: str | None = Field(default=None, description="user name for the broker")
     password_file: str | None = Field(
-        None, description="file holding the password (first line), relative to the config file"
+        default=None,
+        description="file holding the password (first line), relative to the config file",
     )
-    password_env: str | None = Field(None, description="environment variable holding the password")
-    tls: MqttTls = Field(default_factory=MqttTls)
-    status_period_s: Positive = Field(1.0, description="how often the retained status is published")
+    password_env: str | None = Field(
+        default=None, description="environment variable holding the password"
+    )
+    tls: MqttTls = MqttTls()
+    status_period_s: Positive = Field(
+        default=1.0, description="how often the retained status is published"
+    )
     buffer_file: str = Field(
-        "mqtt-outbox.jsonl",
+        default="mqtt-outbox.jsonl",
         description="alarms waiting for the broker, on disk (relative to state_dir)",
     )
     buffer_max_messages: PositiveInt = Field(
-        10000, description="bound of that buffer; beyond it the oldest alarm is dropped and counted"
+        default=10000,
+        description="bound of that buffer; beyond it the oldest alarm is dropped and counted",
     )
 
 
 class Metrics(Section):
     listen: Annotated[str, AfterValidator(_listen)] | None = Field(
-        None, description="HOST:PORT of the Prometheus exporter; null = off"
+        default=None, description="HOST:PORT of the Prometheus exporter; null = off"
     )
 
 
@@ -214,41 +246,44 @@ _ALARM = AlarmSettings()  # the alarm defaults
 
 class Alarms(Section):
     steps: Annotated[list[float], AfterValidator(_steps)] = Field(
-        list(_ALARM.steps),
+        default=list(_ALARM.steps),
         description="friction levels above the baseline (units of the signature) that step "
         "the alarm priority up",
     )
     deadband: NonNegative = Field(
-        _ALARM.deadband, description="a priority falls only below its step minus this"
+        default=_ALARM.deadband, description="a priority falls only below its step minus this"
     )
     raise_delay_s: NonNegative = Field(
-        _ALARM.raise_delay_s,
+        default=_ALARM.raise_delay_s,
         description="the level stays above a step this long before the priority rises",
     )
     lower_delay_s: NonNegative = Field(
-        _ALARM.lower_delay_s, description="... below step - deadband this long before it falls"
+        default=_ALARM.lower_delay_s,
+        description="... below step - deadband this long before it falls",
     )
     return_delay_s: NonNegative = Field(
-        _ALARM.return_delay_s,
+        default=_ALARM.return_delay_s,
         description="detector cleared and level back at the baseline (moving time) this long "
         "before the alarm returns to normal",
     )
     return_level: Positive = Field(
-        _ALARM.return_level,
+        default=_ALARM.return_level,
         description="level above the baseline under which the fault counts as gone",
     )
-    max_shelve_s: Positive = Field(_ALARM.max_shelve_s, description="longest shelving")
+    max_shelve_s: Positive = Field(default=_ALARM.max_shelve_s, description="longest shelving")
     smoothing_s: NonNegative = Field(
-        _ALARM.smoothing_s, description="time constant of the level smoothing the alarm decides on"
+        default=_ALARM.smoothing_s,
+        description="time constant of the level smoothing the alarm decides on",
     )
     allow_remote_acknowledge: bool = Field(
-        False, description="accept acknowledge/shelve requests on the status socket and Modbus"
+        default=False,
+        description="accept acknowledge/shelve requests on the status socket and Modbus",
     )
     state_file: str | None = Field(
-        "state.json", description="alarm state kept across restarts; null disables"
+        default="state.json", description="alarm state kept across restarts; null disables"
     )
     trend: str | None = Field(
-        "trend.sqlite", description="friction trend, one row per minute; null disables"
+        default="trend.sqlite", description="friction trend, one row per minute; null disables"
     )
 
 
@@ -276,22 +311,27 @@ class SimFault(Section):
 
 class SimulatedDevice(Section):
     transport: Annotated[str, AfterValidator(_transport)] = Field(
-        "modbus-tcp", description="fake device protocol: modbus-tcp | modbus-rtu | serial (pty)"
+        default="modbus-tcp",
+        description="fake device protocol: modbus-tcp | modbus-rtu | serial (pty)",
     )
     scenario: str | None = Field(
-        None,
+        default=None,
         description="scenario YAML played by the rig (relative to the config file); null = "
         "the fake device's default",
     )
-    seed: int = Field(0, description="seed of the simulated rig's noise")
+    seed: int = Field(default=0, description="seed of the simulated rig's noise")
     faults: list[SimFault] = Field(
         default_factory=list, description="faults injected: [{at_s: 20, bearing_supply: 0.35}]"
     )
 
 
 class Monitor(Section):
-    detector: dict[str, Any] | None = Field(None, description="overrides the model's detector")
-    velocity: dict[str, Any] | None = Field(None, description="overrides the model's velocity")
+    detector: dict[str, Any] | None = Field(
+        default=None, description="overrides the model's detector"
+    )
+    velocity: dict[str, Any] | None = Field(
+        default=None, description="overrides the model's velocity"
+    )
 
 
 class RigFile(BaseModel):
@@ -300,19 +340,19 @@ class RigFile(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True, title="fdi rig config")
 
     link: dict[str, Any] | None = Field(
-        None,
+        default=None,
         description="the field link: kind serial | modbus-tcp | modbus-rtu | replay | sim and "
         "its settings (docs/service.md); left out with simulated_device",
     )
     simulated_device: SimulatedDevice | None = None
-    model: ModelSection = Field(default_factory=ModelSection)
-    monitor: Monitor = Field(default_factory=Monitor)
-    sinks: Sinks = Field(default_factory=Sinks)
-    recorder: Recorder = Field(default_factory=Recorder)
-    service: ServiceSection = Field(default_factory=ServiceSection)
-    mqtt: Mqtt = Field(default_factory=Mqtt)
-    metrics: Metrics = Field(default_factory=Metrics)
-    alarms: Alarms = Field(default_factory=Alarms)
+    model: ModelSection = ModelSection()
+    monitor: Monitor = Monitor()
+    sinks: Sinks = Sinks()
+    recorder: Recorder = Recorder()
+    service: ServiceSection = ServiceSection()
+    mqtt: Mqtt = Mqtt()
+    metrics: Metrics = Metrics()
+    alarms: Alarms = Alarms()
 
 
 #: the sections with documented keys (docs/service.md has a table per section)

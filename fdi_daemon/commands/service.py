@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     if args.user and spec.allow_ip:
         raise UserError("--allow-ip: a user manager cannot filter IP traffic (leave --user out)")
     text = render_unit(spec)
-    target = (args.unit_dir or default_unit_dir(args.user)) / unit_name(spec.template)
+    target = ((args.unit_dir or default_unit_dir(args.user)) / unit_name(spec.template)).absolute()
     config_dir = "~/.config/fdi" if args.user else "/etc/fdi"
     config = f"{config_dir}/{instance or 'rig'}.yaml"
     if args.dry_run:

@@ -10,6 +10,7 @@ The ``link`` mapping is the links' own (`fdi_daemon.io.links.base.link_settings`
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
@@ -24,72 +25,53 @@ SIM_TRANSPORTS = ("modbus-tcp", "modbus-rtu", "serial")
 SIM_FAULT_KEYS = FAULT_NAMES
 
 
-def _positive(v: float) -> float:
-    if not (v > 0 and math.isfinite(v)):
-        raise ValueError("must be a positive number")
-    return v
+def _rule(ok: Callable[[Any], bool], problem: str) -> AfterValidator:
+    """A check after the type's: ``ok(value)`` or a ValueError ``problem`` (the error line
+    reads ``<key path> <problem> (got <value>)``)."""
+
+    def check(value: Any) -> Any:
+        if not ok(value):
+            raise ValueError(problem)
+        return value
+
+    return AfterValidator(check)
 
 
-def _non_negative(v: float) -> float:
-    if not (v >= 0 and math.isfinite(v)):
-        raise ValueError("must be >= 0")
-    return v
-
-
-def _port(v: int) -> int:
-    if not 0 <= v <= 65535:
-        raise ValueError("must be a TCP port 0..65535 (0 = any free port)")
-    return v
-
-
-def _device_id(v: int) -> int:
-    if not 0 <= v <= 247:
-        raise ValueError("must be a Modbus device id 0..247")
-    return v
-
-
-def _fsync_period(v: float) -> float:
-    if not 0 < v <= 1.0:
-        raise ValueError("must be in (0, 1] s (a SIGKILL may lose at most 1 s)")
-    return v
-
-
-def _fraction(v: float) -> float:
-    if not 0 <= v <= 1:
-        raise ValueError("must be a fraction in [0, 1]")
-    return v
-
-
-def _topic_level(v: str) -> str:
-    if not v or any(c in v for c in "/+#\0"):
-        raise ValueError("must be a non-empty MQTT topic level without / + #")
-    return v
-
-
-def _listen(v: str) -> str:
+def _is_listen(v: str) -> bool:
     host, sep, port = v.rpartition(":")
-    if not (sep and host and port.isdigit() and int(port) <= 65535):
-        raise ValueError("must be HOST:PORT, e.g. 127.0.0.1:9108 (port 0 = any free port)")
-    return v
+    return bool(sep and host and port.isdigit() and int(port) <= 65535)
 
 
-def _steps(v: list[float]) -> list[float]:
-    if not v or not all(0 < x < math.inf for x in v) or any(a >= b for a, b in zip(v, v[1:])):
-        raise ValueError("must be a list of positive, increasing levels")
-    return v
+def _is_steps(v: list[float]) -> bool:
+    return bool(v) and all(0 < x < math.inf for x in v) and all(a < b for a, b in zip(v, v[1:]))
 
 
-def _transport(v: str) -> str:
-    if v not in SIM_TRANSPORTS:
-        raise ValueError(f"must be one of {', '.join(SIM_TRANSPORTS)}")
-    return v
-
-
-Positive = Annotated[float, AfterValidator(_positive)]
-PositiveInt = Annotated[int, AfterValidator(_positive)]
-NonNegative = Annotated[float, AfterValidator(_non_negative)]
-Port = Annotated[int, AfterValidator(_port)]
-TopicLevel = Annotated[str, AfterValidator(_topic_level)]
+_POSITIVE = _rule(lambda v: v > 0 and math.isfinite(v), "must be a positive number")
+Positive = Annotated[float, _POSITIVE]
+PositiveInt = Annotated[int, _POSITIVE]
+NonNegative = Annotated[float, _rule(lambda v: v >= 0 and math.isfinite(v), "must be >= 0")]
+Port = Annotated[
+    int, _rule(lambda v: 0 <= v <= 65535, "must be a TCP port 0..65535 (0 = any free port)")
+]
+TopicLevel = Annotated[
+    str,
+    _rule(
+        lambda v: bool(v) and not any(c in v for c in "/+#\0"),
+        "must be a non-empty MQTT topic level without / + #",
+    ),
+]
+DeviceId = Annotated[int, _rule(lambda v: 0 <= v <= 247, "must be a Modbus device id 0..247")]
+FsyncPeriod = Annotated[
+    float, _rule(lambda v: 0 < v <= 1.0, "must be in (0, 1] s (a SIGKILL may lose at most 1 s)")
+]
+Fraction = Annotated[float, _rule(lambda v: 0 <= v <= 1, "must be a fraction in [0, 1]")]
+Listen = Annotated[
+    str, _rule(_is_listen, "must be HOST:PORT, e.g. 127.0.0.1:9108 (port 0 = any free port)")
+]
+Steps = Annotated[list[float], _rule(_is_steps, "must be a list of positive, increasing levels")]
+Transport = Annotated[
+    str, _rule(lambda v: v in SIM_TRANSPORTS, f"must be one of {', '.join(SIM_TRANSPORTS)}")
+]
 
 
 def _nullable_object(schema: dict[str, Any]) -> None:
@@ -124,9 +106,7 @@ class ModbusStatus(Section):
         default="127.0.0.1", description="address to bind (loopback unless configured)"
     )
     port: Port = Field(default=5020, description="TCP port (0 = any free port, logged at start)")
-    device_id: Annotated[int, AfterValidator(_device_id)] = Field(
-        default=1, description="Modbus device id (unit) answered"
-    )
+    device_id: DeviceId = Field(default=1, description="Modbus device id (unit) answered")
 
 
 class Sinks(Section):
@@ -153,10 +133,8 @@ class Recorder(Section):
         default=3600.0, description="start a new file after this many s of samples"
     )
     rotate_bytes: PositiveInt = Field(default=200_000_000, description="or after this many bytes")
-    fsync_period_s: Annotated[float, AfterValidator(_fsync_period)] = Field(
-        default=1.0, description="flush + fsync period, <= 1 s"
-    )
-    keep_files: Annotated[int, AfterValidator(_non_negative)] = Field(
+    fsync_period_s: FsyncPeriod = Field(default=1.0, description="flush + fsync period, <= 1 s")
+    keep_files: Annotated[int, _rule(lambda v: v >= 0, "must be >= 0")] = Field(
         default=0, description="delete the oldest recordings beyond this many (0 keeps all)"
     )
 
@@ -236,7 +214,7 @@ class Mqtt(Section):
 
 
 class Metrics(Section):
-    listen: Annotated[str, AfterValidator(_listen)] | None = Field(
+    listen: Listen | None = Field(
         default=None, description="HOST:PORT of the Prometheus exporter; null = off"
     )
 
@@ -245,7 +223,7 @@ _ALARM = AlarmSettings()  # the alarm defaults
 
 
 class Alarms(Section):
-    steps: Annotated[list[float], AfterValidator(_steps)] = Field(
+    steps: Steps = Field(
         default=list(_ALARM.steps),
         description="friction levels above the baseline (units of the signature) that step "
         "the alarm priority up",
@@ -291,7 +269,7 @@ class SimFault(Section):
     """One fault of the simulated rig: its sample time and exactly one setting."""
 
     at_s: NonNegative = Field(description="sample time of the fault (s)")
-    bearing_supply: Annotated[float, AfterValidator(_fraction)] | None = None
+    bearing_supply: Fraction | None = None
     accel_bias: float | None = None
     valve_gain: float | None = None
     supply_pressure: float | None = None
@@ -310,7 +288,7 @@ class SimFault(Section):
 
 
 class SimulatedDevice(Section):
-    transport: Annotated[str, AfterValidator(_transport)] = Field(
+    transport: Transport = Field(
         default="modbus-tcp",
         description="fake device protocol: modbus-tcp | modbus-rtu | serial (pty)",
     )

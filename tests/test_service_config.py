@@ -318,3 +318,12 @@ def test_a_simulated_fault_entry_takes_every_fault_of_the_fake_device():
     from fdi_daemon.service.config_models import SIM_FAULT_KEYS, SimFault
 
     assert set(SimFault.model_fields) == {"at_s", *SIM_FAULT_KEYS}
+
+
+def test_a_fault_without_its_time_names_what_is_missing():
+    bad = {"model": {"path": "m"}, "simulated_device": {"faults": [{"accel_bias": 0.1}]}}
+    with pytest.raises(ConfigError) as info:
+        config_from_dict(bad, "rig.yaml")
+    assert str(info.value) == (
+        "rig.yaml: simulated_device.faults[0].at_s is required (sample time of the fault (s))"
+    )

@@ -57,7 +57,8 @@ def _describe(error: ErrorDetails, root: type[BaseModel]) -> str:
         hint = f"did you mean {close!r}?" if close else f"known: {', '.join(known)}"
         return f"{path}: unknown key ({hint})"
     if kind == "missing":
-        return f"{path} is required"
+        about = _model_at(root, loc[:-1]).model_fields[str(loc[-1])].description
+        return f"{path} is required" + (f" ({about})" if about else "")
     if kind == "value_error":
         problem = str(error.get("ctx", {}).get("error", error["msg"]))
         return f"{path} {problem} (got {given!r})"

@@ -182,8 +182,8 @@ def test_password_from_a_file_beside_the_config_or_the_environment(tmp_path, mon
         ({"mqtt": {"rig": "#"}}, "mqtt.rig must be"),
         ({"mqtt": {"port": 70000}}, "mqtt.port"),
         ({"mqtt": {"tls": {"ca": "x"}}}, "mqtt.tls.ca: unknown key"),
-        ({"metrics": {"listen": "9108"}}, "metrics.listen must be HOST:PORT"),
-        ({"metrics": {"port": 9108}}, "metrics.port: unknown key"),
+        ({"metrics": {"listen": "19108"}}, "metrics.listen must be HOST:PORT"),
+        ({"metrics": {"port": 19108}}, "metrics.port: unknown key"),
     ],
 )
 def test_bad_mqtt_and_metrics_settings_name_the_key(section, message):

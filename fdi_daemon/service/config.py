@@ -249,6 +249,12 @@ SCHEMA: dict[str, dict[str, Any]] = {
             "key_file": Field(STR, None, "the client certificate's key (PEM)", nullable=True),
         },
         "status_period_s": Field(NUM, 1.0, "how often the retained status is published", _positive),
+        "discovery_prefix": Field(
+            STR,
+            "homeassistant",
+            "topic prefix of the Home Assistant MQTT discovery messages; null = none",
+            nullable=True,
+        ),
         "buffer_file": Field(
             STR,
             "mqtt-outbox.jsonl",

@@ -132,7 +132,7 @@ def _node_id(prefix: str) -> str:
 
 
 #: (component, object id, name, topic suffix, value template, extra config)
-DISCOVERED = (
+DISCOVERED: tuple[tuple[str, str, str, str, str, dict[str, Any]], ...] = (
     (
         "sensor",
         "state",

@@ -148,6 +148,11 @@ class Subscriber:
         with self._lock:
             return [m for m in self.messages if m["topic"].endswith(suffix)]
 
+    def events(self) -> list[dict]:
+        """The messages on the event sub-topics ``.../event/<kind>``."""
+        with self._lock:
+            return [m for m in self.messages if m["topic"].rpartition("/")[0].endswith("/event")]
+
     def wait(self, predicate, timeout_s: float, what: str, explain=lambda: ""):
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:

@@ -114,13 +114,12 @@ def test_embedded_run_publishes_its_fault_across_a_broker_restart(tmp_path):
         explain = lambda: broker.tail() + daemon.output()  # noqa: E731
         url = daemon.wait_line("metrics ").split()[1]
         sub.wait(
-            lambda s: any(m["payload"]["kind"] == "calibrated" for m in s.on("/event")),
+            lambda s: any(m["payload"]["kind"] == "calibrated" for m in s.events()),
             180,
             "the calibrated event over MQTT",
             explain,
         )
-        online = sub.on("/status")[0]["payload"]
-        assert online["online"] is True
+        assert sub.on("/availability")[0]["payload"]["state"] == "online"
 
         broker.stop()  # the broker goes away before the fault and stays away during it
         events = wait_until(
@@ -156,7 +155,8 @@ def test_embedded_run_publishes_its_fault_across_a_broker_restart(tmp_path):
         )
         assert metrics["fdi_samples_total"] > 0
         assert metrics["fdi_alarm_episodes_total"] >= 1
-        assert metrics["fdi_state"] in (3.0, 4.0)
+        states = [metrics[f'fdi_state{{"fdi_state": "{s}"}}'] for s in DETECTOR_ALARMS[:2]]
+        assert sum(states) == 1.0  # an Enum: the current state's series is 1
         assert metrics["fdi_tick_latency_seconds_count"] > 0
         assert metrics["fdi_mqtt_connected"] == 0 and metrics["fdi_mqtt_buffered_alarms"] >= 2
 
@@ -164,22 +164,22 @@ def test_embedded_run_publishes_its_fault_across_a_broker_restart(tmp_path):
         sub.wait(
             lambda s: (
                 {"fault_detected", "friction_isolated"}
-                <= {m["payload"]["kind"] for m in s.on("/event")}
+                <= {m["payload"]["kind"] for m in s.events()}
             ),
             60,
             "the alarms after the restart",
             explain,
         )
-        alarms = [m["payload"] for m in sub.on("/event") if "id" in m["payload"]]
-        first_seen = list(dict.fromkeys(a["id"] for a in alarms))
+        alarms = [m["payload"] for m in sub.events() if "seq" in m["payload"]]
+        first_seen = list(dict.fromkeys(a["seq"] for a in alarms))
         assert first_seen == sorted(first_seen) and first_seen[0] == 1
         # the detector's alarms, in order (the alarm lifecycle's alarm_* go between them)
         alarms = [a for a in alarms if a["kind"] in DETECTOR_ALARMS]
         assert [a["kind"] for a in alarms][:2] == ["fault_detected", "friction_isolated"]
         assert fault["at_s"] <= alarms[0]["t"] <= alarms[1]["t"] <= fault["at_s"] + 10.0
         seen = set()
-        for m in sub.on("/event"):
-            message_id = m["payload"].get("id")
+        for m in sub.events():
+            message_id = m["payload"].get("seq")
             if message_id in seen:
                 assert m["dup"] or m["payload"].get("dup"), m
             seen.add(message_id)
@@ -192,30 +192,40 @@ def test_embedded_run_publishes_its_fault_across_a_broker_restart(tmp_path):
             "the retained status",
             explain,
         )[0]["payload"]
-        assert retained["online"] is True and retained["state"] in ALARMS
+        assert retained["state"] in ALARMS
         assert retained["friction_level"] > 0 and retained["alarm_episodes"] >= 1
 
+        last_status = sub.on("/status")[-1]["payload"]
         daemon.proc.send_signal(signal.SIGKILL)  # dies without a word: the last will
         daemon.proc.wait(30)
         sub.wait(
-            lambda s: s.on("/status")[-1]["payload"].get("state") == "offline",
+            lambda s: s.on("/availability")[-1]["payload"].get("state") == "offline",
             60,
             "the last will",
             explain,
         )
-        assert sub.on("/status")[-1]["payload"] == {
+        assert sub.on("/availability")[-1]["payload"] == {
             "schema": 2,
-            "online": False,
             "state": "offline",
+            "time": None,
+            "reason": "connection lost",
         }
-        late.append(Subscriber(broker.port, "fdi/lab/e2e/status", client_id="late-2"))
-        will = late[1].wait(
-            lambda s: [m for m in s.on("/status") if m["retain"]],
+        # a later subscriber: offline, and still the last status (friction level) and alarm
+        late.append(Subscriber(broker.port, "fdi/lab/e2e/#", client_id="late-2"))
+        late[1].wait(
+            lambda s: (
+                {"availability", "status", "alarm"}
+                <= {m["topic"].rpartition("/")[2] for m in s.messages if m["retain"]}
+            ),
             30,
-            "the retained last will",
+            "the retained availability, status and alarm",
             explain,
-        )[0]
-        assert will["payload"]["online"] is False
+        )
+        assert late[1].on("/availability")[0]["payload"]["state"] == "offline"
+        assert late[1].on("/status")[0]["payload"] == last_status
+        assert last_status["friction_level"] > 0 and last_status["state"] in ALARMS
+        retained_alarm = late[1].on("/alarm")[0]["payload"]
+        assert retained_alarm["active"] is True and retained_alarm["alarm_id"] >= 1
     finally:
         if daemon.proc.poll() is None:
             daemon.proc.kill()

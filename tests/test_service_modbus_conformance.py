@@ -3,7 +3,9 @@
 pymodbus's client and, where installed, mbpoll (Debian's independent Modbus master, the tool
 that found these defects): device id 255 (Modbus TCP "addressed directly") is answered like
 the configured id, other ids get exception 11, and function codes 1 and 2 (coils, discrete
-inputs) get exception 1 (illegal function) instead of register 0's bits.
+inputs) get exception 1 (illegal function) instead of register 0's bits; a register write
+(function codes 6, 16) to a read-only register gets exception 2 (illegal data address), the
+answer masters expect for a read-only register of a supported function.
 """
 
 import shutil
@@ -28,7 +30,7 @@ SNAPSHOT = {
     "monitor": {"theta1": 0.75, "theta2": -2.5},
     "link": {"connected": True, "samples": 70000},
 }
-ILLEGAL_FUNCTION, GATEWAY_NO_RESPONSE = 1, 11
+ILLEGAL_FUNCTION, ILLEGAL_ADDRESS, ILLEGAL_VALUE, GATEWAY_NO_RESPONSE = 1, 2, 3, 11
 
 
 @pytest.fixture
@@ -75,9 +77,13 @@ def test_coils_and_discrete_inputs_are_an_illegal_function(client, device_id, ad
 
 
 def test_writes_stay_refused(client):
+    """Without alarm requests every register is read-only: exception 2; coils: exception 1."""
     for device_id in (1, 255):
-        rr = client.write_register(1, 0, device_id=device_id)
-        assert rr.isError() and rr.exception_code == ILLEGAL_FUNCTION
+        for address in (1, 51):
+            rr = client.write_register(address, 0, device_id=device_id)
+            assert rr.isError() and rr.exception_code == ILLEGAL_ADDRESS, (address, rr)
+        rr = client.write_registers(51, [1], device_id=device_id)
+        assert rr.isError() and rr.exception_code == ILLEGAL_ADDRESS
         rr = client.write_coil(0, True, device_id=device_id)
         assert rr.isError() and rr.exception_code == ILLEGAL_FUNCTION
 
@@ -94,9 +100,10 @@ def test_words_are_high_word_first_big_endian_bytes():
     assert regs[3] == 7
 
 
-def _mbpoll(port: int, *args: str) -> subprocess.CompletedProcess:
+def _mbpoll(port: int, *args: str, write: tuple[str, ...] = ()) -> subprocess.CompletedProcess:
+    """mbpoll once against the server (``write``: the values to write, after the host)."""
     return subprocess.run(
-        ["mbpoll", "-m", "tcp", "-p", str(port), "-0", "-1", "-o", "3", *args, "127.0.0.1"],
+        ["mbpoll", "-m", "tcp", "-p", str(port), "-0", "-1", "-o", "3", *args, "127.0.0.1", *write],
         capture_output=True,
         text=True,
         timeout=30,
@@ -130,6 +137,9 @@ def test_mbpoll_reads_with_device_id_255_and_is_refused_bits(server):
         assert refused.returncode != 0 and "Illegal function" in refused.stderr, name
     other = _mbpoll(server.port, "-a", "9", "-t", "3", "-r", "0", "-c", "1")
     assert other.returncode != 0 and "Target device failed to respond" in other.stderr
+    for address in ("1", "51"):  # holding register writes (function 6) to read-only registers
+        write = _mbpoll(server.port, "-a", "255", "-t", "4", "-r", address, write=("1",))
+        assert write.returncode != 0 and "Illegal data address" in write.stderr, write.stderr
 
 
 def test_coil_writes_never_reach_the_alarm_command_register():
@@ -152,6 +162,14 @@ def test_coil_writes_never_reach_the_alarm_command_register():
             assert rr.isError() and rr.exception_code == ILLEGAL_FUNCTION
             rr = c.write_coils(51, [True], device_id=device_id)
             assert rr.isError() and rr.exception_code == ILLEGAL_FUNCTION
+        for address, values in ((0, [2]), (4, [1]), (50, [1]), (51, [1, 5]), (52, [0, 0])):
+            rr = c.write_registers(address, values, device_id=1)  # read-only, or two at once
+            assert rr.isError() and rr.exception_code == ILLEGAL_ADDRESS, (address, rr)
+            if len(values) == 1:
+                rr = c.write_register(address, values[0], device_id=255)
+                assert rr.isError() and rr.exception_code == ILLEGAL_ADDRESS, (address, rr)
+        rr = c.write_register(51, 7, device_id=1)  # a command register, an unknown command
+        assert rr.isError() and rr.exception_code == ILLEGAL_VALUE
         assert calls == []
         assert not c.write_register(51, 1, device_id=255).isError()  # function 6 does
         assert [r["request"] for r in calls] == ["acknowledge"]

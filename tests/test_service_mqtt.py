@@ -45,13 +45,13 @@ def alarm(t, kind="fault_detected"):
 
 def test_outbox_bounded_drops_the_oldest_but_never_the_one_in_flight(tmp_path):
     box = AlarmOutbox(tmp_path / "out.jsonl", max_messages=3)
-    ids = [box.add(alarm(float(t)))[0]["id"] for t in range(3)]
+    ids = [box.add(alarm(float(t)))[0]["seq"] for t in range(3)]
     assert ids == [1, 2, 3] and box.lost == 0
     _, dropped = box.add(alarm(3.0), in_flight=1)  # 1 is with the broker: drop 2 instead
-    assert [m["id"] for m in dropped] == [2] and box.lost == 1
+    assert [m["seq"] for m in dropped] == [2] and box.lost == 1
     _, dropped = box.add(alarm(4.0), in_flight=None)
-    assert [m["id"] for m in dropped] == [1] and box.lost == 2
-    assert [m["id"] for m in box.pending.values()] == [3, 4, 5]
+    assert [m["seq"] for m in dropped] == [1] and box.lost == 2
+    assert [m["seq"] for m in box.pending.values()] == [3, 4, 5]
     assert [m["t"] for m in box.pending.values()] == [2.0, 3.0, 4.0]
 
 
@@ -67,7 +67,7 @@ def test_outbox_survives_a_restart_in_order_and_flags_what_was_sent(tmp_path):
     with open(path, "a") as fh:
         fh.write('{"ack": 3')  # a line torn by the crash
     again = AlarmOutbox(path, max_messages=100)
-    assert [(m["id"], m.get("dup", False)) for m in again.pending.values()] == [
+    assert [(m["seq"], m.get("dup", False)) for m in again.pending.values()] == [
         (2, True),
         (3, False),
         (4, False),
@@ -77,7 +77,7 @@ def test_outbox_survives_a_restart_in_order_and_flags_what_was_sent(tmp_path):
     again.close()
     assert path.read_text().splitlines() == ['{"next_id":5}']  # compacted, ids go on
     third = AlarmOutbox(path, max_messages=100)
-    assert len(third) == 0 and third.add(alarm(9.0))[0]["id"] == 5
+    assert len(third) == 0 and third.add(alarm(9.0))[0]["seq"] == 5
 
 
 def test_status_payload_carries_the_friction_level_and_buffer_losses(tmp_path):
@@ -93,7 +93,17 @@ def test_status_payload_carries_the_friction_level_and_buffer_losses(tmp_path):
         "counters": {"fault_detected": 1},
     }
     payload = status_payload(snap, box, skipped_events=3)
-    assert payload["online"] is True and payload["state"] == "friction_isolated"
+    assert (
+        "online" not in payload and payload["state"] == "friction_isolated"
+    )  # availability has it
+    assert payload["units"] == {
+        "t": "s",
+        "friction_level": "multiple of the calibrated fault (1 = the calibrated fault)",
+        "statistic": "1",
+        "threshold": "1",
+        "residual_rms": "m/s^2",
+        "time": "RFC 3339",
+    }
     assert payload["friction_level"] == 1.42 and payload["alarm_episodes"] == 1
     assert payload["mqtt"] == {"buffered": 1, "lost": 1, "skipped_events": 3}
     assert payload["time"] == "2023-11-14T22:13:20.000000Z"
@@ -182,8 +192,8 @@ def test_password_from_a_file_beside_the_config_or_the_environment(tmp_path, mon
         ({"mqtt": {"rig": "#"}}, "mqtt.rig must be"),
         ({"mqtt": {"port": 70000}}, "mqtt.port"),
         ({"mqtt": {"tls": {"ca": "x"}}}, "mqtt.tls.ca: unknown key"),
-        ({"metrics": {"listen": "9108"}}, "metrics.listen must be HOST:PORT"),
-        ({"metrics": {"port": 9108}}, "metrics.port: unknown key"),
+        ({"metrics": {"listen": "19108"}}, "metrics.listen must be HOST:PORT"),
+        ({"metrics": {"port": 19108}}, "metrics.port: unknown key"),
     ],
 )
 def test_bad_mqtt_and_metrics_settings_name_the_key(section, message):
@@ -210,14 +220,14 @@ def sink_settings(port, **more):
 
 
 def alarm_ids(sub):
-    return [m["payload"]["id"] for m in sub.on("/event") if "id" in m["payload"]]
+    return [m["payload"]["seq"] for m in sub.events() if "seq" in m["payload"]]
 
 
 def check_at_least_once_in_order(sub, expected_ids):
     """Every alarm at least once; first arrivals in order; every repeat flagged ``dup``."""
     seen: list[int] = []
-    for m in sub.on("/event"):
-        message_id = m["payload"].get("id")
+    for m in sub.events():
+        message_id = m["payload"].get("seq")
         if message_id is None:
             continue
         if message_id in seen:
@@ -234,13 +244,13 @@ def test_alarms_wait_on_disk_while_the_broker_is_away_and_arrive_in_order(tmp_pa
     outbox = tmp_path / "state" / "mqtt-outbox.jsonl"
     sink = MqttSink(sink_settings(broker.port), outbox)
     try:
-        sub.wait(lambda s: s.on("/status"), 20, "the online status", broker.tail)
-        assert sub.on("/status")[0]["payload"]["online"] is True
+        sub.wait(lambda s: s.on("/availability"), 20, "the availability", broker.tail)
+        assert sub.on("/availability")[0]["payload"]["state"] == "online"
         sink.event(stamp_event({"t": 2.0, "kind": "calibrated"}))
         sink.event(alarm(10.0))
         sub.wait(lambda s: alarm_ids(s) == [1], 20, "the first alarm", broker.tail)
-        assert [m["payload"]["kind"] for m in sub.on("/event")] == ["calibrated", "fault_detected"]
-        assert sub.on("/event")[1]["qos"] == 1 and sub.on("/event")[0]["qos"] == 0
+        assert [m["payload"]["kind"] for m in sub.events()] == ["calibrated", "fault_detected"]
+        assert sub.events()[1]["qos"] == 1 and sub.events()[0]["qos"] == 0
 
         broker.stop()  # the broker goes away during the alarm
         deadline = time.monotonic() + 20
@@ -265,7 +275,7 @@ def test_alarms_wait_on_disk_while_the_broker_is_away_and_arrive_in_order(tmp_pa
         broker.start()  # back on the same port, with the subscriber's session
         sub.wait(lambda s: len(alarm_ids(s)) >= 5, 60, "the buffered alarms", broker.tail)
         check_at_least_once_in_order(sub, [1, 2, 3, 4, 5])
-        assert [m["payload"]["kind"] for m in sub.on("/event") if "id" in m["payload"]] == [
+        assert [m["payload"]["kind"] for m in sub.events() if "seq" in m["payload"]] == [
             "fault_detected"
         ] + kinds
         deadline = time.monotonic() + 20
@@ -277,8 +287,11 @@ def test_alarms_wait_on_disk_while_the_broker_is_away_and_arrive_in_order(tmp_pa
         sub.close()
         broker.stop()
     assert outbox.read_text().splitlines() == ['{"next_id":6}']
-    offline = sub.on("/status")[-1]["payload"]
-    assert offline["online"] is False and offline["state"] == "offline"
+    offline = sub.on("/availability")[-1]
+    assert offline["retain"] is False  # a live subscriber sees it as it comes
+    assert offline["payload"]["state"] == "offline" and offline["payload"]["reason"] == "stopped"
+    assert offline["payload"]["time"].endswith("Z")
+    assert all(m["payload"].get("state") != "offline" for m in sub.on("/status"))
 
 
 @needs_mosquitto
@@ -290,13 +303,13 @@ def test_an_alarm_sent_before_a_crash_is_sent_again_flagged_dup(tmp_path):
     box.add(alarm(10.5, "friction_isolated"))
     box.mark_sent(1)  # the daemon died before the broker's acknowledgement was recorded
     box.close()
-    sub = Subscriber(broker.port, "fdi/lab/rig7/event")
+    sub = Subscriber(broker.port, "fdi/lab/rig7/event/#")
     sink = MqttSink(sink_settings(broker.port), outbox)
     try:
         sub.wait(lambda s: len(alarm_ids(s)) >= 2, 30, "the alarms", broker.tail)
-        first, second = [m["payload"] for m in sub.on("/event")]
-        assert (first["id"], first.get("dup")) == (1, True)
-        assert (second["id"], second.get("dup")) == (2, None)
+        first, second = [m["payload"] for m in sub.events()]
+        assert (first["seq"], first.get("dup")) == (1, True)
+        assert (second["seq"], second.get("dup")) == (2, None)
         check_at_least_once_in_order(sub, [1, 2])
     finally:
         sink.close()
@@ -397,7 +410,7 @@ def test_password_and_tls_from_the_config_against_a_broker_that_requires_them(tm
     try:
         sink.event(alarm(10.0))
         sub.wait(lambda s: alarm_ids(s) == [1], 30, "the alarm over TLS", broker.tail)
-        assert sub.on("/status")[0]["payload"]["online"] is True
+        assert sub.on("/availability")[0]["payload"]["state"] == "online"
     finally:
         sink.close()
         sub.close()
@@ -450,7 +463,7 @@ def test_daemon_sinks_send_the_event_log_line_and_reopen_after_a_reload(tmp_path
         "rig.yaml",
         tmp_path,
     )
-    sub = Subscriber(broker.port, "fdi/lab/rig7/event")
+    sub = Subscriber(broker.port, "fdi/lab/rig7/event/#")
     try:
         for reload in range(2):
             sinks = Sinks(cfg, 256.0, "modbus-tcp", StatusBoard())
@@ -473,9 +486,9 @@ def test_daemon_sinks_send_the_event_log_line_and_reopen_after_a_reload(tmp_path
     lines = [
         json.loads(line) for line in (tmp_path / "state" / "events.jsonl").read_text().splitlines()
     ]
-    messages = [m["payload"] for m in sub.on("/event")]
-    assert [m["id"] for m in messages] == [1, 2]
-    assert [{k: v for k, v in m.items() if k != "id"} for m in messages] == lines
+    messages = [m["payload"] for m in sub.events()]
+    assert [m["seq"] for m in messages] == [1, 2]
+    assert [{k: v for k, v in m.items() if k not in ("seq", "units")} for m in messages] == lines
     assert all(line["schema"] == 2 and line["theta2"] is None for line in lines)
 
 
@@ -519,10 +532,10 @@ def test_a_full_buffer_drops_the_oldest_alarms_counts_and_logs_them(tmp_path, ca
         deadline = time.monotonic() + 30
         while sink.outbox.lost < 3 and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert [m["id"] for m in sink.outbox.pending.values()] == [4, 5]
+        assert [m["seq"] for m in sink.outbox.pending.values()] == [4, 5]
         assert status_payload({}, sink.outbox)["mqtt"]["lost"] == 3
         dropped = [r.getMessage() for r in caplog.records if "dropped alarm" in r.getMessage()]
-        assert len(dropped) == 3 and "dropped alarm id 1 " in dropped[0]
+        assert len(dropped) == 3 and "dropped alarm message seq 1 " in dropped[0]
         assert dropped[-1].endswith("3 lost since start")
     finally:
         sink.close(timeout_s=0.5)

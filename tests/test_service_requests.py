@@ -88,7 +88,7 @@ def test_modbus_command_registers(allow):
         assert client.connect()
         ack = client.write_register(COMMAND_REGISTERS["alarm_command"], 1, device_id=1)
         if not allow:
-            assert ack.isError() and ack.exception_code == 1
+            assert ack.isError() and ack.exception_code == 2  # read-only: illegal data address
             assert keeper.lifecycle.state == "unacknowledged"
             return
         assert not ack.isError(), ack

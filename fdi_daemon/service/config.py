@@ -26,7 +26,7 @@ Sections::
     recorder: {enabled, dir, rotate_seconds, rotate_bytes, fsync_period_s, keep_files}
     service: {fs, deadline_s, status_period_s, queue_size, read_timeout_s, state_dir}
     mqtt: {enabled, host, port, site, rig, username, password_file, password_env, tls: {...}, ...}
-    metrics: {listen}  # Prometheus exporter, e.g. 127.0.0.1:9108; null (default) = off
+    metrics: {listen}  # Prometheus exporter, e.g. 127.0.0.1:19108; null (default) = off
 
 Secrets (the MQTT password) are never read from the YAML: ``mqtt.password`` is refused;
 ``mqtt.password_file`` or ``mqtt.password_env`` name where the daemon reads it.

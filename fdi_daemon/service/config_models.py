@@ -66,7 +66,7 @@ FsyncPeriod = Annotated[
 ]
 Fraction = Annotated[float, _rule(lambda v: 0 <= v <= 1, "must be a fraction in [0, 1]")]
 Listen = Annotated[
-    str, _rule(_is_listen, "must be HOST:PORT, e.g. 127.0.0.1:9108 (port 0 = any free port)")
+    str, _rule(_is_listen, "must be HOST:PORT, e.g. 127.0.0.1:19108 (port 0 = any free port)")
 ]
 Steps = Annotated[list[float], _rule(_is_steps, "must be a list of positive, increasing levels")]
 Transport = Annotated[
@@ -202,6 +202,10 @@ class Mqtt(Section):
     tls: MqttTls = MqttTls()
     status_period_s: Positive = Field(
         default=1.0, description="how often the retained status is published"
+    )
+    discovery_prefix: str | None = Field(
+        default="homeassistant",
+        description="topic prefix of the Home Assistant MQTT discovery messages; null = none",
     )
     buffer_file: str = Field(
         default="mqtt-outbox.jsonl",

@@ -1,7 +1,9 @@
 """Prometheus exporter (prometheus_client): the daemon's status as metrics over HTTP.
 
-Off unless ``metrics.listen`` is set; the usual setting is ``127.0.0.1:9108`` (loopback:
-a Prometheus on another host needs it set to an outside address on purpose). Every value
+Off unless ``metrics.listen`` is set; the documented setting is ``127.0.0.1:19108``
+(loopback: a Prometheus on another host needs an outside address on purpose; the port lies
+outside 9100-9999, the range of Prometheus's default-port allocations, which is full, so it
+is no other exporter's registered default). Every value
 is read at scrape time, from the status board (the snapshot refreshed every
 ``service.status_period_s``) and the loop's tick-latency histogram, so nothing runs on the
 sample loop's thread. The metrics live in a registry of their own, not prometheus_client's
@@ -12,8 +14,12 @@ Names, units and the Grafana dashboard: docs/service.md, configs/grafana_fdi.jso
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any
 
+from fdi_daemon import __version__
+from fdi_daemon.alarms.lifecycle import LIFECYCLE_KINDS, STATES
+from fdi_daemon.detect.events import EVENT_KINDS
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.service.sinks import STATE_CODES, StatusBoard
 
@@ -44,17 +50,24 @@ class StatusCollector:
         ("fdi_statistic", "detection statistic", ("monitor", "statistic")),
         ("fdi_threshold", "detection threshold of the statistic", ("monitor", "threshold")),
         (
-            "fdi_residual_rms",
+            "fdi_residual_rms_meters_per_second_squared",
             "RMS of the model residual r = ẍ - x̂̈ (eq. 3), m/s²",
             ("monitor", "residual_rms"),
         ),
+        (
+            "fdi_baseline_level",
+            "fault-free friction level of the model's baseline, units of the signature "
+            "(NaN: the model has none)",
+            ("alarm", "baseline_level"),
+        ),
+        (
+            "fdi_alarm_priority",
+            "operator alarm priority: 0 none, 1..3 alarm steps crossed (ISA-18.2)",
+            ("alarm", "priority"),
+        ),
+        ("fdi_alarm_id", "number of the current (or last) operator alarm", ("alarm", "alarm_id")),
         ("fdi_link_connected", "1 while the data link is up", ("link", "connected")),
         ("fdi_sample_rate_hz", "samples per second over the last ~2 s", ("link", "rate_hz")),
-        (
-            "fdi_uptime_seconds",
-            "seconds since the loop started (restarts on reload)",
-            ("uptime_s",),
-        ),
         ("fdi_sample_time_seconds", "sample time t of the last sample, s", ("t",)),
     )
     COUNTERS = (  # name (without _total), help, snapshot path
@@ -92,29 +105,37 @@ class StatusCollector:
     def __init__(self, board: StatusBoard, mqtt: Any = None) -> None:
         self.board = board
         self.mqtt = mqtt
-        self.loop = None
+        self.loop: Any = None
 
-    def collect(self):
+    def collect(self) -> Iterator[Any]:
         from prometheus_client.core import (
             CounterMetricFamily,
             GaugeMetricFamily,
             HistogramMetricFamily,
+            InfoMetricFamily,
+            StateSetMetricFamily,
         )
 
         snap = self.board.snapshot()
+        yield InfoMetricFamily("fdi_build", "fdi version", value={"version": __version__})
         for name, doc, path in self.GAUGES:
             yield GaugeMetricFamily(name, doc, value=_number(_get(snap, path)))
         for name, doc, path in self.COUNTERS:
             yield CounterMetricFamily(name, doc, value=_number(_get(snap, path) or 0))
-        state = snap.get("state", "starting")
+        yield _one_of(StateSetMetricFamily, "fdi_state", "monitor state", STATE_CODES, snap)
+        uptime_s = snap.get("uptime_s")
         yield GaugeMetricFamily(
-            "fdi_state",
-            "monitor state: " + ", ".join(f"{code} {name}" for name, code in STATE_CODES.items()),
-            value=STATE_CODES.get(state, 0),
+            "fdi_start_time_seconds",
+            "start of the sample loop (restarts on reload), Unix time, s",
+            value=round(snap["time"] - uptime_s, 3)
+            if isinstance(uptime_s, (int, float)) and "time" in snap
+            else math.nan,
         )
+        yield from self._alarm(snap.get("alarm") or {}, GaugeMetricFamily, StateSetMetricFamily)
+        counts = snap.get("counters") or {}
         events = CounterMetricFamily("fdi_events", "events by kind", labels=["kind"])
-        for kind, count in sorted((snap.get("counters") or {}).items()):
-            events.add_metric([str(kind)], count)
+        for kind in dict.fromkeys([*EVENT_KINDS, *LIFECYCLE_KINDS, *sorted(counts)]):
+            events.add_metric([str(kind)], counts.get(kind, 0))
         yield events
         if self.loop is not None:
             yield self._tick_latency(HistogramMetricFamily)
@@ -135,7 +156,29 @@ class StatusCollector:
                 value=self.mqtt.outbox.lost,
             )
 
-    def _tick_latency(self, family):
+    @staticmethod
+    def _alarm(alarm: dict[str, Any], gauge: Any, state_set: Any) -> Iterator[Any]:
+        """The operator alarm's lifecycle (ISA-18.2, `fdi_daemon.alarms.lifecycle`)."""
+        state = alarm.get("state", "normal")
+        yield _one_of(
+            state_set, "fdi_alarm_state", "operator alarm state (ISA-18.2)", STATES, alarm
+        )
+        flags = (
+            ("active", "1 while the alarm is active (unacknowledged or acknowledged)"),
+            ("acknowledged", "1 while the active alarm is acknowledged"),
+            ("shelved", "1 while the alarm is shelved (not annunciated)"),
+            ("annunciated", "1 while the alarm is active and not shelved"),
+        )
+        values = {
+            "active": state in ("unacknowledged", "acknowledged"),
+            "acknowledged": state == "acknowledged",
+            "shelved": alarm.get("state_code") == 4,
+            "annunciated": bool(alarm.get("annunciated")),
+        }
+        for name, doc in flags:
+            yield gauge(f"fdi_alarm_{name}", doc, value=float(values[name]))
+
+    def _tick_latency(self, family: Any) -> Any:
         """The loop's tick latency (link delivery to the end of Monitor.step), seconds."""
         hist = self.loop.tick_latency
         counts = list(hist.counts)  # one copy: the loop thread keeps counting
@@ -156,7 +199,14 @@ class StatusCollector:
         )
 
 
-def _get(snapshot: dict, path: tuple[str, ...]) -> Any:
+def _one_of(family: Any, name: str, doc: str, states: Any, source: dict[str, Any]) -> Any:
+    """A state set (prometheus_client's ``Enum`` exposition): one series per state, 1 for
+    ``source["state"]`` (the first state when missing)."""
+    current = source.get("state", next(iter(states)))
+    return family(name, doc, value={str(state): state == current for state in states})
+
+
+def _get(snapshot: dict[str, Any], path: tuple[str, ...]) -> Any:
     value: Any = snapshot
     for key in path:
         value = value.get(key) if isinstance(value, dict) else None
@@ -170,7 +220,12 @@ class MetricsServer:
         self, board: StatusBoard, listen: str, mqtt: Any = None, source: str = "config"
     ) -> None:
         try:
-            from prometheus_client import CollectorRegistry, start_http_server
+            from prometheus_client import (
+                CollectorRegistry,
+                PlatformCollector,
+                ProcessCollector,
+                start_http_server,
+            )
         except ImportError:
             raise ConfigError(
                 f"{source}: metrics.listen needs prometheus_client: pip install 'fdi[fleet]'"
@@ -180,6 +235,8 @@ class MetricsServer:
         self.collector = StatusCollector(board, mqtt)
         self.registry = CollectorRegistry(auto_describe=True)
         self.registry.register(self.collector)
+        ProcessCollector(registry=self.registry)
+        PlatformCollector(registry=self.registry)
         try:
             self._server, self._thread = start_http_server(
                 int(port), addr=self.host, registry=self.registry

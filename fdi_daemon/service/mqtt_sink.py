@@ -2,19 +2,25 @@
 
 Topics, ``<prefix>`` = ``fdi/<site>/<rig>``:
 
-- ``<prefix>/event``: every event as JSON, as the event log writes it (`stamp_event`: ``t``,
-  ``kind``, ..., ``time``, ``schema``). Alarm kinds (``fault_detected``,
-  ``friction_isolated``, ``other_fault``, ``cleared``) go with QoS 1 through the on-disk
-  `AlarmOutbox`; each carries ``id`` (consecutive per rig, kept across restarts) and
-  ``dup: true`` when it is published again after a daemon restart because the broker's
+- ``<prefix>/event/<kind>``: every event as JSON, as the event log writes it
+  (`stamp_event`: ``t``, ``kind``, ..., ``time``, ``schema``) plus ``units``. Alarm kinds
+  (detector: ``fault_detected``, ``friction_isolated``, ``other_fault``, ``cleared``; the
+  operator alarm's lifecycle: ``alarm_*``) go with QoS 1 through the on-disk `AlarmOutbox`;
+  each carries ``seq`` (consecutive per rig, kept across restarts; not the ``alarm_id``)
+  and ``dup: true`` when it is published again after a daemon restart because the broker's
   acknowledgement of an earlier send was not recorded. Other kinds go with QoS 0 while the
   broker is there and are skipped (and counted) while it is not; the event log has them all.
-- ``<prefix>/status``: retained, every ``status_period_s`` (1 s):
-  `status_payload` (``online``, ``state``, ``friction_level``, θ, counters, the outbox's
-  ``buffered`` and ``lost``). On every connect a status with ``online: true`` (QoS 1); the
-  last will, ``{"online": false, "state": "offline"}`` (retained, QoS 1), is published by the
-  broker when the connection dies without a clean disconnect (SIGKILL, power, network);
-  a clean stop publishes the same itself before disconnecting.
+- ``<prefix>/status``: retained, every ``status_period_s`` (1 s): `status_payload`
+  (``state``, ``friction_level``, θ, counters, the outbox's ``buffered`` and ``lost``,
+  ``units``). It stays retained when the daemon dies: the last known friction level.
+- ``<prefix>/availability``: retained, QoS 1: ``online`` at every connect; the last will,
+  ``offline`` (``time: null``), published by the broker when the connection dies without a
+  clean disconnect (SIGKILL, power, network); a clean stop publishes ``offline`` with its
+  time itself before disconnecting (`fdi_daemon.service.mqtt_payloads.availability`).
+- ``<prefix>/alarm``: retained, QoS 1: the operator alarm, on connect and after every
+  lifecycle event (`fdi_daemon.service.mqtt_payloads.alarm_from_event`).
+- ``<discovery_prefix>/.../config``: retained, on connect: Home Assistant MQTT discovery
+  (`fdi_daemon.service.mqtt_payloads.discovery`), unless ``discovery_prefix`` is null.
 
 Threads. The daemon's sink worker calls `MqttSink.event` / `MqttSink.status`, which only
 queue items for this sink's own `Worker`; that thread writes the outbox file and calls
@@ -36,8 +42,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from fdi_daemon.alarms.lifecycle import LIFECYCLE_KINDS
 from fdi_daemon.detect.events import EVENT_SCHEMA
 from fdi_daemon.errors import ConfigError
+from fdi_daemon.service import mqtt_payloads
 from fdi_daemon.service.sinks import ALARM_KINDS, Worker, json_line, rfc3339
 
 log = logging.getLogger("fdi.mqtt")
@@ -45,8 +53,8 @@ log = logging.getLogger("fdi.mqtt")
 #: paho's reconnect backoff (s): first retry, cap
 RECONNECT_MIN_S = 0.5
 RECONNECT_MAX_S = 5.0
-#: the last will (retained on the status topic), also published on a clean stop
-OFFLINE = {"schema": EVENT_SCHEMA, "online": False, "state": "offline"}
+#: the last will (retained on the availability topic); a clean stop says when
+LAST_WILL = mqtt_payloads.availability(False, None, "connection lost")
 #: the outbox file is compacted when it has this many more lines than pending alarms
 COMPACT_SLACK_LINES = 1000
 
@@ -86,11 +94,12 @@ class AlarmOutbox:
     """Alarms not yet acknowledged by the broker, oldest first, mirrored in a file.
 
     The file is JSON Lines, appended to: ``{"msg": {...}}`` when an alarm is added (flushed
-    and fsynced), ``{"sent": id}`` when it is handed to the client, ``{"ack": id}`` when the
-    broker acknowledged it, ``{"drop": id}`` when the bound pushed it out. Loading replays
+    and fsynced), ``{"sent": seq}`` when it is handed to the client, ``{"ack": seq}`` when
+    the broker acknowledged it, ``{"drop": seq}`` when the bound pushed it out. (Files of
+    fdi 0.1.0, whose messages carry ``id`` for ``seq``, load unchanged.) Loading replays
     these lines; a message that was sent but not acknowledged comes back with ``dup: true``.
-    The file is rewritten with only what is pending (and ``{"next_id": n}``, so ids never
-    repeat) at load and whenever it holds `COMPACT_SLACK_LINES` lines more than that.
+    The file is rewritten with only what is pending (and ``{"next_id": n}``, so ``seq``
+    never repeats) at load and whenever it holds `COMPACT_SLACK_LINES` lines more than that.
     At most ``max_messages`` wait; adding one more drops the oldest (never the one in
     flight) and counts it in ``lost``.
     """
@@ -115,8 +124,8 @@ class AlarmOutbox:
         return next(iter(self.pending.values()), None)
 
     def add(self, payload: dict, in_flight: int | None = None) -> tuple[dict, list[dict]]:
-        """Queue an alarm; returns it (with ``id``) and the alarms dropped to make room."""
-        message = {**payload, "id": self.next_id}
+        """Queue an alarm; returns it (with ``seq``) and the alarms dropped to make room."""
+        message = {**payload, "seq": self.next_id}
         self.next_id += 1
         dropped = []
         while len(self.pending) >= self.max_messages:
@@ -127,7 +136,7 @@ class AlarmOutbox:
             self._sent.discard(victim)
             self.lost += 1
             self._append({"drop": victim})
-        self.pending[message["id"]] = message
+        self.pending[message["seq"]] = message
         self._append({"msg": message}, sync=True)
         return message, dropped
 
@@ -163,8 +172,10 @@ class AlarmOutbox:
                 continue
             if "msg" in record:
                 message = record["msg"]
-                self.pending[message["id"]] = message
-                self.next_id = max(self.next_id, message["id"] + 1)
+                if "seq" not in message:  # written by fdi 0.1.0
+                    message["seq"] = message.pop("id")
+                self.pending[message["seq"]] = message
+                self.next_id = max(self.next_id, message["seq"] + 1)
             elif "next_id" in record:
                 self.next_id = max(self.next_id, record["next_id"])
             elif "sent" in record:
@@ -216,7 +227,6 @@ def status_payload(
     payload = {
         "schema": EVENT_SCHEMA,
         "time": rfc3339(snapshot.get("time") or time.time()),
-        "online": True,
         "state": snapshot.get("state", "starting"),
         "t": snapshot.get("t"),
         "friction_level": monitor.get("friction_level"),
@@ -224,6 +234,7 @@ def status_payload(
         "theta2": monitor.get("theta2"),
         "statistic": monitor.get("statistic"),
         "threshold": monitor.get("threshold"),
+        "residual_rms": monitor.get("residual_rms"),
         "link_connected": bool(link.get("connected")),
         "samples": link.get("samples", 0),
         "gaps": link.get("gaps", 0),
@@ -236,7 +247,7 @@ def status_payload(
             "lost": outbox.lost,
             "skipped_events": skipped_events,
         }
-    return payload
+    return mqtt_payloads.with_units(payload)
 
 
 class MqttSink:
@@ -258,8 +269,12 @@ class MqttSink:
 
         self.settings = settings
         self.prefix = topic_prefix(settings)
-        self.event_topic = f"{self.prefix}/event"
+        self.event_topic = f"{self.prefix}/event"  # + "/<kind>"
         self.status_topic = f"{self.prefix}/status"
+        self.availability_topic = f"{self.prefix}/availability"
+        self.alarm_topic = f"{self.prefix}/alarm"
+        self.discovery_prefix: str | None = settings.get("discovery_prefix", "homeassistant")
+        self._alarm: dict[str, Any] | None = None  # the retained operator alarm
         self.where = f"{settings['host']}:{settings['port']}"
         self.status_period_s = settings["status_period_s"]
         self.skipped_events = 0
@@ -267,7 +282,7 @@ class MqttSink:
         self._outage_logged = False  # paho retries every few s: say it once per outage
         self._next_status = -float("inf")
         self._last_snapshot: dict[str, Any] = {"state": "starting"}
-        self._in_flight: tuple[int, int] | None = None  # (alarm id, paho mid)
+        self._in_flight: tuple[int, int] | None = None  # (message seq, paho mid)
         password = read_password(settings, source)
         client_id = settings["client_id"] or "fdi-" + self.prefix[4:].replace("/", "-")
         client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id)
@@ -283,7 +298,7 @@ class MqttSink:
                 )
             except (OSError, ValueError) as exc:
                 raise ConfigError(f"{source}: mqtt.tls: {exc}") from None
-        client.will_set(self.status_topic, json.dumps(OFFLINE), qos=1, retain=True)
+        client.will_set(self.availability_topic, json.dumps(LAST_WILL), qos=1, retain=True)
         client.reconnect_delay_set(RECONNECT_MIN_S, RECONNECT_MAX_S)
         client.on_connect = self._on_connect
         client.on_disconnect = self._on_disconnect
@@ -335,6 +350,8 @@ class MqttSink:
             self._event(value)
         elif kind == "status":
             self._last_snapshot = value
+            if self._alarm is None and value.get("alarm"):
+                self._set_alarm(mqtt_payloads.alarm_from_summary(value["alarm"], time.time()))
             if self.connected:
                 self._publish(self.status_topic, self._status(), qos=0, retain=True)
         elif kind == "acked":
@@ -351,6 +368,13 @@ class MqttSink:
                 len(self.outbox),
             )
             self._publish(self.status_topic, self._status(), qos=1, retain=True)
+            online = mqtt_payloads.availability(True, time.time(), "connected")
+            self._publish(self.availability_topic, online, qos=1, retain=True)
+            if self._alarm is not None:
+                self._publish(self.alarm_topic, self._alarm, qos=1, retain=True)
+            if self.discovery_prefix is not None:
+                for topic, config in mqtt_payloads.discovery(self.prefix, self.discovery_prefix):
+                    self._publish(topic, config, qos=1, retain=True)
         elif kind in ("disconnected", "down"):
             if not self._outage_logged:
                 self._outage_logged = True
@@ -365,9 +389,13 @@ class MqttSink:
         self._pump()
 
     def _event(self, event: dict) -> None:
+        event = mqtt_payloads.with_units(event)
+        if event.get("kind") in LIFECYCLE_KINDS:
+            baseline = (self._last_snapshot.get("alarm") or {}).get("baseline_level")
+            self._set_alarm(mqtt_payloads.alarm_from_event(event, baseline))
         if event.get("kind") not in ALARM_KINDS:
             if self.connected:
-                self._publish(self.event_topic, event, qos=0)
+                self._publish(f"{self.event_topic}/{event.get('kind')}", event, qos=0)
             else:
                 self.skipped_events += 1
             return
@@ -375,14 +403,20 @@ class MqttSink:
         _, dropped = self.outbox.add(event, in_flight)
         for lost in dropped:
             log.warning(
-                "MQTT alarm buffer full (%d): dropped alarm id %d (%s at t=%s); "
+                "MQTT alarm buffer full (%d): dropped alarm message seq %d (%s at t=%s); "
                 "%d lost since start",
                 self.outbox.max_messages,
-                lost["id"],
+                lost["seq"],
                 lost.get("kind"),
                 lost.get("t"),
                 self.outbox.lost,
             )
+
+    def _set_alarm(self, alarm: dict[str, Any]) -> None:
+        """Keep the operator alarm and publish it (retained) while connected."""
+        self._alarm = alarm
+        if self.connected:
+            self._publish(self.alarm_topic, alarm, qos=1, retain=True)
 
     def _pump(self) -> None:
         """Hand the oldest waiting alarm to the client when none is in flight."""
@@ -391,10 +425,10 @@ class MqttSink:
         message = self.outbox.head()
         if message is None:
             return
-        info = self._publish(self.event_topic, message, qos=1)
+        info = self._publish(f"{self.event_topic}/{message.get('kind')}", message, qos=1)
         if info is not None:
-            self._in_flight = (message["id"], info.mid)
-            self.outbox.mark_sent(message["id"])
+            self._in_flight = (message["seq"], info.mid)
+            self.outbox.mark_sent(message["seq"])
 
     def _publish(self, topic: str, payload: dict, qos: int, retain: bool = False):
         info = self.client.publish(topic, json_line(payload).rstrip("\n"), qos=qos, retain=retain)
@@ -408,18 +442,16 @@ class MqttSink:
         return status_payload(self._last_snapshot, self.outbox, self.skipped_events)
 
     def close(self, timeout_s: float = 5.0) -> None:
-        """Deliver the waiting alarms (for up to ``timeout_s``), mark the rig offline
-        (retained), disconnect. What is not delivered stays in the outbox file."""
+        """Deliver the waiting alarms (for up to ``timeout_s``), mark the rig offline on the
+        availability topic (retained; the status stays), disconnect. What is not delivered stays in the outbox file."""
         deadline = time.monotonic() + timeout_s
         while self.connected and len(self.outbox) and time.monotonic() < deadline:
             time.sleep(0.05)
         self.worker.close()
         if self.connected:
+            offline = mqtt_payloads.availability(False, time.time(), "stopped")
             info = self.client.publish(
-                self.status_topic,
-                json.dumps({**OFFLINE, "time": rfc3339(time.time())}),
-                qos=1,
-                retain=True,
+                self.availability_topic, json.dumps(offline), qos=1, retain=True
             )
             if info.rc == self._mqtt.MQTT_ERR_SUCCESS:
                 info.wait_for_publish(max(0.1, deadline - time.monotonic()))

@@ -618,11 +618,13 @@ class ModbusStatusServer:
     """Modbus TCP server of the status registers (holding and input registers alike).
 
     Every read refreshes the block from the status board, so a client always sees the
-    latest snapshot. Writes are refused (exception 1), except to `COMMAND_REGISTERS` when
-    ``requests`` is given: 1 to ``alarm_command`` acknowledges, 2 unshelves, N > 0 to
-    ``shelve_minutes`` shelves for N minutes; a request refused by the alarm is answered
-    with exception 3 (illegal data value). Bit reads (function codes 1, 2) are refused with
-    exception 1 (illegal function). Answers the configured device id and 255 (addressed
+    latest snapshot. Register writes (function codes 6, 16) to a read-only register, or of
+    more than one register, are refused with exception 2 (illegal data address); only one
+    of `COMMAND_REGISTERS` at a time is writable, and only when ``requests`` is given:
+    1 to ``alarm_command`` acknowledges, 2 unshelves, N > 0 to ``shelve_minutes`` shelves
+    for N minutes; a value the alarm refuses is answered with exception 3 (illegal data
+    value). Coil writes (5, 15) and bit reads (1, 2) are refused with exception 1 (illegal
+    function): the map has no bits. Answers the configured device id and 255 (addressed
     directly); any other id gets exception 11.
     """
 
@@ -675,7 +677,7 @@ class ModbusStatusServer:
             or len(values) != 1
             or address not in COMMAND_REGISTERS.values()
         ):
-            return ExcCodes.ILLEGAL_FUNCTION
+            return ExcCodes.ILLEGAL_ADDRESS
         value = int(values[0])
         if address == COMMAND_REGISTERS["shelve_minutes"]:
             request = {"request": "shelve", "duration_s": 60.0 * value} if value > 0 else None

@@ -143,6 +143,8 @@ def calibrate(
     _fdi("signature", path, "--model", plant, *options, "-o", out)
     t0, t1 = (float(x) for x in options[options.index("--fault-window") + 1].split(":"))
     model = load_model(out)
+    if model.fault_filter is None:
+        raise SystemExit(f"{out}: fdi signature wrote no fault_filter")
     prov = model.provenance["signature"]
     profile = prov["cost_profile"]
     low, high = profile["interval_99"]

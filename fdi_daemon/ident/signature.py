@@ -341,7 +341,7 @@ def estimate_signature(
     depth = float(np.max(sse) / best_fit.sse - 1.0)
     boot = None
     if len(grid) > 2:
-        errors = np.array([residual - f.y_sim for f in fits])
+        errors = np.array([residual - f.y_sim for f in fits if f is not None])
         boot = bootstrap_interval(grid, errors, int(np.argmin(sse)))
     interval = _hull(profile_interval, (gamma_f, gamma_f), boot)
     if at_edge:  # the minimum is no minimum: the data exclude no γ of the grid

@@ -84,6 +84,7 @@ def test_signature_figure_labels_what_was_fitted_and_gives_gamma_a_unit():
         grid=np.linspace(0, 10, 11),
         interval=(2.4, 4.0),
         flat=False,
+        status="identified",
         relative_cost=lambda: 1 + (np.linspace(0, 10, 11) - 3.14) ** 2 / 10,
     )
     fig = signature_figure(t, residual, result, residual_label=label)

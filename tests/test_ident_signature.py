@@ -48,13 +48,14 @@ def test_refinement_lands_between_grid_points():
     assert result.sse_min <= result.sse.min()
 
 
-def test_single_sine_is_flagged_flat():
+def test_single_sine_is_flagged():
     residual, velocity = signature_data(3.0, "sine", noise_fraction=0.1)
     result = sig.estimate_signature(residual, velocity)
-    assert result.flat
-    assert "not identifiable" in result.recommendation
+    assert result.status == "poorly identified"
+    assert "step its amplitude" in result.recommendation
     summary = result.summary()
-    assert summary["flat"] is True and summary["interval_99"][1] - summary["interval_99"][0] > 2
+    assert summary["status"] == "poorly identified"
+    assert summary["interval_99"][1] - summary["interval_99"][0] > 2
 
 
 def test_progress_callback_counts_every_fit():

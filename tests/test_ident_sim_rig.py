@@ -112,7 +112,8 @@ def _signature(model_path, rec_path, t0, t1, **options):
 def test_single_sine_fault_window_is_flagged_flat(
     sim_model, sim_recordings, name, t0, calibration_options
 ):  # noqa: F811
-    """The paper's single 8 Hz sine does not identify γ: flagged with the paper's settings
+    """The paper's single 8 Hz sine does not identify γ: flagged (flat or poorly identified)
+    with the paper's settings
     and with the calibration's (low-pass on the fundamentals, G_e pole bound)."""
     options = {}
     if calibration_options:
@@ -121,8 +122,8 @@ def test_single_sine_fault_window_is_flagged_flat(
             "max_pole_radius": signature.plant_pole_bound(load_model(sim_model).plant_a),
         }
     _, result = _signature(sim_model, sim_recordings[name], t0, 6.0, **options)
-    assert result.flat
-    assert result.recommendation and "signature_calibration" in result.recommendation
+    assert result.status in ("flat", "poorly identified")
+    assert result.recommendation and "step its amplitude" in result.recommendation
 
 
 def test_reference_window_with_another_excitation_is_refused(

@@ -77,7 +77,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--flat-fraction",
         type=float,
         default=0.2,
-        help="flag the profile flat when the 99 %% interval of γ covers more "
+        help="call gamma_f poorly identified when its 99 %% interval covers more "
         "than this fraction of the grid (default %(default)s)",
     )
     parser.add_argument(
@@ -148,6 +148,7 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.errors import ConfigError, UserError
     from fdi_daemon.ident import provenance
     from fdi_daemon.ident import signature as sig
+    from fdi_daemon.ident.signature_advice import CalibrationContext, plant_resonance_hz
     from fdi_daemon.io.model_file import FaultFilter, load_model, save_model
     from fdi_daemon.io.outputs import check_outputs
     from fdi_daemon.io.recordings import same_rate
@@ -218,6 +219,11 @@ def run(args: argparse.Namespace) -> int:
         residual = sig.reference_difference(residual, lag)
         start = lag  # the difference exists from one lag on
     t_win = t[first:end]
+    context = CalibrationContext(
+        fs_hz=float(model.fs),
+        referenced=args.reference_window is not None,
+        resonance_hz=plant_resonance_hz(model.plant_a, float(model.fs)),
+    )
     fits = []
     for candidate in candidates:
         if fits and fits[-1][0] >= sig.LOW_VAF_PERCENT:
@@ -244,6 +250,7 @@ def run(args: argparse.Namespace) -> int:
             args.min_depth,
             radius,
             candidate,
+            context,
         )
         fault_fit = result.fit
         if args.lowpass_hz is not None:  # G_e for the monitor: full band, at gamma_f
@@ -412,6 +419,7 @@ def _estimate(
     min_depth,
     radius,
     method,
+    context,
 ):
     from rich.console import Console
     from rich.progress import Progress
@@ -435,9 +443,24 @@ def _estimate(
                 fit_from=fit_from,
                 max_pole_radius=radius,
                 on_step=lambda: progress.advance(task),
+                context=context,
             )
         except ValueError as exc:
             raise UserError(f"signature: {exc}") from None
+
+
+def _interval_parts(result) -> str:
+    """How the interval was made: the profile's LR interval and the block bootstrap's."""
+    info = result.info
+    if info.get("interval_99_bootstrap") is None:
+        return f" (N_eff = {result.effective_samples:.0f})"
+    (p0, p1), (b0, b1) = info["interval_99_profile"], info["interval_99_bootstrap"]
+    edge = "; whole grid: least cost at its end" if result.at_edge else ""
+    return (
+        f" (profile {p0:.3g}..{p1:.3g} with N_eff = {result.effective_samples:.0f}; "
+        f"block bootstrap {b0:.3g}..{b1:.3g}, blocks of {info['bootstrap_block_samples']} "
+        f"samples{edge})"
+    )
 
 
 def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf, explained) -> None:
@@ -476,7 +499,7 @@ def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf, ex
         f"gamma_f           : {gamma} (grid {result.grid[0]:g}..{result.grid[-1]:g}"
         f" step {result.grid[1] - result.grid[0]:g}, refined)",
         f"99 % interval     : {result.interval[0]:.3g} .. {result.interval[1]:.3g}"
-        f" (N_eff = {result.effective_samples:.0f})",
+        + _interval_parts(result),
         f"cost profile      : SSE(γ)/SSE(γ_f) from {rel.min():.4f} to {rel.max():.4f}"
         f" ({result.status.upper() if result.status != 'identified' else 'identifiable'})",
         f"G_e fit           : {result.info['fit_percent']:.2f} % of the residual explained "
@@ -503,7 +526,7 @@ def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf, ex
             "(docs/identification.md)",
             file=sys.stderr,
         )
-    if result.flat:
+    if result.recommendation is not None:
         print(
             f"fdi signature: warning: {result.recommendation} (G_e x_f explains "
             f"{result.info['vaf_percent']:.1f} % of the residual's variance; 99 % interval "

@@ -209,7 +209,12 @@ def signature_figure(
     ax_g.set_xlabel("γ (s/m)")
     ax_g.set_ylabel("SSE(γ) / SSE(γ_f)")
     ax_g.set_title(
-        "cost profile" + ("  —  FLAT: γ_f not identifiable" if result.flat else ""),
+        "cost profile"
+        + {
+            "flat": "  —  FLAT: γ_f not identifiable",
+            "poorly identified": "  —  γ_f POORLY IDENTIFIED (wide 99 % interval)",
+            "not identified (edge)": "  —  γ_f NOT IDENTIFIED: least cost at the grid's end",
+        }.get(result.status, ""),
         loc="left",
         fontsize=9,
     )

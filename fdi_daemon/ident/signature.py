@@ -20,12 +20,17 @@ on the switching harmonics that stick, Stribeck and sub-sample reversal timing d
 pole-radius bound keeps G_e from parking a slow resonance on the carrier that trades with γ.
 
 Identifiability. sign(v) and v share their fundamental, so with a single sine G_e can absorb
-γ and the cost hardly depends on it. The profile is *flat* (γ_f not identifiable) when either
-- its depth max SSE/min SSE − 1 over the whole grid is below `min_depth` (default 0.01), or
-- the 99 % likelihood-ratio interval {γ : N_eff·ln(SSE(γ)/SSE_min) <= χ²₁(0.99) = 6.63}
-  covers more than `flat_fraction` of the grid span. N_eff = N/(1 + 2Σρ_k²) counts the
-  independent samples in the error: a periodic misfit (the usual case with sine excitation
-  and unmodelled stick-slip) is worth few samples, however long the window.
+γ and the cost hardly depends on it. γ_f's 99 % interval is the hull of
+- the likelihood-ratio interval {γ : N_eff·ln(SSE(γ)/SSE_min) <= χ²₁(0.99) = 6.63}, N_eff =
+  N/(1 + 2Σρ_k²) the independent samples in the error (a periodic misfit is worth few
+  samples, however long the window), and
+- the moving-block bootstrap interval of the profile's minimiser (`gamma_interval`), which
+  keeps the error's correlation and its changes across the window;
+the whole grid when the least cost lies at the grid's end. Status: *flat* where the profile is
+(its depth max SSE/min SSE − 1 below `min_depth`, default 0.01, or an interval that excludes
+no γ of the grid), *poorly identified* where the interval covers more than `flat_fraction`
+of the grid, else *identified*; for the first two a recommendation names what to change in
+this run (`signature_advice`).
 """
 
 from __future__ import annotations
@@ -37,19 +42,12 @@ import numpy as np
 from scipy import signal
 from scipy.optimize import minimize_scalar
 
+from fdi_daemon.ident.gamma_interval import BootstrapInterval, bootstrap_interval
 from fdi_daemon.ident.output_error import OEFit, fit_output_error
+from fdi_daemon.ident.signature_advice import CalibrationContext, advise
 
 #: χ² quantile with one degree of freedom at 99 %
 CHI2_1_99 = 6.634896601021214
-
-RECOMMENDATION = (
-    "gamma_f is not identifiable from this window: the cost profile is flat, so G_e absorbs "
-    "the viscous part. Record the fault under an excitation whose velocity amplitude varies "
-    "(a sine stepped through several amplitudes), played once fault-free and once with the "
-    "fault, as in configs/scenarios/signature_calibration_paired.yaml, and run `fdi signature "
-    "--reference-window R0:R1 --lowpass-hz F` on it (docs/identification.md)."
-)
-
 
 EDGE_RECOMMENDATION = (
     "gamma_f is not identified: the least cost lies at an end of the gamma grid, so the "
@@ -135,7 +133,7 @@ class SignatureResult:
     grid: np.ndarray
     sse: np.ndarray  # Σ e² per grid point
     sse_min: float  # at gamma_f (after refinement)
-    interval: tuple[float, float]  # 99 % likelihood-ratio interval for γ (grid resolution)
+    interval: tuple[float, float]  # 99 % interval for γ (s/m): profile LR ∪ block bootstrap
     effective_samples: float
     flat: bool
     recommendation: str | None
@@ -144,13 +142,16 @@ class SignatureResult:
     info: dict = field(default_factory=dict)
     residual: np.ndarray | None = None  # the fitted (prefiltered) residual of the window
     at_edge: bool = False  # the least SSE lies at an end of the grid: γ_f is not identified
+    wide: bool = False  # not flat, but the interval covers more than flat_fraction of the grid
 
     @property
     def status(self) -> str:
-        """ "identified", "flat" or "not identified (edge)"."""
+        """ "identified", "poorly identified", "flat" or "not identified (edge)"."""
         if self.at_edge:
             return "not identified (edge)"
-        return "flat" if self.flat else "identified"
+        if self.flat:
+            return "flat"
+        return "poorly identified" if self.wide else "identified"
 
     def relative_cost(self) -> np.ndarray:
         """SSE(γ)/SSE(γ_f) on the grid."""
@@ -172,10 +173,25 @@ class SignatureResult:
             "relative_cost_range": [float(rel.min()), float(rel.max())],
             "depth": float(self.info.get("depth", rel.max() - 1.0)),
             "flat": bool(self.flat),
+            "interval_99_profile": self.info.get("interval_99_profile"),
+            "interval_99_bootstrap": self.info.get("interval_99_bootstrap"),
+            "bootstrap_block_samples": self.info.get("bootstrap_block_samples"),
             "fit_percent": float(self.info.get("fit_percent", float("nan"))),
             "vaf_percent": float(self.info.get("vaf_percent", float("nan"))),
             "status": self.status,
         }
+
+
+def _hull(
+    *intervals: tuple[float, float] | BootstrapInterval | None,
+) -> tuple[float, float]:
+    """The least interval holding all given ones."""
+    ends = [
+        (i.low, i.high) if isinstance(i, BootstrapInterval) else i
+        for i in intervals
+        if i is not None
+    ]
+    return float(min(e[0] for e in ends)), float(max(e[1] for e in ends))
 
 
 def _effective_samples(error: np.ndarray) -> float:
@@ -236,6 +252,7 @@ def estimate_signature(
     fit_from: int = 0,
     max_pole_radius: float | None = None,
     on_step: Callable[[], None] | None = None,
+    context: CalibrationContext | None = None,
 ) -> SignatureResult:
     """Grid search over γ with an OE fit of G_e at each point (eq. 13), then refinement.
 
@@ -246,6 +263,8 @@ def estimate_signature(
     (b, a) or second-order sections. max_pole_radius: bound on G_e's poles (default: the
     record's, exp(−1/N)).
     on_step is called once per OE fit of the sweeps (`sweep_fits(len(grid))` calls).
+    context: what the recommendation needs to know about the run (sampling rate, reference
+    pass, plant resonance).
     """
     residual = np.asarray(residual, dtype=float)
     velocity = np.asarray(velocity, dtype=float)
@@ -315,16 +334,30 @@ def estimate_signature(
     n_eff = _effective_samples(residual - best_fit.y_sim)
     lr = n_eff * np.log(sse / best_fit.sse)
     inside = grid[lr <= CHI2_1_99]
-    interval = (float(inside.min()), float(inside.max())) if inside.size else (gamma_f, gamma_f)
+    profile_interval = (
+        (float(inside.min()), float(inside.max())) if inside.size else (gamma_f, gamma_f)
+    )
     span = float(grid[-1] - grid[0]) if len(grid) > 1 else 0.0
     depth = float(np.max(sse) / best_fit.sse - 1.0)
-    flat = span > 0 and ((interval[1] - interval[0]) > flat_fraction * span or depth < min_depth)
+    boot = None
+    if len(grid) > 2:
+        errors = np.array([residual - f.y_sim for f in fits if f is not None])
+        boot = bootstrap_interval(grid, errors, int(np.argmin(sse)))
+    interval = _hull(profile_interval, (gamma_f, gamma_f), boot)
+    if at_edge:  # the minimum is no minimum: the data exclude no γ of the grid
+        interval = (float(grid[0]), float(grid[-1]))
+    flat = span > 0 and (depth < min_depth or interval[1] - interval[0] >= span - 1e-9)
+    wide = span > 0 and not flat and (interval[1] - interval[0]) > flat_fraction * span
     fit_pct = fit_percent(residual, best_fit.y_sim)
     vaf = variance_accounted_for(residual, best_fit.y_sim)
     if at_edge:
         flat, recommendation = True, EDGE_RECOMMENDATION
+    elif flat or wide:
+        recommendation = advise(
+            flat, interval, span, velocity[fit_from:], context or CalibrationContext()
+        )
     else:
-        recommendation = RECOMMENDATION if flat else None
+        recommendation = None
     return SignatureResult(
         gamma_f=gamma_f,
         fit=best_fit,
@@ -334,10 +367,19 @@ def estimate_signature(
         interval=interval,
         effective_samples=n_eff,
         flat=bool(flat),
+        wide=bool(wide),
         recommendation=recommendation,
         orders=tuple(orders),
         evaluations=evaluations,
-        info={"fit_percent": float(fit_pct), "vaf_percent": float(vaf), "depth": depth},
+        info={
+            "fit_percent": float(fit_pct),
+            "vaf_percent": float(vaf),
+            "depth": depth,
+            "interval_99_profile": list(profile_interval),
+            "interval_99_bootstrap": None if boot is None else [boot.low, boot.high],
+            "bootstrap_block_samples": None if boot is None else boot.block_samples,
+            "bootstrap_draws": None if boot is None else boot.draws,
+        },
         residual=residual,
         at_edge=bool(at_edge),
     )

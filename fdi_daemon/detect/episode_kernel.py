@@ -414,7 +414,10 @@ def episode_tick(
         normal = over < 0.5 and sliding and (ii[eo + P_LEVEL] != 0 or frozen_stat <= threshold)
         needed = ii[eo + P_FRICTION_CLEAR]
     else:
-        normal = frozen_stat <= threshold
+        # an unconfirmed episode (fault_detected, other_fault) holds while the friction
+        # level is still at least half its margin above normal (issue 43): a fault that
+        # creeps in keeps its episode until the level path confirms it, never raise-clear
+        normal = frozen_stat <= threshold and not over >= 0.5
         needed = ii[eo + P_CLEAR]
     ii[eo + P_QUIET] = ii[eo + P_QUIET] + 1 if normal and moving else 0
     if ii[eo + P_QUIET] >= needed:

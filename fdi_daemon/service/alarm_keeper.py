@@ -62,6 +62,7 @@ class AlarmKeeper:
         self._pending: list[dict[str, Any]] = []
         self.event_counts: dict[str, int] = {}
         self.lifecycle = AlarmLifecycle(settings)
+        self.restored = stored is not None
         if stored is not None:
             self.lifecycle = AlarmLifecycle.from_dict(stored["alarm"], settings, now=clock())
             self.event_counts = {
@@ -128,6 +129,30 @@ class AlarmKeeper:
                 "alarm": self.lifecycle.to_dict(),
                 "event_counts": dict(event_counts),
             }
+
+    def carried_over(self) -> str | None:
+        """One line naming the alarm a restart inherited from the state file (None when
+        there is none): id, priority, since when, acknowledged or not, shelved."""
+        if not self.restored:
+            return None
+        now = self._clock()
+        with self._lock:
+            s = self.lifecycle.summary(now)
+        if s["state"] == "normal":
+            return None
+        since = (
+            time.strftime("%Y-%m-%d %H:%M:%S %z", time.localtime(s["started"]))
+            if isinstance(s["started"], (int, float))
+            else "an unknown time"
+        )
+        text = (
+            f"alarm carried over from an earlier run: #{s['alarm_id']} P{s['priority']} "
+            f"{s['state'].replace('_', ' ')} since {since}"
+        )
+        if s["shelved_until"] is not None and now < s["shelved_until"]:
+            until = time.strftime("%H:%M:%S", time.localtime(s["shelved_until"]))
+            text += f", shelved until {until}"
+        return text
 
     def reconfigure(self, settings: AlarmSettings, allow_remote: bool) -> None:
         """New settings after a reload; the alarm itself goes on."""

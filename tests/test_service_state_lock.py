@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+from alarm_state_support import seed_open_alarm
 from process_support import start_fdi
 
 from fdi_daemon.service.state_lock import LOCK_NAME
@@ -67,26 +68,8 @@ def test_a_second_daemon_is_refused_naming_the_holder_and_sigkill_frees_the_fold
 
 
 def test_a_restart_names_the_alarm_it_inherits_and_counts_its_own_events(tmp_path):
-    from fdi_daemon.alarms.lifecycle import AlarmLifecycle, AlarmSettings
-    from fdi_daemon.io.model_file import load_model
-    from fdi_daemon.service.config import load_config
-    from fdi_daemon.service.state_file import model_identity, write_state
-
     state = tmp_path / "state"
-    config = load_config(None)
-    lifecycle = AlarmLifecycle(AlarmSettings())
-    started = time.time() - 3600.0
-    lifecycle.step(started, None, {"kind": "fault_detected", "t": 1.0})
-    assert lifecycle.state == "unacknowledged"
-    write_state(
-        state / "state.json",
-        {
-            "model": model_identity(load_model(config.model_path)),
-            "written": started,
-            "alarm": lifecycle.to_dict(),
-            "event_counts": {"alarm_raised": 1, "calibrated": 7},
-        },
-    )
+    started = seed_open_alarm(state)
     result = second_run(state)
     assert result.returncode == 0, result.stderr[-2000:]
     since = time.strftime("%Y-%m-%d %H:%M:%S %z", time.localtime(started))

@@ -76,6 +76,32 @@ class StatusConnection:
             self.close()
             raise DaemonUnreachable(f"{self.path}: {exc.strerror or exc}") from None
 
+    def ask(self, request: dict[str, Any]) -> dict[str, Any]:
+        """The daemon's answer to one ``{"request": ...}`` (acknowledge, shelve, unshelve);
+        failures as in `request`."""
+        try:
+            if self._sock is None:
+                self._connect()
+                self._read_line()  # the greeting snapshot
+            assert self._sock is not None
+            self._sock.sendall(json.dumps(request).encode() + b"\n")
+            return _parse(self._read_line())
+        except DaemonUnreachable:
+            self.close()
+            raise
+        except FileNotFoundError:
+            self.close()
+            raise DaemonUnreachable(f"no socket at {self.path}") from None
+        except ConnectionRefusedError:
+            self.close()
+            raise DaemonUnreachable(f"nothing listening on {self.path}") from None
+        except TimeoutError:
+            self.close()
+            raise DaemonUnreachable(f"no answer within {self.timeout_s:g} s") from None
+        except OSError as exc:
+            self.close()
+            raise DaemonUnreachable(f"{self.path}: {exc.strerror or exc}") from None
+
     def _connect(self) -> None:
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:

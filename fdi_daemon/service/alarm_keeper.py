@@ -162,12 +162,18 @@ class AlarmKeeper:
 
     # ------------------------------------------------------------------ server threads
     def handle(self, request: dict[str, Any]) -> dict[str, Any]:
-        """A request of the status socket or Modbus server: {"request", "by", "duration_s"}."""
+        """A request of the status socket or Modbus server: {"request", "by", "duration_s",
+        "why"}."""
         return self.request(
-            str(request.get("request")), str(request.get("by", "")), request.get("duration_s")
+            str(request.get("request")),
+            str(request.get("by", "")),
+            request.get("duration_s"),
+            str(request.get("why") or ""),
         )
 
-    def request(self, action: str, by: str, duration_s: float | None = None) -> dict[str, Any]:
+    def request(
+        self, action: str, by: str, duration_s: float | None = None, why: str = ""
+    ) -> dict[str, Any]:
         """acknowledge | shelve (duration_s) | unshelve; the answer says why if refused."""
         if not self.allow_remote:
             return {
@@ -178,13 +184,13 @@ class AlarmKeeper:
         now = self._clock()
         with self._lock:
             if action == "acknowledge":
-                ok, reason, events = self.lifecycle.acknowledge(now, by)
+                ok, reason, events = self.lifecycle.acknowledge(now, by, why)
             elif action == "shelve":
                 if not isinstance(duration_s, (int, float)) or isinstance(duration_s, bool):
                     return {"ok": False, "error": "shelve needs duration_s (seconds)"}
-                ok, reason, events = self.lifecycle.shelve(now, float(duration_s), by)
+                ok, reason, events = self.lifecycle.shelve(now, float(duration_s), by, why)
             elif action == "unshelve":
-                ok, reason, events = self.lifecycle.unshelve(now, by)
+                ok, reason, events = self.lifecycle.unshelve(now, by, why)
             else:
                 return {
                     "ok": False,

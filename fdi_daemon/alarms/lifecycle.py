@@ -344,7 +344,19 @@ class AlarmLifecycle:
         s.peak_priority = s.priority
         s.peak_level = s.level
         s.acknowledged_at = None
-        out.append(self._event(now, "alarm_raised", cause=cause, classification=s.classification))
+        # the level of the fault is not measured yet (the reported level restarts at the
+        # detection, its first reading a window later): the event says so rather than
+        # showing the level from before the fault; alarm_priority and the status have it
+        out.append(
+            self._event(
+                now,
+                "alarm_raised",
+                cause=cause,
+                classification=s.classification,
+                level=None,
+                level_before=s.level,
+            )
+        )
 
     def _crossed(self, level: float) -> int:
         return sum(level >= step for step in self.settings.steps)

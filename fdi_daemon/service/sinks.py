@@ -251,10 +251,10 @@ def format_event(event: dict) -> str:
     t = event.get("t")
     when = f"t={t:10.3f} s" if isinstance(t, (int, float)) else "t=         - s"
     parts = [when, f"{kind.upper().replace('_', ' '):<17}"]
-    for key, label in (("theta1", "θ1"), ("theta2", "θ2")):
+    for key, label, unit in (("theta1", "θ1", ""), ("theta2", "θ2", " s/m")):  # θ2 as γ_f
         value = event.get(key)
         if isinstance(value, (int, float)) and math.isfinite(value):
-            parts.append(f"{label}={value:+.4g}")
+            parts.append(f"{label}={value:+.4g}{unit}")
     for key, value in event.items():
         if (
             key in ("t", "kind", "theta1", "theta2", "time")

@@ -32,6 +32,7 @@ COMMANDS: dict[str, str] = {
     "trend": "trend",
     "baseline": "baseline",
     "service": "service",
+    "alarm": "alarm",
 }
 
 

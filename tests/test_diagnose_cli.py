@@ -102,10 +102,10 @@ def _bad(args, capsys):
 def test_bad_input_is_one_line_and_exit_2(files, tmp_path, capsys):
     model = str(files / "nominal.yaml")
     assert "no such file" in _bad([str(tmp_path / "none.csv"), "--model", model], capsys)
-    assert "--output torque: no column" in _bad(
+    assert "missing column(s) torque " in _bad(
         [str(files / "coulomb.csv"), "--model", model, "--output", "torque"], capsys
     )
-    assert "--input u: no column" in _bad(
+    assert "missing column(s) u " in _bad(
         [str(files / "coulomb.csv"), "--model", model, "--input", "u"], capsys
     )
     save_model(
@@ -273,3 +273,12 @@ def test_a_recording_without_a_time_column_takes_its_rate_from_fs(tmp_path, caps
     # a time column and a rate that disagree: one line, no traceback
     assert "not 100 Hz" in _bad([str(timed)] + args + ["--fs", "100"], capsys)
     assert "--fs must be a positive" in _bad([str(bare)] + args + ["--fs", "0"], capsys)
+
+
+def test_every_missing_column_is_named_at_once(tmp_path, capsys):
+    """It named only t where the input and the output were missing too."""
+    other = tmp_path / "other.csv"
+    other.write_text("time,u,y\n" + "".join(f"{k / 100},{k % 7},{k % 5}\n" for k in range(400)))
+    err = _bad([str(other), "--fit-linear"], capsys)
+    assert "missing column(s) t, v_in, accel " in err
+    assert "--columns t=COLUMN,v_in=COLUMN,accel=COLUMN" in err

@@ -444,6 +444,9 @@ def test_out_of_band_residual_input_correlation_gets_a_verdict(chirps, tmp_path,
     assert f"fdi diagnose {chirps[1]} --model {tmp_path / 'm2.yaml'}" in verdict
     assert xcorr_verdict({"max_abs": 0.05, "bound": 0.057}, 4, "r.csv", "m.yaml") == []
     assert len(xcorr_verdict({"max_abs": 0.06, "bound": 0.057}, 4, "r.csv", "m.yaml")) == 1
+    mapped = {"t": "time", "v_in": "u", "accel": "y"}  # the user's --columns, kept in the hint
+    (hint,) = xcorr_verdict({"max_abs": 0.06, "bound": 0.057}, 4, "r.csv", "m.yaml", mapped)
+    assert "`fdi diagnose r.csv --model m.yaml --columns t=time,v_in=u,accel=y`" in hint
 
 
 def test_outputs_that_would_destroy_an_input_and_out_of_range_options(

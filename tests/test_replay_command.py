@@ -88,7 +88,18 @@ def test_replay_writes_events_summary_and_plot(files, capsys):
     ]
     assert summary["alarms"] == 1 and summary["alarm_peak_priority"] >= 1
     assert (root / "fig.png").stat().st_size > 10_000
-    assert "classification friction" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "classification friction" in out
+    lines = out.splitlines()
+    isolated = next(line for line in lines if "friction_isolated" in line)
+    assert " θ1=" in isolated and " s/m" in isolated  # θ2 with its unit
+    raised = next(line for line in lines if "alarm_raised" in line)
+    assert "level=- (not measured yet)" in raised  # not the level from before the fault
+    assert events[2]["level"] is None and "level_before" in events[2]
+    assert (
+        f"wrote events {root / 'ev.jsonl'} (4 lines); summary {root / 'sum.json'}; "
+        f"plot {root / 'fig.png'}"
+    ) in lines
 
 
 def test_replay_of_a_recording_with_a_gap(files):
@@ -182,7 +193,9 @@ def _trace_rows(path):
 
 
 @pytest.mark.parametrize("every", [1, 4])
-def test_trace_csv_and_npz_hold_every_nth_sample_with_the_events_states(files, tmp_path, every):
+def test_trace_csv_and_npz_hold_every_nth_sample_with_the_events_states(
+    files, tmp_path, every, capsys
+):
     """--trace: the header, one row per N samples, θ as the detector reports it, and the
     state named, switching where the events say it does."""
     root, model, rec = files
@@ -202,6 +215,8 @@ def test_trace_csv_and_npz_hold_every_nth_sample_with_the_events_states(files, t
         if every != 1:
             argv += ["--trace-every", str(every)]
         assert main(argv) == 0
+    said = [line for line in capsys.readouterr().out.splitlines() if line.startswith("wrote ")]
+    assert said and all(f"every {every} sample" in line for line in said), said
     header, rows = _trace_rows(csv_path)
     assert header == ["t", "theta1", "theta2", "friction_level", "statistic", "state"]
     src = scenario_recording("test_case_2")

@@ -153,6 +153,11 @@ class _State:
     counters: dict[str, int] = field(default_factory=lambda: {k: 0 for k in LIFECYCLE_KINDS})
 
 
+def _note(why: str) -> dict[str, str]:
+    """The operator's note of a request as an event field (none when empty)."""
+    return {"why": why} if why else {}
+
+
 class AlarmLifecycle:
     """One alarm point (the rig's friction fault): see the module docstring."""
 
@@ -220,8 +225,9 @@ class AlarmLifecycle:
             out.extend(self.step(now, level, event))
         return out
 
-    def acknowledge(self, now: float, by: str = "") -> tuple[bool, str, list[dict]]:
-        """Operator acknowledge; returns (accepted, reason, events)."""
+    def acknowledge(self, now: float, by: str = "", why: str = "") -> tuple[bool, str, list[dict]]:
+        """Operator acknowledge; returns (accepted, reason, events); ``why``, when given,
+        goes into the event (the operator's note)."""
         s = self._s
         if s.state == "unacknowledged":
             s.state = "acknowledged"
@@ -230,9 +236,11 @@ class AlarmLifecycle:
         else:
             return False, f"nothing to acknowledge (alarm state {s.state})", []
         s.acknowledged_at = now
-        return True, "acknowledged", [self._event(now, "alarm_acknowledged", by=by)]
+        return True, "acknowledged", [self._event(now, "alarm_acknowledged", by=by, **_note(why))]
 
-    def shelve(self, now: float, duration_s: float, by: str = "") -> tuple[bool, str, list[dict]]:
+    def shelve(
+        self, now: float, duration_s: float, by: str = "", why: str = ""
+    ) -> tuple[bool, str, list[dict]]:
         """Shelve the alarm point for ``duration_s`` (0 < d <= max_shelve_s)."""
         if not (
             isinstance(duration_s, (int, float)) and 0 < duration_s <= self.settings.max_shelve_s
@@ -242,14 +250,18 @@ class AlarmLifecycle:
         return (
             True,
             "shelved",
-            [self._event(now, "alarm_shelved", by=by, until=self._s.shelved_until)],
+            [self._event(now, "alarm_shelved", by=by, until=self._s.shelved_until, **_note(why))],
         )
 
-    def unshelve(self, now: float, by: str = "") -> tuple[bool, str, list[dict]]:
+    def unshelve(self, now: float, by: str = "", why: str = "") -> tuple[bool, str, list[dict]]:
         if not self.shelved(now):
             return False, "not shelved", []
         self._s.shelved_until = None
-        return True, "unshelved", [self._event(now, "alarm_unshelved", by=by, reason="request")]
+        return (
+            True,
+            "unshelved",
+            [self._event(now, "alarm_unshelved", by=by, reason="request", **_note(why))],
+        )
 
     # ------------------------------------------------------------------ persistence
     def to_dict(self) -> dict[str, Any]:
@@ -332,7 +344,19 @@ class AlarmLifecycle:
         s.peak_priority = s.priority
         s.peak_level = s.level
         s.acknowledged_at = None
-        out.append(self._event(now, "alarm_raised", cause=cause, classification=s.classification))
+        # the level of the fault is not measured yet (the reported level restarts at the
+        # detection, its first reading a window later): the event says so rather than
+        # showing the level from before the fault; alarm_priority and the status have it
+        out.append(
+            self._event(
+                now,
+                "alarm_raised",
+                cause=cause,
+                classification=s.classification,
+                level=None,
+                level_before=s.level,
+            )
+        )
 
     def _crossed(self, level: float) -> int:
         return sum(level >= step for step in self.settings.steps)

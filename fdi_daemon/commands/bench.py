@@ -11,7 +11,11 @@ HELP = "measure the monitor (per tick, batch, against baselines), the simulator 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="FILE", help="also write the numbers as JSON")
     parser.add_argument(
-        "--quick", action="store_true", help="smaller samples (a rough figure in a few seconds)"
+        "--quick",
+        action="store_true",
+        help="smaller samples: a rough figure, still minutes (2 min 43 s with --skip-e2e on "
+        "a shared 2-core machine); the end-to-end part adds minutes of fdi sim serve + fdi "
+        "run. Each stage's table is printed when it is measured, progress on stderr",
     )
     parser.add_argument(
         "--skip-e2e",
@@ -26,10 +30,8 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from fdi_daemon.bench.ident import bench_ident
-    from fdi_daemon.bench.monitor import bench_monitor
-    from fdi_daemon.bench.sim import bench_sim
     from fdi_daemon.io.outputs import check_outputs, write_json
 
     check_outputs({"--json": args.json})  # it failed after minutes of measuring
@@ -41,34 +43,68 @@ def run(args: argparse.Namespace) -> int:
             "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         }
     }
-    with console.status("monitor: per-tick step, batch replay and baselines ..."):
-        results["monitor"] = (
-            bench_monitor(
-                step_samples=5_000, batch_samples=200_000, baseline_samples=1_500, incident_s=300.0
-            )
-            if args.quick
-            else bench_monitor()
-        )
-    with console.status("simulator ..."):
-        results["sim"] = bench_sim(duration_s=30.0) if args.quick else bench_sim()
-    with console.status("identification ..."):
-        results["ident"] = bench_ident(repeats=1 if args.quick else 3)
+    stages = [
+        ("monitor: per-tick step, batch replay and baselines", "monitor"),
+        ("simulator", "sim"),
+        ("identification", "ident"),
+    ]
     if not args.skip_e2e:
-        from fdi_daemon.bench.e2e import bench_e2e
-
-        with console.status("daemon end to end: fdi sim serve + fdi run ..."):
-            results["e2e"] = bench_e2e(quick=args.quick)
-    console.print(_monitor_table(results["monitor"]))
-    console.print(_reference_table(results["monitor"]))
-    console.print(_sim_table(results["sim"]))
-    console.print(_ident_table(results["ident"]))
-    if "e2e" in results:
-        from fdi_daemon.bench.e2e import e2e_table
-
-        console.print(e2e_table(results["e2e"]))
+        stages.append(("daemon end to end: fdi sim serve + fdi run", "e2e"))
+    # progress on stderr (which stage, how long so far); each table as soon as it is measured
+    progress = Progress(
+        TextColumn("bench {task.completed:.0f}/{task.total:.0f}: {task.description}"),
+        BarColumn(),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    )
+    with progress:
+        task = progress.add_task(stages[0][0], total=len(stages))
+        for description, key in stages:
+            progress.update(task, description=description + " ...")
+            results[key] = _measure(key, args.quick)
+            for table in _tables(key, results):
+                console.print(table)
+            progress.advance(task)
     if args.json:
         write_json(args.json, results)
     return 0
+
+
+def _measure(key: str, quick: bool) -> dict:
+    """One stage's figures (``--quick``: smaller samples)."""
+    if key == "monitor":
+        from fdi_daemon.bench.monitor import bench_monitor
+
+        if quick:
+            return bench_monitor(
+                step_samples=5_000, batch_samples=200_000, baseline_samples=1_500, incident_s=300.0
+            )
+        return bench_monitor()
+    if key == "sim":
+        from fdi_daemon.bench.sim import bench_sim
+
+        return bench_sim(duration_s=30.0) if quick else bench_sim()
+    if key == "ident":
+        from fdi_daemon.bench.ident import bench_ident
+
+        return bench_ident(repeats=1 if quick else 3)
+    from fdi_daemon.bench.e2e import bench_e2e
+
+    return bench_e2e(quick=quick)
+
+
+def _tables(key: str, results: dict) -> list:
+    """The tables of one stage."""
+    if key == "monitor":
+        return [_monitor_table(results["monitor"]), _reference_table(results["monitor"])]
+    if key == "sim":
+        return [_sim_table(results["sim"])]
+    if key == "ident":
+        return [_ident_table(results["ident"])]
+    from fdi_daemon.bench.e2e import e2e_table
+
+    return [e2e_table(results["e2e"])]
 
 
 def _monitor_table(m: dict):

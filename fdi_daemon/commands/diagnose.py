@@ -67,17 +67,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _column(rec, name: str, path: str, option: str):
-    from fdi_daemon.errors import RecordingError
-    from fdi_daemon.io.recordings import fit_column
-
-    try:
-        rec[name]
-    except RecordingError as exc:  # "no column ..." names neither the file nor the option
-        raise RecordingError(f"{path}: {option} {name}: {exc}") from None
-    return fit_column(rec, name, path)
-
-
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -86,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     from fdi_daemon.errors import UserError
     from fdi_daemon.io.model_file import FdiModel, load_model, save_model
     from fdi_daemon.io.outputs import check_outputs, write_json
-    from fdi_daemon.io.recordings import read_recording, same_rate
+    from fdi_daemon.io.recordings import fit_column, read_recording, same_rate
 
     if args.order is not None and not 1 <= args.order <= MAX_ORDER:
         raise UserError(f"--order must be 1..{MAX_ORDER}, got {args.order}")
@@ -100,10 +89,12 @@ def run(args: argparse.Namespace) -> int:
     # only the time and the two columns used are required (real data name them freely)
     if args.fs is not None and not (np.isfinite(args.fs) and args.fs > 0):
         raise UserError(f"--fs must be a positive sample rate in Hz, got {args.fs:g}")
-    rec = read_recording(args.recording, required=("t",), columns=args.columns, fs_hz=args.fs)
+    rec = read_recording(
+        args.recording, required=("t", args.input, out_col), columns=args.columns, fs_hz=args.fs
+    )  # every missing column named at once
     fs = rec.fs
-    u = _column(rec, args.input, args.recording, "--input")
-    y = _column(rec, out_col, args.recording, "--output")
+    u = fit_column(rec, args.input, args.recording)
+    y = fit_column(rec, out_col, args.recording)
     min_samples = max(256, 40 * ((args.order or 8) + 2))
     if len(u) < min_samples:
         raise UserError(

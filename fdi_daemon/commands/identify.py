@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import argparse
 
-from fdi_daemon.io.columns import add_columns_option
+from fdi_daemon.io.columns import add_columns_option, columns_argument
 
 HELP = "identify the plant model G from a friction-free recording (v_in -> accel)"
 #: highest model order accepted (`--order` of identify and diagnose, G_e's NB and NF)
 MAX_ORDER = 12
 
 
-def xcorr_verdict(xcorr: dict, order: int, recording: str, model: str) -> list[str]:
+def xcorr_verdict(
+    xcorr: dict, order: int, recording: str, model: str, columns: dict[str, str] | None = None
+) -> list[str]:
     """What an out-of-band residual-input correlation means and what to try (one line;
     none when it is inside the 99 % band of a white residual)."""
     if not xcorr["max_abs"] > xcorr["bound"]:
@@ -20,7 +22,7 @@ def xcorr_verdict(xcorr: dict, order: int, recording: str, model: str) -> list[s
         f"  -> out of band: the residual still follows the input, so the model misses "
         f"input-driven dynamics (a nonlinearity, too low an order, a delay, or too "
         f"noisy a fit); try --order {order + 2}, check the band, or "
-        f"`fdi diagnose {recording} --model {model}`"
+        f"`fdi diagnose {recording} --model {model}{columns_argument(columns)}`"
     ]
 
 
@@ -238,7 +240,13 @@ def _report(args, ident, check, val_label) -> None:
         f"simulation fit    : {check['fit_percent']:.2f} % on {val_label}",
         f"residual-input xcorr: max |r| {check['xcorr']['max_abs']:.3f} "
         f"(99 % band ±{check['xcorr']['bound']:.3f})",
-        *xcorr_verdict(check["xcorr"], args.order, args.validate or args.recording, args.output),
+        *xcorr_verdict(
+            check["xcorr"],
+            args.order,
+            args.validate or args.recording,
+            args.output,
+            args.columns,
+        ),
         "band errors       : "
         + ", ".join(
             f"{r['band_hz'][0]:.3g}-{r['band_hz'][1]:.3g} Hz {100 * r['rms_relative_error']:.1f} %"

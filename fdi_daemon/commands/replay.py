@@ -128,18 +128,23 @@ def run(args: argparse.Namespace) -> int:
         replay.trace,
         replay.summary,
     )
+    written: list[str] = []  # "what PATH" of each output file, said at the end
     if stopped:  # the outputs hold what was replayed
         summary.update(samples=stopped["samples"], interrupted_at_t=stopped["t"])
     if args.events:
         from fdi_daemon.detect.events import write_events
 
         write_events(args.events, events)
+        written.append(f"events {args.events} ({len(events)} lines)")
     if args.summary:
         write_json(args.summary, summary)
+        written.append(f"summary {args.summary}")
     if args.trace:
         from fdi_daemon.detect.trace_file import write_trace
 
         write_trace(args.trace, trace, shown // trace.every)
+        rows = -(-len(trace.t) // (shown // trace.every))
+        written.append(f"trace {args.trace} ({rows} rows, every {shown} sample{'s' * (shown > 1)})")
     if args.plot:
         from fdi_daemon.detect.plots import plot_replay
 
@@ -157,7 +162,10 @@ def run(args: argparse.Namespace) -> int:
             onset,
             title=str(args.recording),
         )
+        written.append(f"plot {args.plot}")
     _report(events, summary)
+    if written:
+        print("wrote " + "; ".join(written))
     if monitor.baseline_note:
         print(f"note: {monitor.baseline_note}")
     if stopped:
@@ -312,16 +320,20 @@ def _stop_on_interrupt(stopped: dict | None, where):
 def _line(event: dict) -> str:
     extra = ""
     if event.get("theta1") is not None:
-        extra = f"  θ=({event['theta1']:.3g}, {event['theta2']:.3g})"
+        # θ2 multiplies the velocity's filtered regressor: s/m, as γ_f of the signature (1, γ_f)
+        extra = f"  θ1={event['theta1']:.3g}  θ2={event['theta2']:.3g} s/m"
+    if event.get("friction_level") is not None:
+        extra += f"  friction_level={event['friction_level']:.3g}"
     if "count" in event:
         extra += f"  count={event['count']} ({event.get('reason', '')})"
     if "missing_samples" in event:
         extra += f"  missing={event['missing_samples']}"
     if "alarm_id" in event:
         level = event.get("level")
+        shown = f"{level:.3g}" if level is not None else "- (not measured yet)"
         extra += (
             f"  alarm {event['alarm_id']} {event['state']} priority {event['priority']}"
-            f"  level={'-' if level is None else f'{level:.3g}'}"
+            f"  level={shown}"
         )
     return f"{event['t']:10.4f} s  {event['kind']}{extra}"
 

@@ -117,7 +117,20 @@ def daily_lines(data) -> list[str]:
     return lines
 
 
+def csv_cell(name: str, value: float) -> str:
+    """One CSV value: empty for NaN, ``time_unix`` in seconds to the millisecond, whole
+    numbers (counts, priority, state) as integers, other readings to 6 significant digits."""
+    if value != value:
+        return ""
+    if name == "time_unix":
+        return f"{value:.3f}"
+    if float(value).is_integer() and abs(value) < 2**53:
+        return str(int(value))
+    return f"{value:.6g}"
+
+
 def write_csv(path, data) -> None:
+    """The rows with ``time_utc`` (RFC 3339, milliseconds) first; see `csv_cell`."""
     import csv
     from datetime import datetime, timezone
 
@@ -129,10 +142,10 @@ def write_csv(path, data) -> None:
             writer = csv.writer(fh)
             writer.writerow(["time_utc"] + names)
             for i in range(len(data["time_unix"])):
-                when = datetime.fromtimestamp(data["time_unix"][i], timezone.utc)
+                when = datetime.fromtimestamp(float(data["time_unix"][i]), timezone.utc)
                 writer.writerow(
-                    [when.strftime("%Y-%m-%dT%H:%M:%SZ")]
-                    + ["" if data[n][i] != data[n][i] else f"{data[n][i]:.6g}" for n in names]
+                    [when.isoformat(timespec="milliseconds").replace("+00:00", "Z")]
+                    + [csv_cell(n, float(data[n][i])) for n in names]
                 )
     except OSError as exc:
         raise UserError(f"{path}: cannot write: {exc.strerror or exc}") from None

@@ -11,11 +11,12 @@ reconnects with a capped, growing delay until the daemon answers again.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -54,12 +55,29 @@ class StatusConnection:
     def request(self) -> dict[str, Any]:
         """The daemon's latest snapshot; on any failure the connection is closed and
         `DaemonUnreachable` says why (the next call connects again)."""
-        try:
+        with self._failures():
             if self._sock is None:
                 self._connect()  # the daemon greets a new client with a snapshot
             else:
                 self._sock.sendall(b"\n")
             return _parse(self._read_line())
+
+    def ask(self, request: dict[str, Any]) -> dict[str, Any]:
+        """The daemon's answer to one ``{"request": ...}`` (acknowledge, shelve, unshelve);
+        failures as in `request`."""
+        with self._failures():
+            if self._sock is None:
+                self._connect()
+                self._read_line()  # the greeting snapshot
+            assert self._sock is not None
+            self._sock.sendall(json.dumps(request).encode() + b"\n")
+            return _parse(self._read_line())
+
+    @contextlib.contextmanager
+    def _failures(self) -> Iterator[None]:
+        """Any failure inside: the connection closed and `DaemonUnreachable` saying why."""
+        try:
+            yield
         except DaemonUnreachable:
             self.close()
             raise

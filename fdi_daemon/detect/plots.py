@@ -66,6 +66,20 @@ def gap_spans(events: list[dict[str, Any]], period_s: float) -> list[tuple[float
     ]
 
 
+#: θ2 "departs" from γ_f·θ1 when their median relative difference, where θ1 reads a fault
+#: (above half a calibrated fault), exceeds this
+DEPARTURE = 0.5
+
+
+def _departs_from_signature(theta1: np.ndarray, theta2: np.ndarray, gamma_f: float) -> bool:
+    """Whether θ2 leaves the signature's line γ_f·θ1 while θ1 reads a fault."""
+    faulty = np.isfinite(theta1) & np.isfinite(theta2) & (theta1 > 0.5)
+    if not faulty.any() or gamma_f == 0:
+        return False
+    along = gamma_f * theta1[faulty]
+    return bool(np.median(np.abs(theta2[faulty] - along) / np.abs(along)) > DEPARTURE)
+
+
 def replay_figure(
     trace: MonitorTrace,
     events: list[dict[str, Any]],
@@ -149,13 +163,33 @@ def replay_figure(
             )
 
     # the reported friction level (calibrated faults) beside θ1, in the dashboard's magenta
-    ax_1.plot(t, level, lw=1.6, color="magenta", label="friction level (reported)")
-    for ax, values, name, sig, key in (
-        (ax_1, theta1, "θ1 (Coulomb), friction level\n(calibrated faults)", 1.0, "theta1"),
-        (ax_2, theta2, "θ2 (viscous)", gamma_f, "theta2"),
+    ax_1.plot(
+        t,
+        level,
+        lw=1.6,
+        color="magenta",
+        label="friction level: the reported reading\n(θ held to the signature (1, γ_f))",
+    )
+    # where the free fit leaves the signature's line θ2 = γ_f·θ1, say why (docs/detector.md)
+    ax_2.plot(t, gamma_f * theta1, lw=0.8, ls="--", color="tab:gray", label="γ_f·θ1")
+    departs = _departs_from_signature(theta1, theta2, gamma_f)
+    if departs:
+        ax_2.text(
+            0.01,
+            0.04,
+            "θ2 departs from γ_f·θ1: g1 and g2 are nearly collinear under few tones, so the\n"
+            "free fit slides along their valley; read the friction level (panel above)",
+            transform=ax_2.transAxes,
+            fontsize=7,
+            va="bottom",
+            bbox={"facecolor": "white", "alpha": 0.8, "lw": 0},
+        )
+    for ax, values, name, sig, key, unit in (
+        (ax_1, theta1, "θ1 (Coulomb), friction level\n(calibrated faults)", 1.0, "theta1", ""),
+        (ax_2, theta2, "θ2 (viscous, s/m)", gamma_f, "theta2", " s/m"),
     ):
         ax.plot(t, values, lw=0.8, color="tab:purple", label=name.split()[0])
-        ax.axhline(sig, color="tab:green", ls=":", lw=1.2, label=f"signature {sig:.3g}")
+        ax.axhline(sig, color="tab:green", ls=":", lw=1.2, label=f"signature {sig:.3g}{unit}")
         span = list(band[key]) if band is not None else []
         shown = np.concatenate([values, level]) if ax is ax_1 else values
         finite = shown[np.isfinite(shown)]

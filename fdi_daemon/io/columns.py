@@ -11,7 +11,7 @@ import argparse
 
 from fdi_daemon.errors import UserError
 
-__all__ = ["add_columns_option", "parse_columns"]
+__all__ = ["add_columns_option", "columns_argument", "parse_columns"]
 
 HELP = (
     "map the recording's column names to fdi's, e.g. t=time,v_in=u,accel=y "
@@ -38,6 +38,14 @@ def parse_columns(spec: str | None) -> dict[str, str]:
     if twice:
         raise UserError(f"--columns: column {twice[0]!r} is mapped to more than one name")
     return mapping
+
+
+def columns_argument(mapping: dict[str, str] | None) -> str:
+    """The ``--columns`` option that gives ``mapping`` back (`parse_columns`' inverse), with
+    a leading space, for a command line suggested to the user; empty when nothing is mapped."""
+    if not mapping:
+        return ""
+    return " --columns " + ",".join(f"{name}={column}" for name, column in mapping.items())
 
 
 def add_columns_option(parser: argparse.ArgumentParser) -> None:

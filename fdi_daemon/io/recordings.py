@@ -276,7 +276,7 @@ def read_recording(
         raise RecordingError(
             f"{path}: missing column(s) {', '.join(missing)} "
             f"(found: {', '.join(columns) or 'none'}; map other names with "
-            f"--columns {missing[0]}=COLUMN)"
+            f"--columns {','.join(f'{c}=COLUMN' for c in missing)})"
         )
     if "t" in columns and not np.all(np.isfinite(columns["t"])):
         bad = int(np.flatnonzero(~np.isfinite(columns["t"]))[0])

@@ -62,6 +62,7 @@ class AlarmKeeper:
         self._pending: list[dict[str, Any]] = []
         self.event_counts: dict[str, int] = {}
         self.lifecycle = AlarmLifecycle(settings)
+        self.restored = stored is not None
         if stored is not None:
             self.lifecycle = AlarmLifecycle.from_dict(stored["alarm"], settings, now=clock())
             self.event_counts = {
@@ -129,6 +130,30 @@ class AlarmKeeper:
                 "event_counts": dict(event_counts),
             }
 
+    def carried_over(self) -> str | None:
+        """One line naming the alarm a restart inherited from the state file (None when
+        there is none): id, priority, since when, acknowledged or not, shelved."""
+        if not self.restored:
+            return None
+        now = self._clock()
+        with self._lock:
+            s = self.lifecycle.summary(now)
+        if s["state"] == "normal":
+            return None
+        since = (
+            time.strftime("%Y-%m-%d %H:%M:%S %z", time.localtime(s["started"]))
+            if isinstance(s["started"], (int, float))
+            else "an unknown time"
+        )
+        text = (
+            f"alarm carried over from an earlier run: #{s['alarm_id']} P{s['priority']} "
+            f"{s['state'].replace('_', ' ')} since {since}"
+        )
+        if s["shelved_until"] is not None and now < s["shelved_until"]:
+            until = time.strftime("%H:%M:%S", time.localtime(s["shelved_until"]))
+            text += f", shelved until {until}"
+        return text
+
     def reconfigure(self, settings: AlarmSettings, allow_remote: bool) -> None:
         """New settings after a reload; the alarm itself goes on."""
         with self._lock:
@@ -137,12 +162,18 @@ class AlarmKeeper:
 
     # ------------------------------------------------------------------ server threads
     def handle(self, request: dict[str, Any]) -> dict[str, Any]:
-        """A request of the status socket or Modbus server: {"request", "by", "duration_s"}."""
+        """A request of the status socket or Modbus server: {"request", "by", "duration_s",
+        "why"}."""
         return self.request(
-            str(request.get("request")), str(request.get("by", "")), request.get("duration_s")
+            str(request.get("request")),
+            str(request.get("by", "")),
+            request.get("duration_s"),
+            str(request.get("why") or ""),
         )
 
-    def request(self, action: str, by: str, duration_s: float | None = None) -> dict[str, Any]:
+    def request(
+        self, action: str, by: str, duration_s: float | None = None, why: str = ""
+    ) -> dict[str, Any]:
         """acknowledge | shelve (duration_s) | unshelve; the answer says why if refused."""
         if not self.allow_remote:
             return {
@@ -153,13 +184,13 @@ class AlarmKeeper:
         now = self._clock()
         with self._lock:
             if action == "acknowledge":
-                ok, reason, events = self.lifecycle.acknowledge(now, by)
+                ok, reason, events = self.lifecycle.acknowledge(now, by, why)
             elif action == "shelve":
                 if not isinstance(duration_s, (int, float)) or isinstance(duration_s, bool):
                     return {"ok": False, "error": "shelve needs duration_s (seconds)"}
-                ok, reason, events = self.lifecycle.shelve(now, float(duration_s), by)
+                ok, reason, events = self.lifecycle.shelve(now, float(duration_s), by, why)
             elif action == "unshelve":
-                ok, reason, events = self.lifecycle.unshelve(now, by)
+                ok, reason, events = self.lifecycle.unshelve(now, by, why)
             else:
                 return {
                     "ok": False,

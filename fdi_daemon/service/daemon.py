@@ -46,6 +46,7 @@ from fdi_daemon.service.sinks import (
     stamp_event,
 )
 from fdi_daemon.service.state_file import model_identity, read_state, write_state
+from fdi_daemon.service.state_lock import StateDirLock
 from fdi_daemon.service.trend import open_trend_store
 
 log = logging.getLogger("fdi.daemon")
@@ -309,6 +310,8 @@ class Daemon:
         self.sinks: Sinks | None = None
         self.link = None
         self.keeper: AlarmKeeper | None = None
+        self.lock: StateDirLock | None = None  # one daemon per state folder
+        self.inherited_counts: dict[str, int] = {}  # the event counts the state file held
         self._wake = threading.Event()
         self._stopping = False
         self._reload = False
@@ -350,6 +353,8 @@ class Daemon:
         keeper = self.alarm_keeper(config, model)
         sinks = Sinks(config, model.fs, link_config["kind"], self.board, keeper)
         model_info = {"path": str(config.model_path), "provenance": model.provenance}
+        if self.loop is None:
+            self.inherited_counts = dict(keeper.event_counts)
         counts = self.loop.event_counts if self.loop is not None else keeper.event_counts
         loop = ServiceLoop(
             link,
@@ -438,12 +443,15 @@ class Daemon:
     # ------------------------------------------------------------------ running
     def run(self, duration_s: float | None = None) -> int:
         self.config = self.load_config()
+        self.lock = StateDirLock(self.config.state_dir)
+        self.lock.acquire()  # before any output is opened: a second daemon is refused here
         try:
             self.loop, self.sinks, self.link = self.assemble(
                 self.config, *self.prepare(self.config)
             )
         except BaseException:
             self._stop_device()
+            self.lock.release()
             raise
         previous = self._install_signals()
         end = None if duration_s is None else time.monotonic() + duration_s
@@ -467,6 +475,7 @@ class Daemon:
                 self.shutdown()  # a second SIGTERM meanwhile must not kill it half-way
             finally:
                 self._restore_signals(previous)
+                self.lock.release()
         return 0
 
     def announce(self) -> None:
@@ -499,6 +508,8 @@ class Daemon:
             )
         if sinks.metrics is not None:
             lines.append(f"  metrics {sinks.metrics.url}")
+        if self.keeper is not None and (carried := self.keeper.carried_over()) is not None:
+            lines.append(f"  {carried}")
         self.echo("\n".join(lines))
 
     def reload(self) -> None:
@@ -508,9 +519,18 @@ class Daemon:
         """
         self.notifier.reloading()
         log.info("SIGHUP: reloading %s", self.config_path or "the default config")
+        lock = self.lock
         try:
             config = self.load_config()
-            prepared = self.prepare(config)
+            if self.config is not None and config.state_dir != self.config.state_dir:
+                lock = StateDirLock(config.state_dir)
+                lock.acquire()
+            try:
+                prepared = self.prepare(config)
+            except BaseException:
+                if lock is not self.lock:
+                    lock.release()
+                raise
         except (UserError, OSError) as exc:
             log.error("reload failed, keeping the previous config: %s", exc)
             self.notifier.ready("reload failed; previous config kept")
@@ -521,7 +541,12 @@ class Daemon:
         try:
             self.loop, self.sinks, self.link = self.assemble(config, *prepared)
             self.config = config
+            if lock is not self.lock:
+                self.lock.release()
+                self.lock = lock
         except (UserError, OSError) as exc:
+            if lock is not self.lock:
+                lock.release()
             log.error(
                 "reload failed while opening the outputs, back to the previous config: %s", exc
             )
@@ -554,6 +579,10 @@ class Daemon:
         lat = loop.tick_latency.summary()
         late = loop.lateness.summary()
         counts = ", ".join(f"{k} {v}" for k, v in sorted(loop.event_counts.items())) or "none"
+        this_run = {
+            k: n - self.inherited_counts.get(k, 0) for k, n in sorted(loop.event_counts.items())
+        }
+        this_run_text = ", ".join(f"{k} {n}" for k, n in this_run.items() if n > 0) or "none"
         return (
             f"fdi run: {loop.samples} samples, {loop.gaps} gaps, {loop.duplicates} "
             f"duplicates; tick latency p50 {lat['p50']:.0f} µs p99 {lat['p99']:.0f} µs "
@@ -561,8 +590,8 @@ class Daemon:
             f"{late['p99'] / 1e3:.1f} ms; deadline misses {loop.deadline_misses} "
             f"(> {loop.deadline_s * 1e3:g} ms; {loop.late_arrivals} arrived late); "
             f"dropped outputs "
-            f"{self.sinks.dropped() if self.sinks else 0}; events since the alarm state "
-            f"began (kept across restarts): {counts}"
+            f"{self.sinks.dropped() if self.sinks else 0}; events of this run: "
+            f"{this_run_text}; since the alarm state began (kept across restarts): {counts}"
         )
 
     # ------------------------------------------------------------------ signals

@@ -73,6 +73,22 @@ PRIORITY = {
 }
 
 
+#: longest ``by`` / ``why`` text of a socket request kept in the event log (characters)
+REQUEST_TEXT_MAX = 200
+
+
+def _text(value: Any) -> str:
+    """A request's free text, one line, at most `REQUEST_TEXT_MAX` characters."""
+    return " ".join(str(value).split())[:REQUEST_TEXT_MAX] if isinstance(value, str) else ""
+
+
+def _requester(value: Any) -> str:
+    """Who asked on the status socket: the request's ``by`` (`fdi alarm --by`), marked as
+    coming through the socket."""
+    who = _text(value)
+    return f"{who} (status socket)" if who else "status socket"
+
+
 def json_line(value: Any) -> str:
     return json.dumps(json_safe(value), allow_nan=False, separators=(",", ":")) + "\n"
 
@@ -235,10 +251,10 @@ def format_event(event: dict) -> str:
     t = event.get("t")
     when = f"t={t:10.3f} s" if isinstance(t, (int, float)) else "t=         - s"
     parts = [when, f"{kind.upper().replace('_', ' '):<17}"]
-    for key, label in (("theta1", "θ1"), ("theta2", "θ2")):
+    for key, label, unit in (("theta1", "θ1", ""), ("theta2", "θ2", " s/m")):  # θ2 as γ_f
         value = event.get(key)
         if isinstance(value, (int, float)) and math.isfinite(value):
-            parts.append(f"{label}={value:+.4g}")
+            parts.append(f"{label}={value:+.4g}{unit}")
     for key, value in event.items():
         if (
             key in ("t", "kind", "theta1", "theta2", "time")
@@ -416,7 +432,12 @@ class StatusSocketServer:
         duration = request.get("duration_s")
         return json_line(
             self.requests_handler(
-                {"request": action, "duration_s": duration, "by": "status socket"}
+                {
+                    "request": action,
+                    "duration_s": duration,
+                    "by": _requester(request.get("by")),
+                    "why": _text(request.get("why")),
+                }
             )
         ).encode()
 

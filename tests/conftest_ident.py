@@ -11,6 +11,7 @@ import pytest
 from scipy import signal
 
 from fdi_daemon.io.recordings import Recording, write_recording
+from tests.disk_cache import ROOT, cached_build
 
 FS = 256.0
 
@@ -94,30 +95,37 @@ SIM_SCENARIOS = (
 
 
 @pytest.fixture(scope="session")
-def sim_recordings(tmp_path_factory):
-    """CSV recordings of the simulated rig: the scenarios above and ident_chirp with seed 1."""
+def sim_recordings(request):
+    """CSV recordings of the simulated rig: the scenarios above and ident_chirp with seed 1
+    (built once per code version, shared by the xdist workers: tests/disk_cache.py)."""
     from hil_sim.scenarios import load_scenario, simulate
 
-    out = tmp_path_factory.mktemp("sim_rig")
-    paths = {}
-    for name in SIM_SCENARIOS:
-        scenario = load_scenario(f"configs/scenarios/{name}.yaml")
-        paths[name] = write_recording(out / f"{name}.csv", simulate(scenario))
-    scenario = load_scenario("configs/scenarios/ident_chirp.yaml")
-    paths["ident_chirp_seed1"] = write_recording(
-        out / "ident_chirp_seed1.csv", simulate(scenario, seed=1)
-    )
-    return paths
+    scenarios = {name: ROOT / f"configs/scenarios/{name}.yaml" for name in SIM_SCENARIOS}
+
+    def build(out):
+        for name, path in scenarios.items():
+            write_recording(out / f"{name}.csv", simulate(load_scenario(path)))
+        chirp = load_scenario(scenarios["ident_chirp"])
+        write_recording(out / "ident_chirp_seed1.csv", simulate(chirp, seed=1))
+
+    out = cached_build(request.config, "sim_recordings", scenarios.values(), build)
+    return {name: out / f"{name}.csv" for name in (*SIM_SCENARIOS, "ident_chirp_seed1")}
 
 
 @pytest.fixture(scope="session")
-def sim_model(sim_recordings, tmp_path_factory):
-    """Plant model of the simulated rig made by `fdi identify` on ident_chirp."""
+def sim_model(sim_recordings, request):
+    """Plant model of the simulated rig made by `fdi identify` on ident_chirp (built once per
+    code version, shared by the xdist workers)."""
     from fdi_daemon.cli import main
 
-    path = tmp_path_factory.mktemp("sim_model") / "model.yaml"
-    assert main(["identify", str(sim_recordings["ident_chirp"]), "-o", str(path)]) == 0
-    return path
+    def build(out):
+        assert (
+            main(["identify", str(sim_recordings["ident_chirp"]), "-o", str(out / "model.yaml")])
+            == 0
+        )
+
+    chirp = sim_recordings["ident_chirp"]
+    return cached_build(request.config, "sim_model", [chirp], build) / "model.yaml"
 
 
 def true_gamma(rec, t0: float, t1: float, min_speed_m_s: float = 0.01) -> float:

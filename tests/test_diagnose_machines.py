@@ -10,7 +10,7 @@ import pytest
 from scipy import signal
 
 from fdi_daemon.diagnose.workflow import run_diagnose
-from tests import silverbox_like
+from studies import silverbox_like
 from tests.diagnose_cases import (
     FS,
     arrow_recording,
@@ -115,7 +115,7 @@ def test_duffing_oscillator_recorded_as_a_benchmark():
 
 
 def test_a_hardening_spring_whose_first_loop_diverges_is_named():
-    # the Silverbox-like record (tests/silverbox_like.py) with its excitation to 80 Hz:
+    # the Silverbox-like record (studies/silverbox_like.py) with its excitation to 80 Hz:
     # the cubic spring fitted on the nominal motion and fed back at the arrow's tip made
     # the loop diverge from its start, and nothing was named (0.2857 -> 0.2857, in the
     # force balance); a start whose loop diverges is now shrunk towards the linear model

@@ -267,8 +267,9 @@ def _variant_and_its_model(index, tmp_path, monkeypatch):
     """Rig variant ``index`` (`test_detect_other_rig.rig_variant`: another load, valve, seal)
     and its own `fdi identify` model (`diagnose_rig_variants.identified_model`)."""
     monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent))
-    from diagnose_rig_variants import identified_model
     from test_detect_other_rig import rig_variant
+
+    from studies.diagnose_rig_variants import identified_model
 
     rig = rig_variant(index)
     return rig, identified_model(rig, tmp_path)

@@ -23,3 +23,22 @@ def test_ci_runs_exactly_the_readme_test_command():
     test_cmd = readme_commands()[1]
     ci_lines = (ROOT / ".ci" / "run").read_text().splitlines()
     assert test_cmd in ci_lines
+
+
+def test_version_has_one_source_and_the_changelog_names_it():
+    import subprocess
+    import sys
+
+    import fdi_daemon
+
+    pyproject = re.search(r'^version = "(.+)"$', (ROOT / "pyproject.toml").read_text(), re.M)[1]
+    printed = subprocess.run(
+        [sys.executable, "-m", "fdi_daemon", "--version"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
+    assert fdi_daemon.__version__ == pyproject
+    assert printed == ["fdi", pyproject]
+    changelog = (ROOT / "CHANGELOG.md").read_text()
+    assert "## Unreleased" in changelog and f"## {pyproject}" in changelog

@@ -1,7 +1,8 @@
-"""The velocity estimates against the simulator's true velocity (tests/velocity_response.py)."""
+"""The velocity estimates against the simulator's true velocity (studies/velocity_response.py)."""
 
 import pytest
-from velocity_response import response
+
+from studies.velocity_response import response
 
 
 @pytest.mark.parametrize("f_hz", [1.0, 2.0, 3.0, 5.0, 8.0, 10.0])

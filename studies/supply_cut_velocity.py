@@ -1,5 +1,5 @@
 """How right each velocity is after test case 2's bearing supply cut (docs/detector.md §4a).
-Run: ``python tests/supply_cut_velocity.py`` (seconds).
+Run: ``python studies/supply_cut_velocity.py`` (seconds).
 
 Test case 2 on the default simulated rig (8 Hz sine, supply cut at 2.9 s, the load stuck
 about a fifth of the time afterwards) against the simulator's true velocity from 3.5 to

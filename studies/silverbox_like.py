@@ -11,7 +11,7 @@ whose amplitude rises linearly), then ten realisations of an odd random-phase mu
 period's end), 131 072 samples at 610.35 Hz in all; 0.1 mV of position noise. The strength
 β = k₃ y²_rms/ω₀² (y_rms of the multisine part). Run as a script:
 
-    python tests/silverbox_like.py 0.01 0.02 [--band 80]   # two minutes per record
+    python studies/silverbox_like.py 0.01 0.02 [--band 80]   # two minutes per record
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The friction level with the high-pass and the model-based velocity on the simulated rig
-and its variants (docs/detector.md §4a). Run: ``python tests/friction_level_variants.py
+and its variants (docs/detector.md §4a). Run: ``python studies/friction_level_variants.py
 [default|v0|v1|velsrc ...]`` (about a minute per rig).
 
 Per rig: `fdi identify` on its chirps; `fdi signature` as shipped (high-pass velocity,

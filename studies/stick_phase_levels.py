@@ -1,6 +1,6 @@
 """Why a one-amplitude calibration gives a level that depends on the operation: the load's
 stick phases (docs/identification.md, "Where the four-tone level's spread comes from").
-Run: ``python tests/stick_phase_levels.py`` (about a minute).
+Run: ``python studies/stick_phase_levels.py`` (about a minute).
 
 Default simulated rig; plant `configs/model_sim_rig.yaml`; issue 12's four-tone calibration
 (`test_detect_friction_level.LOW_FREQUENCY_CALIBRATION`: the load is stuck about a sixth of

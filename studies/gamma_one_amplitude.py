@@ -1,5 +1,5 @@
 """Is γ_f identifiable from issue 12's one-amplitude four-tone calibration? (docs/identification.md,
-"γ_f from one amplitude"). Run: ``python tests/gamma_one_amplitude.py`` (about two minutes).
+"γ_f from one amplitude"). Run: ``python studies/gamma_one_amplitude.py`` (about two minutes).
 
 The four-tone run (2, 3.3, 5, 8 Hz at 0.45 V, bearing supply 45 % from 4 s; `fdi signature`
 window 5-20 s) is simulated twice, with and without the fault; the difference of the

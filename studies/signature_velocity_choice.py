@@ -1,9 +1,9 @@
 """Which velocity `fdi signature --velocity-method auto` keeps, and what the levels are then
 (docs/identification.md, "Choosing the velocity by the fit"). Run:
-``python tests/signature_velocity_choice.py [default|v0|v1|velsrc|variant0..variant7 ...]``
+``python studies/signature_velocity_choice.py [default|v0|v1|velsrc|variant0..variant7 ...]``
 (about two minutes per rig).
 
-Per rig (`tests/friction_level_variants.py`'s): `fdi identify` on its chirps, then
+Per rig (`studies/friction_level_variants.py`'s): `fdi identify` on its chirps, then
 `fdi signature` with ``--velocity-method auto`` (the default for a plant-only model) and
 with ``highpass`` on two calibration runs: the shipped one (`signature_calibration.yaml`,
 ``--fault-window 11:40``) and issue 12's procedure (four equal tones at 2, 3.3, 5 and 8 Hz,

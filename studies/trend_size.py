@@ -1,6 +1,6 @@
 """Measure the trend file's size: DAYS of minute rows through `TrendStore.append`.
 
-Usage: ``python tests/trend_size.py FOLDER [DAYS]`` (default 365). Appends one row per
+Usage: ``python studies/trend_size.py FOLDER [DAYS]`` (default 365). Appends one row per
 simulated minute (a level creeping up, seeded noise) exactly as the daemon does (one
 transaction per row, the hourly fold past retention) and prints the file size at 90 and
 180 days and at the end. Figures: docs/service.md, "Friction trend".

@@ -1,6 +1,6 @@
 """`Monitor.run` against the compiled reference chain, per sample, for two versions of the
 code alternating (docs/detector.md §6: steadier than one `fdi bench` run on a shared
-machine). Run: ``python tests/monitor_speed_pairs.py TREE_A TREE_B [ROUNDS]``, each TREE a
+machine). Run: ``python studies/monitor_speed_pairs.py TREE_A TREE_B [ROUNDS]``, each TREE a
 checkout (``git worktree add /tmp/a <rev>``); prints, per round and tree, the best of five
 runs over 1 M samples: ns a sample of the monitor and of the chain, and their ratio.
 """

@@ -1,5 +1,5 @@
 """Gain and phase of the velocity estimates against the simulator's true velocity, per
-frequency (docs/detector.md, §1 "Velocity"). Run: ``python tests/velocity_response.py``.
+frequency (docs/detector.md, §1 "Velocity"). Run: ``python studies/velocity_response.py``.
 
 The default simulated rig (fault-free, seal friction only) is driven by one sine per
 frequency; over the last whole periods of each run the fundamental of v̂ is divided by

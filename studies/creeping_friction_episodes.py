@@ -1,6 +1,6 @@
 """Alarm episodes of friction that creeps in, is there from the start, or never comes, on the
 simulated rig (issue 13's checks; docs/detector.md §4b). Run:
-``python tests/creeping_friction_episodes.py [highpass|observer ...]`` (several minutes).
+``python studies/creeping_friction_episodes.py [highpass|observer ...]`` (several minutes).
 
 Models: the shipped one (high-pass velocity, `fdi_daemon/data/model_sim_rig.yaml`) and one
 from `fdi signature --velocity-method model_observer` on the paired calibration run; each

@@ -1,6 +1,6 @@
 """What the stick phases do to the monitor's window (issue 12), and whether the data show
 them: θ1 of eq. (17) over the 1 s window with rows left out by a mask.
-Run: ``python tests/stick_window_oracle.py`` (about 15 s; docs/identification.md, "Where the
+Run: ``python studies/stick_window_oracle.py`` (about 15 s; docs/identification.md, "Where the
 four-tone level's spread comes from").
 
 Default simulated rig; the shipped model (`configs/model_sim_rig.yaml`, high-pass velocity,

@@ -1,13 +1,13 @@
 """The detector's events on the scenarios of `configs/scenarios` (seeds 0 and 1), one line
 each, to diff two versions of the code: a change meant to be faster must not move them
-(docs/detector.md §6). Run: ``python tests/scenario_events.py > events.txt`` (a minute),
+(docs/detector.md §6). Run: ``python studies/scenario_events.py > events.txt`` (a minute),
 with each version (``git worktree``), then ``diff``.
 """
 
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from conftest_detect import scenario_recording, sim_rig_model  # noqa: E402
 

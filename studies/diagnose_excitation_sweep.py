@@ -1,5 +1,5 @@
 """`fdi diagnose` under excitations other than the tests' multisine (docs/diagnose.md §9).
-Run: ``python tests/diagnose_excitation_sweep.py [mechanics] [duffing] [rig]`` (all three
+Run: ``python studies/diagnose_excitation_sweep.py [mechanics] [duffing] [rig]`` (all three
 by default; about five minutes each, the rig fifteen).
 
 mechanics: the §V model with its nominal model file, one parameter changed (mass × 0.8 and

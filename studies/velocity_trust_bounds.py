@@ -1,7 +1,7 @@
 """The bounds of the trusted-velocity gate (docs/detector.md §3, "Clearing"), measured on
 friction that creeps in under changing operation (the recordings of
 `creeping_friction_episodes.py`, shipped high-pass model with a baseline). Run:
-``python tests/velocity_trust_bounds.py`` (several minutes).
+``python studies/velocity_trust_bounds.py`` (several minutes).
 
 For each phase bound and share: the clearing count replayed on the sliding-window level
 (eq. 17) from the first detection on, trusted ticks below half the baseline's margin

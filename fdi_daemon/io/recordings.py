@@ -22,6 +22,7 @@ import contextlib
 import gzip
 import io
 import json
+import logging
 import math
 import zipfile
 from collections.abc import Mapping
@@ -32,6 +33,8 @@ import numpy as np
 
 from fdi_daemon.errors import RecordingError
 from fdi_daemon.io.outputs import replaced_atomically
+
+log = logging.getLogger("fdi.recordings")
 
 REQUIRED_COLUMNS = ("t", "v_in", "accel")
 
@@ -371,21 +374,41 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     ncol = len(header)
     if not any(line.strip() and not line.lstrip().startswith("#") for line in lines[body_start:]):
         return {name: np.empty(0) for name in header}, meta
+    data = _parse_csv_body(body, delimiter, ncol)
+    if data is None:
+        number, problem = _locate_bad_csv_line(path, lines, body_start, ncol, delimiter)
+        if number != _last_data_line(lines, body_start):
+            raise RecordingError(problem)
+        # a torn last line (a writer stopped mid-row): the rows before it are whole
+        log.warning("%s; dropped as a torn last line (the rows before it are read)", problem)
+        data = _parse_csv_body("\n".join(lines[body_start : number - 1]), delimiter, ncol)
+        if data is None:
+            raise RecordingError(problem)
+    columns = {name: np.ascontiguousarray(data[:, j]) for j, name in enumerate(header)}
+    if "seq" in columns:
+        columns["seq"] = _as_counter(columns["seq"], path)
+    return columns, meta
+
+
+def _parse_csv_body(body: str, delimiter: str, ncol: int) -> np.ndarray | None:
+    """The rows of a CSV body as a (rows, ncol) array; None when a line is malformed."""
     try:
         with np.errstate(all="ignore"):
             data = np.loadtxt(
                 io.StringIO(body), delimiter=delimiter, comments="#", ndmin=2, dtype=np.float64
             )
     except ValueError:
-        raise RecordingError(
-            _locate_bad_csv_line(path, lines, body_start, ncol, delimiter)
-        ) from None
-    if data.shape[1] != ncol:
-        raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol, delimiter))
-    columns = {name: np.ascontiguousarray(data[:, j]) for j, name in enumerate(header)}
-    if "seq" in columns:
-        columns["seq"] = _as_counter(columns["seq"], path)
-    return columns, meta
+        return None
+    return data if data.shape[1] == ncol or data.size == 0 else None
+
+
+def _last_data_line(lines: list[str], start: int) -> int:
+    """The number (from 1) of the body's last line that is neither blank nor a comment."""
+    for number in range(len(lines), start, -1):
+        line = lines[number - 1].strip()
+        if line and not line.startswith("#"):
+            return number
+    return 0
 
 
 def _delimiter(header: str) -> str:
@@ -399,20 +422,21 @@ def _delimiter(header: str) -> str:
 
 def _locate_bad_csv_line(
     path: Path, lines: list[str], start: int, ncol: int, delimiter: str
-) -> str:
+) -> tuple[int, str]:
+    """The number (from 1) of the first malformed body line and what is wrong with it."""
     for number in range(start + 1, len(lines) + 1):
         line = lines[number - 1].strip()
         if not line or line.startswith("#"):
             continue
         cells = line.split(delimiter)
         if len(cells) != ncol:
-            return f"{path}: line {number} has {len(cells)} field(s), the header has {ncol}"
+            return number, f"{path}: line {number} has {len(cells)} field(s), the header has {ncol}"
         for cell in cells:
             try:
                 float(cell)
             except ValueError:
-                return f"{path}: line {number}: {cell.strip()!r} is not a number"
-    return f"{path}: malformed CSV body"
+                return number, f"{path}: line {number}: {cell.strip()!r} is not a number"
+    return 0, f"{path}: malformed CSV body"
 
 
 #: largest sample counter accepted (2**53: every whole number up to it is exact in float64)

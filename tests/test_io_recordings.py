@@ -296,3 +296,29 @@ def test_an_interrupted_write_leaves_the_old_file_and_no_partial_one(tmp_path, m
         write_recording(path, make_recording(n=8))
     assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+@pytest.mark.parametrize("torn", ["0.0117,1.5", "0.0117,1.5,", "0.01", "0.0117,1.5,2e"])
+def test_a_torn_last_line_is_dropped_with_a_warning_naming_it(tmp_path, caplog, torn):
+    """A writer stopped mid-row leaves a malformed last line without its line end."""
+    rows = "".join(f"{k / FS:.6f},{k % 3},{k % 5}\n" for k in range(3))
+    path = tmp_path / "torn.csv"
+    path.write_text("# fs: 256\nt,v_in,accel\n" + rows + torn)
+    rec = read_recording(path)
+    assert len(rec) == 3
+    np.testing.assert_array_equal(rec.v_in, [0, 1, 2])
+    assert "line 6" in caplog.text and "torn last line" in caplog.text
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        "t,v_in,accel\n0,1,2\n0.0039,1\n0.0078,1,2\n0.0117,1,2\n",  # torn inside
+        "t,v_in,accel\n0,1,2\n0.0039,1,2\n0.0078,1\n",  # malformed, yet ended
+    ],
+)
+def test_a_torn_line_elsewhere_is_still_an_error(tmp_path, body):
+    path = tmp_path / "torn.csv"
+    path.write_text(body)
+    with pytest.raises(RecordingError, match=r"line \d has 2 field"):
+        read_recording(path)

@@ -377,9 +377,10 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     data = _parse_csv_body(body, delimiter, ncol)
     if data is None:
         number, problem = _locate_bad_csv_line(path, lines, body_start, ncol, delimiter)
-        if number != _last_data_line(lines, body_start):
+        torn = number == len(lines) and not text.endswith(("\n", "\r"))
+        if not torn:
             raise RecordingError(problem)
-        # a torn last line (a writer stopped mid-row): the rows before it are whole
+        # a writer stopped mid-row: a malformed last line without its line end
         log.warning("%s; dropped as a torn last line (the rows before it are read)", problem)
         data = _parse_csv_body("\n".join(lines[body_start : number - 1]), delimiter, ncol)
         if data is None:
@@ -400,15 +401,6 @@ def _parse_csv_body(body: str, delimiter: str, ncol: int) -> np.ndarray | None:
     except ValueError:
         return None
     return data if data.shape[1] == ncol or data.size == 0 else None
-
-
-def _last_data_line(lines: list[str], start: int) -> int:
-    """The number (from 1) of the body's last line that is neither blank nor a comment."""
-    for number in range(len(lines), start, -1):
-        line = lines[number - 1].strip()
-        if line and not line.startswith("#"):
-            return number
-    return 0
 
 
 def _delimiter(header: str) -> str:

@@ -31,6 +31,7 @@ COMMANDS: dict[str, str] = {
     "bench": "bench",
     "trend": "trend",
     "baseline": "baseline",
+    "convert": "convert",
 }
 
 

@@ -13,7 +13,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "recordings",
         metavar="DIR_OR_GLOB",
-        help="a folder of recordings (.csv, .csv.gz, .npz, .mat) or a glob "
+        help="a folder of recordings (.csv, .csv.gz, .npz, .mat, .parquet) or a glob "
         "pattern (quote it; ** recurses)",
     )
     which = parser.add_mutually_exclusive_group(required=True)

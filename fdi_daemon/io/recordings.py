@@ -8,7 +8,10 @@ Metadata are string key/value pairs (``fs``, ``scenario``, ``seed`` ...).
 Formats, chosen by file name:
 - ``.csv`` / ``.csv.gz``: header row, ``# key: value`` comment lines for metadata;
 - ``.npz``: one array per column, metadata as JSON in ``__meta__``;
-- ``.mat`` (MATLAB v5): one variable per column, metadata as JSON in ``meta_json``.
+- ``.mat`` (MATLAB v5): one variable per column, metadata as JSON in ``meta_json``;
+- ``.parquet`` (pyarrow, zstd): one column per column, metadata as the file's key-value
+  metadata; ``seq`` as int64, a float column as float32 where that is lossless
+  (`parquet_column_type`), else float64.
 
 Sampling is checked on read: a gap, a duplicate or time going backwards (in ``seq`` where
 present, else in ``t``) is reported, never papered over. ``read_recording(strict=True)``
@@ -37,6 +40,10 @@ from fdi_daemon.io.outputs import replaced_atomically
 log = logging.getLogger("fdi.recordings")
 
 REQUIRED_COLUMNS = ("t", "v_in", "accel")
+
+#: file endings of the recording formats, and as the error messages name them
+SUFFIXES = (".csv", ".csv.gz", ".npz", ".mat", ".parquet")
+FORMATS_TEXT = ".csv, .csv.gz, .npz, .mat or .parquet"
 
 #: relative tolerance on a sample interval before it counts as irregular
 DT_TOLERANCE = 0.25
@@ -250,10 +257,10 @@ def read_recording(
             columns_read, meta = _read_npz(path)
         elif name.endswith(".mat"):
             columns_read, meta = _read_mat(path)
+        elif name.endswith(".parquet"):
+            columns_read, meta = _read_parquet(path)
         else:
-            raise RecordingError(
-                f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)"
-            )
+            raise RecordingError(f"{path}: unknown recording format (use {FORMATS_TEXT})")
     except RecordingError:
         raise
     except (
@@ -483,6 +490,65 @@ def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     return columns, meta
 
 
+def _pyarrow_parquet(path: Path):  # -> the pyarrow.parquet module
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise RecordingError(
+            f"{path}: Parquet recordings need pyarrow: pip install pyarrow"
+        ) from None
+    return pq
+
+
+#: key-value metadata pyarrow and pandas write themselves (not the recording's)
+_FOREIGN_META = (b"ARROW:schema", b"pandas")
+
+
+def _read_parquet(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """Every numeric column, read by columns; the file's own key-value metadata."""
+    pq = _pyarrow_parquet(path)
+    table = pq.read_table(path)
+    raw = table.schema.metadata or {}
+    meta = {k.decode(): v.decode() for k, v in raw.items() if k not in _FOREIGN_META}
+    columns = {}
+    for name in table.column_names:
+        values = table.column(name).to_numpy(zero_copy_only=False)
+        columns[name] = _column(np.asarray(values), name, path)
+    return columns, meta
+
+
+def parquet_column_type(name: str, values: np.ndarray) -> str:
+    """The Parquet type of a column, lossless for what it holds: ``seq`` int64; a float
+    column float32 when every value is exactly a float32 (a sensor resolving at most 24
+    significant bits, as its ADC counts scaled by a power of two), else float64. Time
+    in seconds is float64 unless exact (1/256 s steps are)."""
+    if name == "seq":
+        return "int64"
+    as32 = values.astype(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        exact = np.array_equal(as32.astype(np.float64), values, equal_nan=True)
+    return "float32" if exact else "float64"
+
+
+#: rows per Parquet row group (about 4 min at 256 Hz): the unit a torn file keeps
+PARQUET_ROW_GROUP = 65_536
+
+
+def _write_parquet(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str]) -> None:
+    import pyarrow as pa
+
+    pq = _pyarrow_parquet(path)
+    arrays = {}
+    for name, col in columns.items():
+        col = np.asarray(col)
+        kind = parquet_column_type(name, col.astype(np.float64))
+        arrays[name] = pa.array(col.astype(np.int64 if kind == "int64" else kind))
+    table = pa.table(arrays).replace_schema_metadata(
+        {k.encode(): v.encode() for k, v in meta.items()}
+    )
+    pq.write_table(table, path, compression="zstd", row_group_size=PARQUET_ROW_GROUP)
+
+
 def _meta_object(text: str) -> dict[str, str]:
     """Metadata stored as JSON text: it must be an object of key/value pairs."""
     meta = json.loads(text)
@@ -504,8 +570,8 @@ def _column(arr: np.ndarray, name: str, path: Path) -> np.ndarray:
 
 def check_format(path: str | Path) -> None:
     """A RecordingError unless the file's ending names a recording format."""
-    if not Path(path).name.lower().endswith((".csv", ".csv.gz", ".npz", ".mat")):
-        raise RecordingError(f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
+    if not Path(path).name.lower().endswith(SUFFIXES):
+        raise RecordingError(f"{path}: unknown recording format (use {FORMATS_TEXT})")
 
 
 def write_recording(path: str | Path, rec: Recording) -> Path:
@@ -533,6 +599,8 @@ def write_recording(path: str | Path, rec: Recording) -> Path:
                     do_compression=True,
                     oned_as="column",
                 )
+            elif name.endswith(".parquet"):
+                _write_parquet(target, rec.columns, meta)
             else:
                 _write_csv(target, rec.columns, meta, path.name)
     except OSError as exc:

@@ -22,7 +22,7 @@ Sections::
     model: {path: model.yaml}
     monitor: {detector: {...}, velocity: {...}}   # override the model's sections
     sinks: {event_log, stdout, status_socket, modbus_status: {enabled, host, port, device_id}}
-    recorder: {enabled, dir, rotate_seconds, rotate_bytes, fsync_period_s, keep_files}
+    recorder: {enabled, dir, rotate_seconds, rotate_bytes, fsync_period_s, keep_files, format}
     service: {fs, deadline_s, status_period_s, queue_size, read_timeout_s, state_dir}
     mqtt: {enabled, host, port, site, rig, username, password_file, password_env, tls: {...}, ...}
     metrics: {listen}  # Prometheus exporter, e.g. 127.0.0.1:9108; null (default) = off
@@ -181,6 +181,12 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "fsync_period_s": Field(NUM, 1.0, "flush + fsync period, <= 1 s", _fsync_period),
         "keep_files": Field(
             INT, 0, "delete the oldest recordings beyond this many (0 keeps all)", _non_negative
+        ),
+        "format": Field(
+            STR,
+            "parquet",
+            "archive: parquet (closed CSVs converted) or csv",
+            _one_of("parquet", "csv"),
         ),
     },
     "service": {

@@ -27,6 +27,7 @@ import io
 import json
 import logging
 import math
+import warnings
 import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -401,7 +402,8 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
 def _parse_csv_body(body: str, delimiter: str, ncol: int) -> np.ndarray | None:
     """The rows of a CSV body as a (rows, ncol) array; None when a line is malformed."""
     try:
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
             data = np.loadtxt(
                 io.StringIO(body), delimiter=delimiter, comments="#", ndmin=2, dtype=np.float64
             )

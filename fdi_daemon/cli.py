@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "baseline": "baseline",
     "service": "service",
     "alarm": "alarm",
+    "convert": "convert",
 }
 
 

@@ -28,6 +28,15 @@ from fdi_daemon.dashboard.client import DaemonUnreachable, fetch_snapshot
 from fdi_daemon.io.recordings import read_recording
 from fdi_daemon.service.sinks import STATUS_REGISTER_COUNT, decode_status
 
+
+def archived_recordings(folder: Path) -> list[Path]:
+    """The recorder's files in start order, one per recording: its Parquet archive, or the
+    CSV journal while it is written or when the recorder was killed before converting it."""
+    files = sorted(folder.glob("rec-*"))  # .csv before .parquet: the archive wins
+    by_start = {p.name.removesuffix(".csv").removesuffix(".parquet"): p for p in files}
+    return list(by_start.values())
+
+
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "configs" / "model_sim_rig.yaml"
 ALARMS = ("fault_detected", "friction_isolated", "other_fault")
@@ -269,7 +278,7 @@ def test_modbus_tcp_friction_fault_link_loss_and_sigkill(tmp_path):
         # SIGKILL: the recorder loses at most 1 s of samples
         last_t = daemon.snapshot()["t"]
         assert daemon.stop(signal.SIGKILL) == -signal.SIGKILL
-        files = sorted((tmp_path / "recordings").glob("rec-*.csv"))
+        files = archived_recordings(tmp_path / "recordings")
         assert len(files) == 2  # the counter restart opened a second file
         rec = read_recording(files[-1], strict=False)
         assert rec.t[-1] >= last_t - 1.0, (rec.t[-1], last_t)
@@ -371,7 +380,7 @@ def test_serial_corruption_stall_friction_reload_and_sigterm(tmp_path):
         assert any(
             line.startswith("fdi run:") and "deadline misses" in line for line in daemon.lines
         )
-        (rec_file,) = sorted((tmp_path / "recordings").glob("rec-*.csv"))[:1]
+        (rec_file,) = archived_recordings(tmp_path / "recordings")[:1]
         rec = read_recording(rec_file, strict=False)
         assert rec.sampling.issues  # the corrupted frames and the stall are visible gaps
     finally:

@@ -21,7 +21,7 @@ from process_support import start_fdi, survivors, wait_for_children
 from fdi_daemon.cli import main
 from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.fleet.inputs import ModelMap, find_recordings
-from fdi_daemon.fleet.replay_one import ROW_COLUMNS, replay_row, summary_row
+from fdi_daemon.fleet.replay_one import ROW_COLUMNS, model_sha256, replay_row, summary_row
 from fdi_daemon.io.recordings import Recording, write_recording
 
 pytest.importorskip("dask.distributed")
@@ -95,10 +95,12 @@ def _single_replay_row(file: str, model: str | None, tmp: Path, capsys) -> dict:
     out = tmp / (Path(file).name + ".summary.json")
     code = main(["replay", file, "--model", model, "--summary", str(out)])
     captured = capsys.readouterr()
+    digest = model_sha256(model)
     if code != 0:
         assert code == 2 and captured.err.startswith("fdi replay: error: ")
-        return summary_row(file, model, error=captured.err.strip()[len("fdi replay: error: ") :])
-    return summary_row(file, model, json.loads(out.read_text()))
+        error = captured.err.strip()[len("fdi replay: error: ") :]
+        return summary_row(file, model, error=error, model_sha256=digest)
+    return summary_row(file, model, json.loads(out.read_text()), model_sha256=digest)
 
 
 def _read_csv_rows(path: Path) -> list[dict]:
@@ -451,3 +453,44 @@ def _start_fleet(fleet, tmp_path):
         "--out",
         str(tmp_path / "rows.csv"),
     )
+
+
+def test_rows_name_the_fdi_version_and_the_models_hash(tmp_path):
+    import hashlib
+
+    from fdi_daemon import __version__
+
+    rec = write_recording(tmp_path / "r.csv", scenario_recording("test_case_1", duration_s=2.0))
+    row = replay_row(str(rec), str(MODEL))
+    assert row["error"] is None and row["fdi_version"] == __version__
+    assert row["model_sha256"] == hashlib.sha256(MODEL.read_bytes()).hexdigest()
+
+
+def test_relative_paths_reach_the_workers_absolute_and_all_failing_exits_1(
+    tmp_path, monkeypatch, capsys
+):
+    """With --scheduler, workers resolve paths in their own folder: the jobs carry absolute
+    paths. A run in which every file fails exits 1; piped output keeps whole names."""
+    pa = pytest.importorskip("pyarrow.parquet")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "recs").mkdir()
+    (tmp_path / "m.yaml").write_bytes(MODEL.read_bytes())
+    long_name = "rig-with-a-name-far-longer-than-any-terminal-column-" + "x" * 60 + ".csv"
+    rec = scenario_recording("test_case_1", duration_s=2.0)
+    write_recording(tmp_path / "recs" / long_name, rec)
+    out = "r.parquet"
+    code = main(["fleet-replay", "recs", "--model", "m.yaml", "--workers", "1", "--out", out])
+    assert code == 0
+    table = pa.read_table(out)
+    (row,) = table.to_pylist()
+    assert row["error"] is None, row["error"]
+    assert row["file"] == str(tmp_path / "recs" / long_name)
+    assert row["model"] == str(tmp_path / "m.yaml")
+    assert table.schema.metadata[b"fdi_version"]
+    assert "M samples/s" in capsys.readouterr().out
+    assert main(["fleet-replay", "recs", "--model", "m.yaml", "--workers", "1"]) == 0
+    assert long_name in capsys.readouterr().out  # captured: not a terminal
+    (tmp_path / "recs" / "bad.csv").write_text("t,v_in\n0,1\n")
+    (tmp_path / "recs" / long_name).write_text("t,v_in\n0,1\n")
+    assert main(["fleet-replay", "recs", "--model", "m.yaml", "--workers", "1"]) == 1
+    assert "2 recording(s): 0 with alarms, 2 with errors" in capsys.readouterr().out

@@ -14,6 +14,7 @@ from fdi_daemon.io.recordings import (
     Recording,
     check_sampling,
     nominal_fs_hz,
+    parquet_column_type,
     read_recording,
     write_recording,
 )
@@ -35,7 +36,7 @@ def make_recording(n=512, seed=3, with_seq=True):
     return Recording(cols, {"fs": "256", "scenario": "unit test"})
 
 
-@pytest.mark.parametrize("suffix", [".csv", ".csv.gz", ".npz", ".mat"])
+@pytest.mark.parametrize("suffix", [".csv", ".csv.gz", ".npz", ".mat", ".parquet"])
 def test_round_trip_every_format(tmp_path, suffix):
     rec = make_recording()
     path = write_recording(tmp_path / f"rec{suffix}", rec)
@@ -296,3 +297,88 @@ def test_an_interrupted_write_leaves_the_old_file_and_no_partial_one(tmp_path, m
         write_recording(path, make_recording(n=8))
     assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+@pytest.mark.parametrize("torn", ["0.0117,1.5", "0.0117,1.5,", "0.01", "0.0117,1.5,2e"])
+def test_a_torn_last_line_is_dropped_with_a_warning_naming_it(tmp_path, caplog, torn):
+    """A writer stopped mid-row leaves a malformed last line without its line end."""
+    rows = "".join(f"{k / FS:.6f},{k % 3},{k % 5}\n" for k in range(3))
+    path = tmp_path / "torn.csv"
+    path.write_text("# fs: 256\nt,v_in,accel\n" + rows + torn)
+    rec = read_recording(path)
+    assert len(rec) == 3
+    np.testing.assert_array_equal(rec.v_in, [0, 1, 2])
+    assert "line 6" in caplog.text and "torn last line" in caplog.text
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        "t,v_in,accel\n0,1,2\n0.0039,1\n0.0078,1,2\n0.0117,1,2\n",  # torn inside
+        "t,v_in,accel\n0,1,2\n0.0039,1,2\n0.0078,1\n",  # malformed, yet ended
+    ],
+)
+def test_a_torn_line_elsewhere_is_still_an_error(tmp_path, body):
+    path = tmp_path / "torn.csv"
+    path.write_text(body)
+    with pytest.raises(RecordingError, match=r"line \d has 2 field"):
+        read_recording(path)
+
+
+def _with_gap_and_duplicate(rec: Recording) -> Recording:
+    """``rec`` without samples 100-102 and with sample 300 twice."""
+    keep = np.r_[np.arange(100), np.arange(103, 300), 300, np.arange(300, len(rec))]
+    return Recording({k: v[keep] for k, v in rec.columns.items()}, dict(rec.meta))
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".csv.gz", ".npz", ".mat"])
+def test_every_format_to_parquet_keeps_samples_gaps_duplicates_and_metadata(tmp_path, suffix):
+    source = write_recording(tmp_path / f"rec{suffix}", _with_gap_and_duplicate(make_recording()))
+    first = read_recording(source, strict=False)
+    parquet = write_recording(tmp_path / "rec.parquet", first)
+    back = read_recording(parquet, strict=False)
+    assert back.meta == first.meta
+    assert list(back.columns) == list(first.columns)
+    for name, col in first.columns.items():
+        np.testing.assert_array_equal(back[name], col)
+    assert back.sampling.issues == first.sampling.issues
+    assert [i.kind for i in back.sampling.issues] == ["gap", "duplicate"]
+    assert back.sampling.issues[0].missing_samples == 3
+
+
+def test_parquet_stores_float32_only_where_lossless(tmp_path):
+    """The rule: a float column is float32 when every value is exactly a float32 (ADC counts
+    times a power of two), else float64; seq is int64; the round trip is exact either way."""
+    import pyarrow.parquet as pq
+
+    n = 1024
+    rng = np.random.default_rng(45)
+    counts = rng.integers(-32768, 32768, n)
+    rec = Recording(
+        {
+            "seq": np.arange(n, dtype=np.int64),
+            "t": np.arange(n) / FS,  # 1/256 s steps: exact in float32 up to 2**24 / 256 s
+            "v_in": counts * 2.0**-13,  # a 16-bit ADC, 8 V full scale: float32
+            "accel": rng.normal(0.0, 2.0, n),  # full float64 precision: float64
+        },
+        {"fs": "256", "units": "t=s v_in=V accel=m/s^2", "model_sha256": "ab" * 32},
+    )
+    path = write_recording(tmp_path / "rec.parquet", rec)
+    schema = pq.read_schema(path)
+    types = {name: str(schema.field(name).type) for name in schema.names}
+    assert types == {"seq": "int64", "t": "float", "v_in": "float", "accel": "double"}
+    assert parquet_column_type("accel", np.float32(rng.normal(size=8)).astype(float)) == "float32"
+    assert pq.ParquetFile(path).metadata.row_group(0).column(0).compression == "ZSTD"
+    back = read_recording(path)
+    for name, col in rec.columns.items():
+        np.testing.assert_array_equal(back[name], col)
+    assert back.meta == rec.meta
+
+
+def test_a_torn_parquet_file_is_a_clear_error(tmp_path):
+    path = write_recording(tmp_path / "rec.parquet", make_recording())
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(RecordingError, match="rec.parquet: cannot read recording") as info:
+        read_recording(path)
+    assert "\n" not in str(info.value)

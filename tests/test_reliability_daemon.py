@@ -18,7 +18,13 @@ import time
 import numpy as np
 import pytest
 from reliability_support import ALARMS, write_config
-from test_e2e_service import DaemonProcess, device_time_s, monitoring, start_device
+from test_e2e_service import (
+    DaemonProcess,
+    archived_recordings,
+    device_time_s,
+    monitoring,
+    start_device,
+)
 
 from fdi_daemon.io.recordings import read_recording
 
@@ -52,7 +58,7 @@ def crash_cycles(tmp_path, kills: int, seed: int) -> None:
             events = [json.loads(line) for line in lines]  # every line is whole JSON
             assert sum(e["kind"] == "calibrated" for e in events) == run + 1
             previous_lines = lines
-            files = sorted((tmp_path / "recordings").glob("rec-*.csv"))
+            files = archived_recordings(tmp_path / "recordings")
             assert len(files) == run + 1, "a restart starts a new recording file"
             recs = [read_recording(f, strict=False) for f in files]
             assert recs[-1].t[-1] >= t_kill - 1.0, (run, recs[-1].t[-1], t_kill)

@@ -13,7 +13,9 @@ OUTPUT_COLUMNS = {"acceleration": "accel", "velocity": "velocity", "position": "
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", metavar="REC", help="recording (.csv, .csv.gz, .npz, .mat)")
+    parser.add_argument(
+        "recording", metavar="REC", help="recording (.csv, .csv.gz, .npz, .mat, .parquet)"
+    )
     src = parser.add_mutually_exclusive_group(required=True)
     src.add_argument("--model", metavar="MODEL.yaml", help="model file with the nominal Ĝ")
     src.add_argument(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 
 HELP = "replay many recordings (each with its rig's model) on a Dask cluster: one row per file"
@@ -13,7 +14,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "recordings",
         metavar="DIR_OR_GLOB",
-        help="a folder of recordings (.csv, .csv.gz, .npz, .mat) or a glob "
+        help="a folder of recordings (.csv, .csv.gz, .npz, .mat, .parquet) or a glob "
         "pattern (quote it; ** recurses)",
     )
     which = parser.add_mutually_exclusive_group(required=True)
@@ -59,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
     models = ModelMap.single(args.model) if args.model else ModelMap.load(args.model_map)
     files = find_recordings(args.recordings)
     check_outputs({"--out": args.out}, files)
-    jobs = [(file, models.model_for(file)) for file in files]
+    # absolute paths: a --scheduler's workers resolve a relative one in their own folder
+    jobs = [(_absolute(file), _absolute(models.model_for(file))) for file in files]
 
     progress, task = _progress(len(jobs))
     started = time.monotonic()
@@ -74,16 +76,23 @@ def run(args: argparse.Namespace) -> int:
     errors = sum(row["error"] is not None for row in rows)
     alarms = sum(bool(row["alarm_episodes"]) for row in rows)
     recorded_s = sum(row["samples"] / row["fs"] for row in rows if row["samples"])
+    samples = sum(row["samples"] or 0 for row in rows)
+    busy_s = max(done - ready, 1e-9)
     print(
         f"{len(rows)} recording(s): {alarms} with alarms, {errors} with errors"
         + (f"; table in {args.out}" if args.out else "")
     )
     print(
         f"{recorded_s:.0f} s of recordings replayed in {done - ready:.1f} s "
-        f"({recorded_s / max(done - ready, 1e-9):.0f}x real time) after "
+        f"({recorded_s / busy_s:.0f}x real time, {samples / busy_s / 1e6:.2f} M samples/s, "
+        f"{len(rows) / busy_s:.1f} files/s) after "
         f"{ready - started:.1f} s to start (or reach) the cluster"
     )
-    return 0
+    return 1 if rows and errors == len(rows) else 0
+
+
+def _absolute(path: str | None) -> str | None:
+    return None if path is None else os.path.abspath(path)
 
 
 def _progress(total: int):
@@ -135,7 +144,8 @@ def _print_table(rows: list[dict]) -> None:
             "-" if level is None else f"{level:.4g}",
             _cell(row["gaps"]),
         )
-    console = Console()
+    # piped: as wide as the names need (a terminal's width would cut them)
+    console = Console() if sys.stdout.isatty() else Console(width=100_000)
     console.print(table)
     for row in rows:
         if row["error"] is not None:

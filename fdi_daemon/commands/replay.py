@@ -14,7 +14,9 @@ TRACE_POINTS = 400_000
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", metavar="REC", help="recording (.csv, .csv.gz, .npz, .mat)")
+    parser.add_argument(
+        "recording", metavar="REC", help="recording (.csv, .csv.gz, .npz, .mat, .parquet)"
+    )
     parser.add_argument(
         "--model",
         required=True,

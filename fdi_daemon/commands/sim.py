@@ -31,7 +31,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--output",
         required=True,
         metavar="REC",
-        help="recording to write (.csv, .csv.gz, .npz or .mat)",
+        help="recording to write (.csv, .csv.gz, .npz, .mat or .parquet)",
     )
     rec.add_argument(
         "--seed",

@@ -74,16 +74,74 @@ def jit(func=None, *, inline: bool = False, nrt: bool = False):
 
 def _compiling_indices_as_given(dispatcher):
     """``dispatcher``, compiling with every integer index taken as it is
-    (`_indices_as_given`)."""
+    (`_indices_as_given`). Each of the two numba internals this rests on falls back to plain
+    ``njit`` (slower, the same results) when a numba release refuses it: the private
+    ``_nrt`` option (`_without_private_nrt`) and the swapped index lowering (a compile that
+    fails with it is compiled again with numba's own)."""
     compile_signature = dispatcher.compile
 
     @functools.wraps(compile_signature)
     def compile(sig):
-        with _indices_as_given():
-            return compile_signature(sig)
+        try:
+            with _indices_as_given():
+                return _compile_allowing_nrt_refusal(dispatcher, compile_signature, sig)
+        except Exception as exc:  # numba wraps the failure in its own error types
+            if not _caused_by_index_swap(exc):
+                raise
+            _warn_fallback("the swapped index lowering (arrayobj.fix_integer_index)", exc)
+            return _compile_allowing_nrt_refusal(dispatcher, compile_signature, sig)
 
     dispatcher.compile = compile
     return dispatcher
+
+
+class _IndexSwapRefused(Exception):
+    """The swapped ``fix_integer_index`` failed inside numba's lowering."""
+
+
+#: marks `_IndexSwapRefused` in the text of numba's error that wraps it
+_INDEX_SWAP_MARK = "fdi index swap refused"
+
+
+def _caused_by_index_swap(exc: BaseException | None) -> bool:
+    """Whether ``exc`` (or an exception it wraps) is `_IndexSwapRefused`."""
+    seen = 0
+    while exc is not None and seen < 20:
+        if isinstance(exc, _IndexSwapRefused) or _INDEX_SWAP_MARK in str(exc):
+            return True
+        exc, seen = exc.__cause__ or exc.__context__, seen + 1
+    return False
+
+
+def _compile_allowing_nrt_refusal(dispatcher, compile_signature, sig):
+    """``compile_signature(sig)``; when numba refuses the private ``_nrt`` option (an
+    unknown option is a KeyError or TypeError naming it), the option is dropped from the
+    dispatcher and the kernel compiled as plain ``njit`` (with numba's runtime)."""
+    try:
+        return compile_signature(sig)
+    except (KeyError, TypeError, ValueError) as exc:
+        if "_nrt" not in str(exc) or "_nrt" not in dispatcher.targetoptions:
+            raise
+        _warn_fallback("the private numba option _nrt", exc)
+        dispatcher.targetoptions.pop("_nrt")
+        return compile_signature(sig)
+
+
+@functools.cache
+def _warn_fallback(internal: str, exc: BaseException) -> None:
+    """One warning per internal and cause: the kernels run slower, with the same results."""
+    log.warning(
+        "numba %s refused %s (%s): kernels compile as plain njit, slower with the same results",
+        _numba_version(),
+        internal,
+        " ".join(str(exc).split())[:200],
+    )
+
+
+def _numba_version() -> str:
+    import numba
+
+    return str(numba.__version__)
 
 
 def _index_as_given(context, builder, idxty, idx, size):
@@ -91,6 +149,15 @@ def _index_as_given(context, builder, idxty, idx, size):
     from numba.core import types
 
     return context.cast(builder, idx, idxty, types.intp if idxty.signed else types.uintp)
+
+
+def _guarded_index_as_given(context, builder, idxty, idx, size):
+    """`_index_as_given`; any failure (a numba whose lowering calls it differently) is
+    `_IndexSwapRefused`, on which the kernel is compiled again with numba's own."""
+    try:
+        return _index_as_given(context, builder, idxty, idx, size)
+    except Exception as exc:  # any failure of an internal API: compile without the swap
+        raise _IndexSwapRefused(f"{_INDEX_SWAP_MARK}: {type(exc).__name__}: {exc}") from exc
 
 
 @contextlib.contextmanager
@@ -114,7 +181,7 @@ def _indices_as_given():
         if saved is None:  # a numba without this hook: its own indexing, the same results
             yield
             return
-        arrayobj.fix_integer_index = _index_as_given
+        arrayobj.fix_integer_index = _guarded_index_as_given
         try:
             yield
         finally:

@@ -21,9 +21,10 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from fdi_daemon.errors import ConfigError, UserError
+from fdi_daemon.io.recordings import SUFFIXES
 
-#: file endings of the recording formats read in a folder (`fdi_daemon.io.recordings`)
-RECORDING_SUFFIXES = (".csv", ".csv.gz", ".npz", ".mat")
+#: file endings of the recording formats read in a folder
+RECORDING_SUFFIXES = SUFFIXES
 _GLOB_CHARS = frozenset("*?[")
 
 

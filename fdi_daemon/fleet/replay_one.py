@@ -12,6 +12,7 @@ own runner for the progress bar, the real-time pacing or the dashboard.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,8 @@ ROW_COLUMNS = (
     "gaps",
     "missing_samples",
     "bad_samples",
+    "fdi_version",
+    "model_sha256",
     "error",
 )
 
@@ -104,9 +107,16 @@ def replay_recording(
 
 
 def summary_row(
-    file: str, model: str | None, summary: dict[str, Any] | None = None, error: str | None = None
+    file: str,
+    model: str | None,
+    summary: dict[str, Any] | None = None,
+    error: str | None = None,
+    model_sha256: str | None = None,
 ) -> dict[str, Any]:
-    """One row of the fleet table from a replay summary, or from the error that stopped it."""
+    """One row of the fleet table from a replay summary, or from the error that stopped it;
+    the row names the fdi version that replayed and the model file's SHA-256."""
+    from fdi_daemon import __version__
+
     s = summary or {}
     return {
         "file": file,
@@ -123,6 +133,8 @@ def summary_row(
         "gaps": (s.get("event_counts") or {}).get("data_gap", 0) if summary else None,
         "missing_samples": s.get("missing_samples"),
         "bad_samples": s.get("bad_samples"),
+        "fdi_version": __version__,
+        "model_sha256": model_sha256,
         "error": error,
     }
 
@@ -135,8 +147,31 @@ def replay_row(file: str, model: str | None) -> dict[str, Any]:
     if model is None:
         return summary_row(file, None, error="no model: the model map has no pattern for this file")
     try:
-        return summary_row(file, model, replay_recording(file, model).summary)
+        digest = model_sha256(model)
+    except OSError as exc:
+        return summary_row(file, model, error=f"{model}: cannot read the model: {exc.strerror}")
+    try:
+        return summary_row(file, model, replay_recording(file, model).summary, None, digest)
     except UserError as exc:
-        return summary_row(file, model, error=str(exc))
+        return summary_row(file, model, error=str(exc), model_sha256=digest)
     except Exception as exc:  # a bug in fdi on one file must not stop the fleet
-        return summary_row(file, model, error=f"internal error: {type(exc).__name__}: {exc}")
+        return summary_row(
+            file,
+            model,
+            error=f"internal error: {type(exc).__name__}: {exc}",
+            model_sha256=digest,
+        )
+
+
+def model_sha256(path: str) -> str:
+    """The SHA-256 of a model file, hashed once per worker for each version of the file
+    (its size and modification time)."""
+    stat = Path(path).stat()
+    return _file_sha256_of_version(str(Path(path).resolve()), stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=256)
+def _file_sha256_of_version(path: str, size: int, mtime_ns: int) -> str:
+    from fdi_daemon.ident.provenance import file_sha256
+
+    return file_sha256(path)

@@ -26,6 +26,8 @@ PARQUET_TYPES = {
     "gaps": "int64",
     "missing_samples": "int64",
     "bad_samples": "int64",
+    "fdi_version": "string",
+    "model_sha256": "string",
     "error": "string",
 }
 
@@ -56,5 +58,10 @@ def _write_parquet(path: Path, rows: Sequence[dict[str, Any]]) -> None:
         raise UserError(
             f"{path}: writing Parquet needs pyarrow: pip install 'fdi[fleet]' (or write .csv)"
         ) from None
-    schema = pa.schema([(name, getattr(pa, PARQUET_TYPES[name])()) for name in ROW_COLUMNS])
+    from fdi_daemon import __version__
+
+    schema = pa.schema(
+        [(name, getattr(pa, PARQUET_TYPES[name])()) for name in ROW_COLUMNS],
+        metadata={"fdi_version": __version__},
+    )
     pq.write_table(pa.Table.from_pylist(list(rows), schema=schema), path)

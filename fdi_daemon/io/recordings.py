@@ -8,7 +8,10 @@ Metadata are string key/value pairs (``fs``, ``scenario``, ``seed`` ...).
 Formats, chosen by file name:
 - ``.csv`` / ``.csv.gz``: header row, ``# key: value`` comment lines for metadata;
 - ``.npz``: one array per column, metadata as JSON in ``__meta__``;
-- ``.mat`` (MATLAB v5): one variable per column, metadata as JSON in ``meta_json``.
+- ``.mat`` (MATLAB v5): one variable per column, metadata as JSON in ``meta_json``;
+- ``.parquet`` (pyarrow, zstd): one column per column, metadata as the file's key-value
+  metadata; ``seq`` as int64, a float column as float32 where that is lossless
+  (`parquet_column_type`), else float64.
 
 Sampling is checked on read: a gap, a duplicate or time going backwards (in ``seq`` where
 present, else in ``t``) is reported, never papered over. ``read_recording(strict=True)``
@@ -22,7 +25,9 @@ import contextlib
 import gzip
 import io
 import json
+import logging
 import math
+import warnings
 import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -33,7 +38,13 @@ import numpy as np
 from fdi_daemon.errors import RecordingError
 from fdi_daemon.io.outputs import replaced_atomically
 
+log = logging.getLogger("fdi.recordings")
+
 REQUIRED_COLUMNS = ("t", "v_in", "accel")
+
+#: file endings of the recording formats, and as the error messages name them
+SUFFIXES = (".csv", ".csv.gz", ".npz", ".mat", ".parquet")
+FORMATS_TEXT = ".csv, .csv.gz, .npz, .mat or .parquet"
 
 #: relative tolerance on a sample interval before it counts as irregular
 DT_TOLERANCE = 0.25
@@ -247,10 +258,10 @@ def read_recording(
             columns_read, meta = _read_npz(path)
         elif name.endswith(".mat"):
             columns_read, meta = _read_mat(path)
+        elif name.endswith(".parquet"):
+            columns_read, meta = _read_parquet(path)
         else:
-            raise RecordingError(
-                f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)"
-            )
+            raise RecordingError(f"{path}: unknown recording format (use {FORMATS_TEXT})")
     except RecordingError:
         raise
     except (
@@ -371,21 +382,34 @@ def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     ncol = len(header)
     if not any(line.strip() and not line.lstrip().startswith("#") for line in lines[body_start:]):
         return {name: np.empty(0) for name in header}, meta
-    try:
-        with np.errstate(all="ignore"):
-            data = np.loadtxt(
-                io.StringIO(body), delimiter=delimiter, comments="#", ndmin=2, dtype=np.float64
-            )
-    except ValueError:
-        raise RecordingError(
-            _locate_bad_csv_line(path, lines, body_start, ncol, delimiter)
-        ) from None
-    if data.shape[1] != ncol:
-        raise RecordingError(_locate_bad_csv_line(path, lines, body_start, ncol, delimiter))
+    data = _parse_csv_body(body, delimiter, ncol)
+    if data is None:
+        number, problem = _locate_bad_csv_line(path, lines, body_start, ncol, delimiter)
+        torn = number == len(lines) and not text.endswith(("\n", "\r"))
+        if not torn:
+            raise RecordingError(problem)
+        # a writer stopped mid-row: a malformed last line without its line end
+        log.warning("%s; dropped as a torn last line (the rows before it are read)", problem)
+        data = _parse_csv_body("\n".join(lines[body_start : number - 1]), delimiter, ncol)
+        if data is None:
+            raise RecordingError(problem)
     columns = {name: np.ascontiguousarray(data[:, j]) for j, name in enumerate(header)}
     if "seq" in columns:
         columns["seq"] = _as_counter(columns["seq"], path)
     return columns, meta
+
+
+def _parse_csv_body(body: str, delimiter: str, ncol: int) -> np.ndarray | None:
+    """The rows of a CSV body as a (rows, ncol) array; None when a line is malformed."""
+    try:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+            data = np.loadtxt(
+                io.StringIO(body), delimiter=delimiter, comments="#", ndmin=2, dtype=np.float64
+            )
+    except ValueError:
+        return None
+    return data if data.shape[1] == ncol or data.size == 0 else None
 
 
 def _delimiter(header: str) -> str:
@@ -399,20 +423,21 @@ def _delimiter(header: str) -> str:
 
 def _locate_bad_csv_line(
     path: Path, lines: list[str], start: int, ncol: int, delimiter: str
-) -> str:
+) -> tuple[int, str]:
+    """The number (from 1) of the first malformed body line and what is wrong with it."""
     for number in range(start + 1, len(lines) + 1):
         line = lines[number - 1].strip()
         if not line or line.startswith("#"):
             continue
         cells = line.split(delimiter)
         if len(cells) != ncol:
-            return f"{path}: line {number} has {len(cells)} field(s), the header has {ncol}"
+            return number, f"{path}: line {number} has {len(cells)} field(s), the header has {ncol}"
         for cell in cells:
             try:
                 float(cell)
             except ValueError:
-                return f"{path}: line {number}: {cell.strip()!r} is not a number"
-    return f"{path}: malformed CSV body"
+                return number, f"{path}: line {number}: {cell.strip()!r} is not a number"
+    return 0, f"{path}: malformed CSV body"
 
 
 #: largest sample counter accepted (2**53: every whole number up to it is exact in float64)
@@ -467,6 +492,65 @@ def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     return columns, meta
 
 
+def _pyarrow_parquet(path: Path):  # -> the pyarrow.parquet module
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise RecordingError(
+            f"{path}: Parquet recordings need pyarrow: pip install pyarrow"
+        ) from None
+    return pq
+
+
+#: key-value metadata pyarrow and pandas write themselves (not the recording's)
+_FOREIGN_META = (b"ARROW:schema", b"pandas")
+
+
+def _read_parquet(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """Every numeric column, read by columns; the file's own key-value metadata."""
+    pq = _pyarrow_parquet(path)
+    table = pq.read_table(path)
+    raw = table.schema.metadata or {}
+    meta = {k.decode(): v.decode() for k, v in raw.items() if k not in _FOREIGN_META}
+    columns = {}
+    for name in table.column_names:
+        values = table.column(name).to_numpy(zero_copy_only=False)
+        columns[name] = _column(np.asarray(values), name, path)
+    return columns, meta
+
+
+def parquet_column_type(name: str, values: np.ndarray) -> str:
+    """The Parquet type of a column, lossless for what it holds: ``seq`` int64; a float
+    column float32 when every value is exactly a float32 (a sensor resolving at most 24
+    significant bits, as its ADC counts scaled by a power of two), else float64. Time
+    in seconds is float64 unless exact (1/256 s steps are)."""
+    if name == "seq":
+        return "int64"
+    as32 = values.astype(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        exact = np.array_equal(as32.astype(np.float64), values, equal_nan=True)
+    return "float32" if exact else "float64"
+
+
+#: rows per Parquet row group (about 4 min at 256 Hz): the unit a torn file keeps
+PARQUET_ROW_GROUP = 65_536
+
+
+def _write_parquet(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str]) -> None:
+    import pyarrow as pa
+
+    pq = _pyarrow_parquet(path)
+    arrays = {}
+    for name, col in columns.items():
+        col = np.asarray(col)
+        kind = parquet_column_type(name, col.astype(np.float64))
+        arrays[name] = pa.array(col.astype(np.int64 if kind == "int64" else kind))
+    table = pa.table(arrays).replace_schema_metadata(
+        {k.encode(): v.encode() for k, v in meta.items()}
+    )
+    pq.write_table(table, path, compression="zstd", row_group_size=PARQUET_ROW_GROUP)
+
+
 def _meta_object(text: str) -> dict[str, str]:
     """Metadata stored as JSON text: it must be an object of key/value pairs."""
     meta = json.loads(text)
@@ -488,8 +572,8 @@ def _column(arr: np.ndarray, name: str, path: Path) -> np.ndarray:
 
 def check_format(path: str | Path) -> None:
     """A RecordingError unless the file's ending names a recording format."""
-    if not Path(path).name.lower().endswith((".csv", ".csv.gz", ".npz", ".mat")):
-        raise RecordingError(f"{path}: unknown recording format (use .csv, .csv.gz, .npz or .mat)")
+    if not Path(path).name.lower().endswith(SUFFIXES):
+        raise RecordingError(f"{path}: unknown recording format (use {FORMATS_TEXT})")
 
 
 def write_recording(path: str | Path, rec: Recording) -> Path:
@@ -517,6 +601,8 @@ def write_recording(path: str | Path, rec: Recording) -> Path:
                     do_compression=True,
                     oned_as="column",
                 )
+            elif name.endswith(".parquet"):
+                _write_parquet(target, rec.columns, meta)
             else:
                 _write_csv(target, rec.columns, meta, path.name)
     except OSError as exc:

@@ -23,7 +23,7 @@ Sections::
     model: {path: model.yaml}
     monitor: {detector: {...}, velocity: {...}}   # override the model's sections
     sinks: {event_log, stdout, status_socket, modbus_status: {enabled, host, port, device_id}}
-    recorder: {enabled, dir, rotate_seconds, rotate_bytes, fsync_period_s, keep_files}
+    recorder: {enabled, dir, rotate_seconds, rotate_bytes, fsync_period_s, keep_files, format}
     service: {fs, deadline_s, status_period_s, queue_size, read_timeout_s, state_dir}
     mqtt: {enabled, host, port, site, rig, username, password_file, password_env, tls: {...}, ...}
     metrics: {listen}  # Prometheus exporter, e.g. 127.0.0.1:19108; null (default) = off

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
@@ -136,6 +136,9 @@ class Recorder(Section):
     fsync_period_s: FsyncPeriod = Field(default=1.0, description="flush + fsync period, <= 1 s")
     keep_files: Annotated[int, _rule(lambda v: v >= 0, "must be >= 0")] = Field(
         default=0, description="delete the oldest recordings beyond this many (0 keeps all)"
+    )
+    format: Literal["parquet", "csv"] = Field(
+        default="parquet", description="archive: parquet (closed CSVs converted) or csv"
     )
 
 

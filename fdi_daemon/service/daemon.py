@@ -124,6 +124,7 @@ class Sinks:
                     rec["fsync_period_s"],
                     rec["keep_files"],
                     meta={"link": link_kind, "config": config.source},
+                    archive_format=rec["format"],
                 )
             if config.mqtt["enabled"]:
                 from fdi_daemon.service.mqtt_sink import MqttSink

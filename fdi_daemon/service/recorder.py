@@ -11,6 +11,14 @@ loss loses at most that much. A file is never rewritten, only appended and rotat
 after ``rotate_seconds`` of sample time, ``rotate_bytes``, or when the device's counter
 restarts (seq going backwards: the device was reset). ``keep_files > 0`` deletes the
 oldest recordings beyond that many.
+
+The archive (``archive_format="parquet"``, the default; ``"csv"`` keeps the CSV files): the
+CSV being written is the journal, durable row by row; a closed one is converted to Parquet
+(`fdi_daemon.io.recordings`: zstd, seq int64, float32 where lossless, the metadata as
+key-value metadata) on a background thread, read back and compared, then deleted. A CSV left
+by a recorder that was killed (SIGKILL, power loss) is converted when the next recorder
+starts: its rows are all kept, a torn last row is dropped with a warning naming it, and a
+file that cannot be read stays as it is with an error in the log, never silently dropped.
 """
 
 from __future__ import annotations
@@ -19,18 +27,27 @@ import logging
 import math
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-from fdi_daemon.io.recordings import csv_header_lines, format_csv_rows
+from fdi_daemon.errors import RecordingError
+from fdi_daemon.io.recordings import (
+    csv_header_lines,
+    format_csv_rows,
+    read_recording,
+    write_recording,
+)
 from fdi_daemon.io.sample import Sample
 
 log = logging.getLogger("fdi.recorder")
 
 COLUMNS = ("seq", "t", "v_in", "accel", "position")
 PREFIX = "rec-"
+#: archive formats: the CSV journal converted to Parquet when closed, or kept as CSV
+ARCHIVE_FORMATS = ("parquet", "csv")
 
 
 class Recorder:
@@ -45,9 +62,13 @@ class Recorder:
         fsync_period_s: float = 1.0,
         keep_files: int = 0,
         meta: dict[str, str] | None = None,
+        archive_format: str = "parquet",
     ) -> None:
         if not 0 < fsync_period_s <= 1.0:
             raise ValueError("fsync_period_s must be in (0, 1]")
+        if archive_format not in ARCHIVE_FORMATS:
+            raise ValueError(f"archive_format must be one of {', '.join(ARCHIVE_FORMATS)}")
+        self.archive_format = archive_format
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.fs_hz = fs_hz
@@ -64,6 +85,11 @@ class Recorder:
         self._file_bytes = 0
         self._last_seq: int | None = None
         self._last_fsync = time.monotonic()
+        self._converter: ThreadPoolExecutor | None = None
+        if archive_format == "parquet":
+            self._converter = ThreadPoolExecutor(1, thread_name_prefix="fdi-archive")
+            for left in sorted(self.directory.glob(f"{PREFIX}*.csv")):  # a killed recorder's
+                self._convert_later(left)
 
     @property
     def path(self) -> Path | None:
@@ -91,7 +117,15 @@ class Recorder:
             self._last_fsync = time.monotonic()
 
     def close(self) -> None:
+        """Close the file being written and wait for its conversion to the archive."""
         self._close_file()
+        if self._converter is not None:
+            self._converter.shutdown(wait=True)
+            self._converter = None
+
+    def _convert_later(self, path: Path) -> None:
+        assert self._converter is not None
+        self._converter.submit(archive_csv, path)
 
     def _needs_rotation(self, s: Sample) -> bool:
         return (
@@ -149,14 +183,38 @@ class Recorder:
         os.close(self._fd)
         self._fd = None
         self._last_fsync = time.monotonic()
+        if self._converter is not None and self._path is not None:
+            self._convert_later(self._path)
 
     def _prune(self) -> None:
         if self.keep_files <= 0:
             return
-        files = sorted(self.directory.glob(f"{PREFIX}*.csv"))
+        files = sorted(
+            p for p in self.directory.glob(f"{PREFIX}*") if p.name.endswith((".csv", ".parquet"))
+        )
         for old in files[: -self.keep_files]:
             try:
                 old.unlink()
                 log.info("deleted old recording %s (keep_files=%d)", old, self.keep_files)
             except OSError as exc:
                 log.error("cannot delete old recording %s: %s", old, exc)
+
+
+def archive_csv(path: Path) -> Path | None:
+    """Convert a closed CSV recording to ``.parquet`` beside it, check that the Parquet
+    file reads back to the same samples, and delete the CSV; returns the Parquet path.
+    A CSV that cannot be read or converted is kept, with an error in the log (None)."""
+    target = path.with_suffix(".parquet")
+    try:
+        rec = read_recording(path, strict=False)
+        write_recording(target, rec)
+        back = read_recording(target, strict=False)
+        same = all(np.array_equal(back[k], v, equal_nan=True) for k, v in rec.columns.items())
+        if not same or back.meta != rec.meta:
+            raise RecordingError(f"{target}: does not read back to the samples of {path.name}")
+    except RecordingError as exc:
+        log.error("recording kept as CSV, not archived: %s", exc)
+        return None
+    path.unlink()
+    log.info("archived %s as %s (%d samples)", path.name, target.name, len(rec))
+    return target

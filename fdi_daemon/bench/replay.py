@@ -1,0 +1,131 @@
+"""Speed of `fdi replay` on files, and the size of the recorder's archive (issue 45).
+
+A recording of the simulated rig's changing operation (``fault_free_hour``, ``base_s``
+simulated, then repeated with a continuous counter and clock up to an hour) is written as
+the recorder's CSV journal and archived to Parquet by the recorder's own `archive_csv`.
+Each figure is the best of ``repeats`` wall-clock runs of ``fdi replay`` in a fresh
+process (what a user waits for):
+
+- ``fixed_cost_s``: a 1 s recording; ``import_baseline_s``: ``import numpy, scipy.signal,
+  yaml`` alone; their ratio ``fixed_cost_ratio`` (target ≤ 1.4);
+- ``hour_csv_samples_per_s`` / ``hour_parquet_samples_per_s``: the marginal rate, (hour
+  samples - 1 s samples) / (hour time - 1 s time); divided by the monitor's batch rate of
+  the same run they are ``share_of_batch_csv`` / ``share_of_batch_parquet``;
+- ``archive_bytes_per_rig_hour``: the Parquet file of the hour;
+- ``day_peak_rss_mib`` (when ``day=True``): peak resident memory of ``fdi replay`` on 24 h.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HOUR_S = 3600.0
+DAY_S = 24 * HOUR_S
+
+
+def _wall_s(argv: list[str], repeats: int) -> float:
+    """Best wall time (s) of ``argv`` run ``repeats`` times; it must succeed."""
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        subprocess.run(argv, check=True, capture_output=True, timeout=3600)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def _replay_argv(recording: Path, model: Path) -> list[str]:
+    return [sys.executable, "-m", "fdi_daemon", "replay", str(recording), "--model", str(model)]
+
+
+def _peak_rss_mib(argv: list[str]) -> float:
+    """Peak resident memory (MiB) of one run of ``argv`` (the children's ru_maxrss)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    subprocess.run(argv, check=True, capture_output=True, timeout=7200)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    if after <= before:  # an earlier child was larger: ru_maxrss keeps the largest
+        raise RuntimeError("peak RSS hidden by a larger earlier child; run this measure first")
+    return after / 1024.0
+
+
+def _recording(base_s: float, duration_s: float, fs_hz: float, seed: int):
+    """The recorder's columns for ``duration_s``: ``base_s`` of simulation, repeated."""
+    import numpy as np
+
+    from fdi_daemon.io.recordings import Recording
+    from hil_sim.scenarios import load_scenario, simulate
+
+    scenario = (
+        Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "fault_free_hour.yaml"
+    )
+    base = simulate(load_scenario(scenario), seed=seed, duration_s=base_s)
+    n = int(round(duration_s * fs_hz))
+    reps = -(-n // len(base))
+    cols = {
+        "seq": np.arange(n, dtype=np.int64),
+        "t": np.arange(n) / fs_hz,
+        **{k: np.tile(np.asarray(base[k]), reps)[:n] for k in ("v_in", "accel", "position")},
+    }
+    return Recording(cols, {"fs": f"{fs_hz:g}", "source": "fdi bench"})
+
+
+def bench_replay(
+    model: Path,
+    batch_samples_per_s: float,
+    base_s: float = 60.0,
+    repeats: int = 3,
+    day: bool = True,
+    seed: int = 0,
+) -> dict:
+    """The figures of the module docstring; ``batch_samples_per_s``: the monitor's batch
+    rate measured in the same run."""
+    from fdi_daemon.io.model_file import load_model
+    from fdi_daemon.io.recordings import write_recording
+    from fdi_daemon.service.recorder import archive_csv
+
+    fs = load_model(model).fs
+    out: dict = {}
+    with tempfile.TemporaryDirectory(prefix="fdi-bench-replay-") as tmp:
+        folder = Path(tmp)
+        hour = _recording(base_s, HOUR_S, fs, seed)
+        second = hour.samples(slice(0, int(round(fs))))
+        one_s = write_recording(folder / "one_s.csv", second)
+        hour_csv = write_recording(folder / "rec-hour.csv", hour)
+        journal = write_recording(folder / "rec-archive.csv", hour)
+        hour_parquet = archive_csv(journal)
+        assert hour_parquet is not None
+        # untimed: loads (or, on a fresh install, compiles) the kernels into numba's cache
+        subprocess.run(_replay_argv(one_s, model), check=True, capture_output=True, timeout=3600)
+        if day:  # first: ru_maxrss keeps the largest child
+            day_rec = _recording(base_s, DAY_S, fs, seed)
+            day_file = write_recording(folder / "day.parquet", day_rec)
+            del day_rec
+            out["day_peak_rss_mib"] = _peak_rss_mib(_replay_argv(day_file, model))
+        baseline = _wall_s([sys.executable, "-c", "import numpy, scipy.signal, yaml"], repeats)
+        fixed = _wall_s(_replay_argv(one_s, model), repeats)
+        csv_s = _wall_s(_replay_argv(hour_csv, model), repeats)
+        parquet_s = _wall_s(_replay_argv(hour_parquet, model), repeats)
+        marginal = len(hour) - len(second)
+        out.update(
+            {
+                "fixed_cost_s": fixed,
+                "import_baseline_s": baseline,
+                "fixed_cost_ratio": fixed / baseline,
+                "hour_csv_s": csv_s,
+                "hour_parquet_s": parquet_s,
+                "hour_csv_samples_per_s": marginal / (csv_s - fixed),
+                "hour_parquet_samples_per_s": marginal / (parquet_s - fixed),
+                "archive_bytes_per_rig_hour": os.path.getsize(hour_parquet),
+                "csv_bytes_per_rig_hour": os.path.getsize(hour_csv),
+                "batch_samples_per_s": batch_samples_per_s,
+            }
+        )
+    out["share_of_batch_csv"] = out["hour_csv_samples_per_s"] / batch_samples_per_s
+    out["share_of_batch_parquet"] = out["hour_parquet_samples_per_s"] / batch_samples_per_s
+    out["load_average"] = os.getloadavg()
+    return out

@@ -13,9 +13,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--quick",
         action="store_true",
-        help="a rough figure of every number in well under a minute (measured 20 s on a "
-        "quiet 2-core machine; the first run after installing also compiles the kernels, "
-        "about a minute more): the monitor per tick on 5 000 samples and in batch on 200 000, "
+        help="a rough figure of every number in well under a minute (20 s measured on a "
+        "2-core machine busy with other work, load 5; the first run after installing or "
+        "upgrading also compiles the kernels, 1-3 min more): the monitor per tick on 5 000 samples and in batch on 200 000, "
         "the simulator on 30 s, identification once, replay of a 10-minute file (rates "
         "scaled to an hour), no 24 h memory peak and no daemon end to end unless --e2e; "
         "same JSON keys as the full run. Each stage's table is printed when it is measured, "

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fdi_daemon.core.compiled import jit
 
@@ -29,7 +30,9 @@ SECONDS_PER_YEAR = 365.25 * 86400.0
 
 
 @jit(inline=True)
-def cusum_increment(e, s, inv_sigma2, shift):  # pragma: no cover - jit
+def cusum_increment(
+    e: float, s: float, inv_sigma2: float, shift: float
+) -> float:  # pragma: no cover - jit
     """ℓ of eq. (LLR): innovation ``e``, regressor ``s``, 1/σ², shift δ (same units as
     the coefficient)."""
     return shift * s * (e - 0.5 * shift * s) * inv_sigma2
@@ -41,9 +44,12 @@ def cusum_threshold(false_alarm_years: float, fs_hz: float) -> float:
     return math.log(false_alarm_years * SECONDS_PER_YEAR * fs_hz)
 
 
-def cusum_run(e, s, sigma2, shift: float, start: float = 0.0) -> np.ndarray:
+def cusum_run(
+    e: ArrayLike, s: ArrayLike, sigma2: ArrayLike, shift: float, start: float = 0.0
+) -> np.ndarray:
     """S_k of Page's CUSUM over arrays (plain Python reference, one sample at a time)."""
-    out = np.empty(len(e))
+    e, s, sigma2 = (np.asarray(x, dtype=float) for x in (e, s, sigma2))
+    out = np.empty(e.size)
     total = float(start)
     for k, (ek, sk, vk) in enumerate(zip(e, s, sigma2, strict=True)):
         total = max(0.0, total + shift * sk * (ek - 0.5 * shift * sk) / vk)

@@ -216,9 +216,17 @@ class Detector:
     _cal_count = _int(K.D_CAL_COUNT)
     theta1 = _float(K.E_THETA1)
     theta2 = _float(K.E_THETA2)
-    drift_statistic = _float(K.E_DRIFT)
     level_base = _float(K.E_LEVEL_BASE)
     del _int, _float
+
+    @property
+    def drift_statistic(self) -> float:
+        """The growing-fault path's CUSUM S (`detect.kernel._drift_tick`), 0 outside a run."""
+        return float(self.arena.f[self.fo + K.E_DRIFT])
+
+    @drift_statistic.setter
+    def drift_statistic(self, value: float) -> None:
+        self.arena.f[self.fo + K.E_DRIFT] = float(value)
 
     @property
     def state(self) -> str:

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from fdi_daemon.core.compiled import jit
 from fdi_daemon.core.cusum import cusum_increment
 from fdi_daemon.core.kernels import packed_row_into, solve_packed, sums_floats, sums_push
@@ -236,7 +238,7 @@ def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
 
 
 @jit
-def episode_rebase(f, ii, eo, ref):  # pragma: no cover - jit
+def episode_rebase(f: np.ndarray, ii: np.ndarray, eo: int, ref: int) -> None:  # pragma: no cover
     """An episode the growing-fault path raised is judged against the reference as it was
     when that path's CUSUM run began (θ at f[ref..ref+3], 1/σ² at f[ref+4]): the moving
     reference at the detection has learnt part of a fault that grows."""

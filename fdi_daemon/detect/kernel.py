@@ -36,6 +36,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from fdi_daemon.core.compiled import jit
 from fdi_daemon.core.cusum import cusum_increment
 from fdi_daemon.core.kernels import (
@@ -453,7 +455,18 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def _drift_tick(f, ii, res, fo, out, armed, r, g1, g2, xhat):  # pragma: no cover - jit
+def _drift_tick(
+    f: np.ndarray,
+    ii: np.ndarray,
+    res: int,
+    fo: int,
+    out: int,
+    armed: bool,
+    r: float,
+    g1: float,
+    g2: float,
+    xhat: float,
+) -> None:  # pragma: no cover - jit
     """The growing-fault path's statistic: Page's CUSUM (`core.cusum`) of the innovation
     along the signature's regressor s = g1 + γ g2, matched to a shift of
     ``drift_shift_level`` calibrated faults, against the residual test's reference as it

@@ -4,7 +4,8 @@ linearly over 1 s (bearing supply 80 -> 62 %, `ramp_spec`), under two operations
 `fdi signature`, as `tests/test_detect_other_rig.py` makes them); and the paper's test
 cases and a fault-free record on the same models (docs/detector.md §3, "Growing friction").
 Run: ``python studies/growing_friction_detection.py [default|v0|v1 ...]`` (a minute or two
-per rig).
+per rig); ``python studies/growing_friction_detection.py tail`` prints the fault-free
+excursion tail the threshold's τ comes from (about 3 minutes).
 
 Prints per rig, operation and seed the first `fault_detected` after the onset (delay in s,
 its path) and what followed, before the path (``drift_shift_level: 0``) and with it; for
@@ -131,7 +132,42 @@ def fmt(m):
     return f"{d}, then {later}, isolated {i}, {m['false_before']} before onset"
 
 
+def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201)):
+    """The fault-free CUSUM's excursions (runs of S > 0) on an hour of changing operation
+    that no test replays (seed 7), the shipped model with the alarm out of reach: how many
+    peak above each level (the threshold's basis, docs/detector.md). One `Monitor.step` a
+    sample, about 3 minutes."""
+    import copy
+
+    import numpy as np
+    from conftest_detect import scenario_recording, sim_rig_model
+
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.io.sample import Sample
+
+    model = copy.deepcopy(sim_rig_model())
+    model.detector = {**(model.detector or {}), "drift_correlation_samples": 10**6}
+    rec = scenario_recording("fault_free_hour", seed=seed)
+    mon = Monitor(model)
+    peaks, peak = [], 0.0
+    for k in range(len(rec)):
+        mon.step(Sample(k, float(rec.t[k]), float(rec.v_in[k]), float(rec.accel[k])))
+        s = mon.detector.drift_statistic
+        if s > 0.0:
+            peak = max(peak, s)
+        elif peak > 0.0:
+            peaks.append(peak)
+            peak = 0.0
+    p = np.array(peaks + ([peak] if peak > 0.0 else []))
+    print(f"fault-free hour seed {seed}: {p.size} excursions, largest {p.max():.1f}")
+    for level in levels:
+        print(f"  above {level}: {int((p > level).sum())}")
+
+
 def main(argv):
+    if argv[:1] == ["tail"]:
+        excursion_tail()
+        return
     names = tuple(argv) or ("default", "v0", "v1")
     for name, (rig, model) in models(names).items():
         for op_name, op in OPERATIONS.items():

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from fdi_daemon.core.compiled import Arena
+from fdi_daemon.core.cusum import cusum_threshold
 from fdi_daemon.core.innovation_test import InnovationTest
 from fdi_daemon.detect import episode_kernel as E
 from fdi_daemon.detect import kernel as K
@@ -147,11 +148,17 @@ class Detector:
         ii[epi + E.P_WARMUP] = self.warmup_samples
         ii[epi + E.P_O_POST : epi + E.P_O_G + 1] = E.episode_layout(epo, n, m)
         sc = int(ii[epi + E.P_O_SCAL])
+        #: the growing-fault path's threshold h = τ·ln(ARL₀): τ ticks per independent innovation (`core.cusum`)
+        self.drift_threshold = s.drift_correlation_samples * cusum_threshold(
+            s.drift_false_alarm_years, fs_hz
+        )
         f[sc + E.S_FMIN] = s.friction_min_level
         f[sc + E.S_THRESHOLD] = s.threshold
         f[sc + E.S_TOL1] = s.track_tolerance
         f[sc + E.S_TOL2] = s.track_tolerance * max(abs(self.gamma_f), 1.0)
         f[sc + E.S_GAMMA_F] = self.gamma_f
+        f[sc + E.S_DRIFT_SHIFT] = s.drift_shift_level if s.method == "sequential" else 0.0
+        f[sc + E.S_DRIFT_H] = self.drift_threshold
         ii[io + K.D_EPI] = epi
         ii[io + K.D_METHOD] = 1 if s.method == "band" else 0
         ii[io + K.D_HAS_BASELINE] = int(self.has_baseline)
@@ -166,6 +173,8 @@ class Detector:
         f[fo + K.E_THRESHOLD] = s.threshold
         f[fo + K.E_GUARD_THRESHOLD] = s.guard_threshold
         f[fo + K.E_FRICTION_MIN] = s.friction_min_level
+        f[fo + K.E_DRIFT_SHIFT] = s.drift_shift_level
+        f[fo + K.E_DRIFT_H] = self.drift_threshold
         if baseline_bins is not None:
             o = fo + K.E_CAL + 2 * self.calibration_samples
             f[o : o + 3 * bins + 1] = np.concatenate(
@@ -211,6 +220,15 @@ class Detector:
     del _int, _float
 
     @property
+    def drift_statistic(self) -> float:
+        """The growing-fault path's CUSUM S (`detect.kernel._drift_tick`), 0 outside a run."""
+        return float(self.arena.f[self.fo + K.E_DRIFT])
+
+    @drift_statistic.setter
+    def drift_statistic(self, value: float) -> None:
+        self.arena.f[self.fo + K.E_DRIFT] = float(value)
+
+    @property
     def state(self) -> str:
         return STATES[self.arena.i[self.io + K.D_STATE]]
 
@@ -231,6 +249,7 @@ class Detector:
         self._guard_until = 0
         self._above = 0
         self._level_above = 0
+        self.drift_statistic = 0.0
         self._hold_until = self.warmup_samples
         if self.state == "calibrating":
             self._cal_count = 0
@@ -261,6 +280,20 @@ class Detector:
             return [self._event(t, "fault_detected", theta1, theta2, path=self.level_path)]
         if code == K.FAST_ALARM:
             return [self._event(t, "fault_detected", theta1, theta2, path="fast")]
+        if code == K.DRIFT_ALARM:
+            # the growing-fault path (CUSUM): a fault, not yet confirmed as friction
+            return [
+                self._event(
+                    t,
+                    "fault_detected",
+                    theta1,
+                    theta2,
+                    path="drift",
+                    unconfirmed=True,
+                    drift_statistic=float(self.arena.f[self.fo + K.E_DRIFT]),
+                    drift_threshold=self.drift_threshold,
+                )
+            ]
         if code == K.CLEARED:
             return [self._event(t, "cleared", theta1, theta2)]
         ii, sc = self.arena.i, int(self.arena.i[self.epi + E.P_O_SCAL])

@@ -21,12 +21,16 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from fdi_daemon.core.compiled import jit
+from fdi_daemon.core.cusum import cusum_increment
 from fdi_daemon.core.kernels import packed_row_into, solve_packed, sums_floats, sums_push
 
 __all__ = [
     "episode_start",
     "episode_restart",
+    "episode_rebase",
     "episode_tick",
     "EPISODE_INTS",
     "episode_floats",
@@ -135,8 +139,12 @@ EPISODE_INTS = 37
     S_GAMMA_F,
     S_Z,
     S_MOTION,
-) = (0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16)
-SCAL_FLOATS = 19
+    S_DRIFT,
+    S_DRIFT_SHIFT,
+    S_DRIFT_H,
+    S_DRIFT_S,
+) = (0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 19, 20, 21, 22)
+SCAL_FLOATS = 23
 
 
 def episode_floats(n: int, m: int) -> int:
@@ -224,6 +232,21 @@ def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
     ii[eo + P_CLIPPED] = 0
     f[sc + S_LEVEL_CHANGE] = math.nan
     f[sc + S_EVIDENCE] = math.nan
+    # the growing-fault test against the frozen reference starts at its threshold: what
+    # raised the episode is there until the innovations say otherwise
+    f[sc + S_DRIFT] = f[sc + S_DRIFT_H]
+
+
+@jit
+def episode_rebase(f: np.ndarray, ii: np.ndarray, eo: int, ref: int) -> None:  # pragma: no cover
+    """An episode the growing-fault path raised is judged against the reference as it was
+    when that path's CUSUM run began (θ at f[ref..ref+3], 1/σ² at f[ref+4]): the moving
+    reference at the detection has learnt part of a fault that grows."""
+    sc = ii[eo + P_O_SCAL]
+    for q in range(4):
+        f[sc + S_THETA_REF + q] = f[ref + q]
+    f[sc + S_COULOMB_BASE] = f[ref]
+    f[sc + S_SIGMA2_REF] = 1.0 / f[ref + 4]
 
 
 @jit
@@ -314,6 +337,15 @@ def episode_tick(
     acc = acc + f[tr + 2] * xhat
     acc = acc + f[tr + 3] * 1.0
     e = r - acc
+    # the growing-fault CUSUM against the frozen reference along s = g1 + γ g2 (S_DRIFT_S,
+    # set by the caller), capped at twice its threshold so that it falls below the
+    # threshold within a bounded time once the shift is gone
+    if f[sc + S_DRIFT_SHIFT] > 0.0:
+        cap = 2.0 * f[sc + S_DRIFT_H]
+        d = f[sc + S_DRIFT] + cusum_increment(
+            e, f[sc + S_DRIFT_S], 1.0 / f[sc + S_SIGMA2_REF], f[sc + S_DRIFT_SHIFT]
+        )
+        f[sc + S_DRIFT] = cap if d > cap else (d if d > 0.0 else 0.0)
     # isolated, the episode reports θ and waits to clear: the friction evidence (the post
     # window's refit, the innovation beyond a linear change, the stopped load) is not
     # looked at again, so its windows are not kept
@@ -417,7 +449,11 @@ def episode_tick(
         # an unconfirmed episode (fault_detected, other_fault) holds while the friction
         # level is still at least half its margin above normal (issue 43): a fault that
         # creeps in keeps its episode until the level path confirms it, never raise-clear
-        normal = frozen_stat <= threshold and not over >= 0.5
+        # ... and (growing-fault path) while the innovations against the frozen reference
+        # still show the shift along the signature (its CUSUM at or above h)
+        normal = (
+            frozen_stat <= threshold and not over >= 0.5 and f[sc + S_DRIFT] < f[sc + S_DRIFT_H]
+        )
         needed = ii[eo + P_CLEAR]
     ii[eo + P_QUIET] = ii[eo + P_QUIET] + 1 if normal and moving else 0
     if ii[eo + P_QUIET] >= needed:

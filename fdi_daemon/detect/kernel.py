@@ -36,7 +36,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from fdi_daemon.core.compiled import jit
+from fdi_daemon.core.cusum import cusum_increment
 from fdi_daemon.core.kernels import (
     iir_step,
     itest_flush_p,
@@ -63,11 +66,12 @@ __all__ = [
     "ISOLATED",
     "OTHER_FAULT",
     "CLEARED",
+    "DRIFT_ALARM",
 ]
 
 #: codes of a tick: nothing to tell, or the event Python formats (the calibration's end is
 #: computed there too)
-QUIET, LEVEL_ALARM, CALIBRATED, FAST_ALARM, ISOLATED, OTHER_FAULT, CLEARED = range(7)
+QUIET, LEVEL_ALARM, CALIBRATED, FAST_ALARM, ISOLATED, OTHER_FAULT, CLEARED, DRIFT_ALARM = range(8)
 
 # filters
 F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL, F_VEL_LOW = range(6)
@@ -162,8 +166,12 @@ DET_INTS = 23
     E_THETA1,
     E_THETA2,
     E_OVER,
-) = range(11)
-E_CAL = 11  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
+    E_DRIFT,
+    E_DRIFT_SHIFT,
+    E_DRIFT_H,
+    E_DRIFT_REF,  # .. +4: the reference θ (4) and 1/σ² frozen at the start of a CUSUM run
+) = range(15)
+E_CAL = 19  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
 STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER = range(1, 6)
 
 
@@ -403,6 +411,7 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
     if tick < ii[io + D_HOLD_UNTIL]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
+        f[fo + E_DRIFT] = 0.0
         return QUIET
     ii[io + D_LEVEL_ABOVE] = ii[io + D_LEVEL_ABOVE] + 1 if over > 1.0 else 0
     if ii[io + D_LEVEL_ABOVE] >= ii[io + D_LEVEL_SAMPLES]:
@@ -426,14 +435,59 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
             or theta2 > f[fo + E_HI2]
         )
     else:
-        alarm = ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL] and stat > f[fo + E_THRESHOLD]
+        armed = ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL]
+        alarm = armed and stat > f[fo + E_THRESHOLD]
+        _drift_tick(f, ii, res, fo, out, armed, r, g1, g2, xhat)
     ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if alarm else 0
     if ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
+        f[fo + E_DRIFT] = 0.0
         _start(f, ii, io, res, 0)
         return FAST_ALARM
+    if f[fo + E_DRIFT] > f[fo + E_DRIFT_H]:
+        ii[io + D_ABOVE] = 0
+        ii[io + D_LEVEL_ABOVE] = 0
+        _start(f, ii, io, res, 0)
+        E.episode_rebase(f, ii, ii[io + D_EPI], fo + E_DRIFT_REF)
+        return DRIFT_ALARM
     return QUIET
+
+
+@jit(inline=True)
+def _drift_tick(
+    f: np.ndarray,
+    ii: np.ndarray,
+    res: int,
+    fo: int,
+    out: int,
+    armed: bool,
+    r: float,
+    g1: float,
+    g2: float,
+    xhat: float,
+) -> None:  # pragma: no cover - jit
+    """The growing-fault path's statistic: Page's CUSUM (`core.cusum`) of the innovation
+    along the signature's regressor s = g1 + γ g2, matched to a shift of
+    ``drift_shift_level`` calibrated faults, against the residual test's reference as it
+    was when the CUSUM's run began (at S = 0; B&N §8.1's two-model approach: the moving
+    reference would learn a fault that grows, the frozen one does not); restarted from 0
+    while the reference is not ready or the operating-point guard holds (the innovations
+    then describe the operating point, not friction)."""
+    shift = f[fo + E_DRIFT_SHIFT]
+    if not armed or shift <= 0.0:
+        f[fo + E_DRIFT] = 0.0
+        return
+    ref = fo + E_DRIFT_REF
+    if f[fo + E_DRIFT] == 0.0:
+        th = ii[res + 20]
+        for q in range(4):
+            f[ref + q] = f[th + q]
+        f[ref + 4] = f[ii[res + 22] + 4]
+    e = r - (f[ref] * g1 + f[ref + 1] * g2 + f[ref + 2] * xhat + f[ref + 3])
+    s = g1 + f[out + O_GAMMA] * g2
+    total = f[fo + E_DRIFT] + cusum_increment(e, s, f[ref + 4], shift)
+    f[fo + E_DRIFT] = total if total > 0.0 else 0.0
 
 
 @jit
@@ -453,6 +507,8 @@ def _episode(
     """A tick of the running episode, and its transition applied to the detector."""
     ep = ii[io + D_EPI]
     band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
+    out = ii[ii[io + D_CHAIN] + C_OUT]
+    f[ii[ep + E.P_O_SCAL] + E.S_DRIFT_S] = g1 + f[out + O_GAMMA] * g2
     packed_row_into(f, ii[res + 15], 4, ii[res + 16])  # this tick's row of the residual fit
     change = E.episode_tick(
         f,
@@ -492,6 +548,7 @@ def _episode(
     ii[io + D_EPISODE] = 0
     level_restart(f, ii, ii[io + D_LEVEL])
     ii[io + D_ABOVE] = 0
+    f[fo + E_DRIFT] = 0.0
     ii[io + D_GUARD_UNTIL] = max(ii[io + D_GUARD_UNTIL], ii[io + D_TICK] + ii[io + D_HOLD])
     return CLEARED
 

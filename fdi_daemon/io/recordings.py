@@ -352,7 +352,93 @@ def _open_text(path: Path):
     return open(path, encoding="utf-8-sig", newline="")
 
 
+#: a CSV at least this large is parsed by pyarrow's multi-threaded reader where pyarrow is
+#: installed (below it, importing pyarrow.csv costs more than it saves)
+ARROW_CSV_MIN_BYTES = 1 << 20
+
+#: line ends of str.splitlines other than \n (the NumPy reader splits on them too)
+_OTHER_LINE_ENDS = ("\r", "\x0b", "\x0c", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029")
+
+
 def _read_csv(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """A CSV recording: through pyarrow's CSV reader when the file is large and plain
+    (`_read_csv_arrow`), else, and for anything it does not take, NumPy's reader with its
+    findings and messages (`_read_csv_numpy`); both give the same arrays and metadata."""
+    if path.stat().st_size >= ARROW_CSV_MIN_BYTES:
+        found = _read_csv_arrow(path)
+        if found is not None:
+            return found
+    return _read_csv_numpy(path)
+
+
+def _read_csv_arrow(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]] | None:
+    """A plain CSV recording through pyarrow (multi-threaded): comment lines (metadata)
+    and the header as `_read_csv_numpy` reads them, then a body of numbers only. None
+    when pyarrow is missing or the file is not plain (a comment or a quote in the body,
+    other line ends than \n and \r\n, a malformed or torn line, an empty field ...):
+    the NumPy reader then reads it, or reports what is wrong, as before."""
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:
+        return None
+    if path.name.lower().endswith(".gz"):
+        with gzip.open(path, "rb") as fh:
+            data = fh.read()
+    else:
+        data = path.read_bytes()
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    meta: dict[str, str] = {}
+    pos = 0
+    header: list[str] | None = None
+    while pos < len(data):
+        end = data.find(b"\n", pos)
+        end = len(data) if end < 0 else end
+        try:
+            line = data[pos:end].decode("utf-8")
+        except UnicodeDecodeError:
+            return None
+        pos = end + 1
+        line = line[:-1] if line.endswith("\r") else line
+        if any(c in line for c in _OTHER_LINE_ENDS):
+            return None
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            key, sep, value = stripped[1:].partition(":")
+            if sep and key.strip():
+                meta[key.strip()] = value.strip()
+            continue
+        delimiter = _delimiter(stripped)
+        header = [h.strip().strip('"').strip() for h in stripped.split(delimiter)]
+        break
+    if header is None or len(set(header)) != len(header) or any(not h for h in header):
+        return None
+    body = data[pos:]
+    if not body.strip() or b"#" in body or b'"' in body or b"\r" in body.replace(b"\r\n", b""):
+        return None
+    try:
+        table = pacsv.read_csv(
+            pa.py_buffer(body),
+            read_options=pacsv.ReadOptions(column_names=header, use_threads=True),
+            parse_options=pacsv.ParseOptions(delimiter=delimiter, quote_char=False),
+            convert_options=pacsv.ConvertOptions(
+                column_types={name: pa.float64() for name in header},
+                null_values=[],
+                strings_can_be_null=False,
+            ),
+        )
+    except (pa.ArrowException, ValueError):
+        return None
+    columns = {name: table.column(name).to_numpy() for name in header}
+    if "seq" in columns:
+        columns["seq"] = _as_counter(columns["seq"], path)
+    return columns, meta
+
+
+def _read_csv_numpy(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     meta: dict[str, str] = {}
     header: list[str] | None = None
     header_line = 0

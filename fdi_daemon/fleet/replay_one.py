@@ -225,7 +225,9 @@ def replay_row(file: str, model: str | None) -> dict[str, Any]:
     except OSError as exc:
         return summary_row(file, model, error=f"{model}: cannot read the model: {exc.strerror}")
     try:
-        return summary_row(file, model, replay_recording(file, model).summary, None, digest)
+        loaded = cached_model(model)
+        replay = replay_recording(file, model, stream=True, model=loaded)
+        return summary_row(file, model, replay.summary, None, digest)
     except UserError as exc:
         return summary_row(file, model, error=str(exc), model_sha256=digest)
     except Exception as exc:  # a bug in fdi on one file must not stop the fleet
@@ -235,6 +237,35 @@ def replay_row(file: str, model: str | None) -> dict[str, Any]:
             error=f"internal error: {type(exc).__name__}: {exc}",
             model_sha256=digest,
         )
+
+
+def cached_model(path: str):
+    """The model file loaded once per worker process for each version of the file (its
+    size and modification time): a fleet's files share a few models."""
+    stat = Path(path).stat()
+    return _model_of_version(str(Path(path).resolve()), stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _model_of_version(path: str, size: int, mtime_ns: int):
+    from fdi_daemon.io.model_file import load_model
+
+    return load_model(path)
+
+
+def warm_worker() -> bool:
+    """Import the monitor and load its compiled kernels from numba's cache (or compile
+    them) in this process, once: `fdi fleet-replay` runs it on every worker before the
+    files, so no file pays for it."""
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.io.model_file import load_model
+
+    Monitor(load_model(DEFAULT_MODEL)).warm_up()
+    return True
+
+
+#: the simulated rig's model, shipped with fdi (any model loads the same kernels)
+DEFAULT_MODEL = str(Path(__file__).resolve().parents[1] / "data" / "model_sim_rig.yaml")
 
 
 def model_sha256(path: str) -> str:

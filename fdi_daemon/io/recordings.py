@@ -32,6 +32,7 @@ import zipfile
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -726,7 +727,7 @@ def _write_parquet(path: Path, columns: dict[str, np.ndarray], meta: dict[str, s
     )
 
 
-def parquet_encodings(names: list[str]) -> dict:
+def parquet_encodings(names: list[str]) -> dict[str, Any]:
     """Lossless Parquet encodings per column (`pyarrow.parquet.write_table` arguments):
     the ``seq`` counter as deltas (DELTA_BINARY_PACKED: an hour's 921 600 counters in
     10 kB instead of 2.7 MB through a dictionary), the time column ``t`` (steps of 1/fs)

@@ -90,34 +90,11 @@ def run_pieces(monitor, stream, stride: int, progress=None):
             arrays[name][rows : rows + n] = getattr(trace, name)
         rows += n
         del trace, piece
-        _trim_heap()
         if progress is not None:
             progress(done, stream.rows)
     if done < stream.rows:  # cannot happen with a file that does not change under us
         events.extend(monitor.finish())
     return events, MonitorTrace(every=stride, **{k: v[:rows] for k, v in arrays.items()})
-
-
-@functools.cache
-def _malloc_trim():
-    """glibc's ``malloc_trim``, or None (another C library)."""
-    import ctypes
-    import ctypes.util
-
-    try:
-        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
-    except (OSError, AttributeError):
-        return None
-
-
-def _trim_heap() -> None:
-    """Hand the heap's free pages back to the system: each piece's columns are large
-    temporaries that glibc keeps (its mmap threshold rises after the first is freed), and
-    the resident memory of a day's replay grew by some 10 bytes per sample without this
-    (515 against 288 MiB at the end of the pieces, 22 M samples)."""
-    trim = _malloc_trim()
-    if trim is not None:
-        trim(0)
 
 
 def replay_recording(

@@ -343,6 +343,8 @@ def _line(event: dict) -> str:
         extra = f"  θ1={event['theta1']:.3g}  θ2={event['theta2']:.3g} s/m"
     if event.get("friction_level") is not None:
         extra += f"  friction_level={event['friction_level']:.3g}"
+    elif "friction_level" in event:  # an episode's level restarts: it takes a few seconds
+        extra += "  friction_level=- (not measured yet)"
     if "count" in event:
         extra += f"  count={event['count']} ({event.get('reason', '')})"
     if "missing_samples" in event:

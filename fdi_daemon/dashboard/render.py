@@ -97,17 +97,26 @@ ALARM_LABELS: dict[str, tuple[str, str]] = {
 }
 
 
-def render(snapshot: dict[str, Any] | None, notice: str | None = None) -> DashboardView:
-    """The dashboard for one snapshot; `notice` (e.g. "daemon not reachable") tops the screen."""
-    return DashboardView(snapshot, notice)
+def render(
+    snapshot: dict[str, Any] | None, notice: str | None = None, footer: Text | None = None
+) -> DashboardView:
+    """The dashboard for one snapshot; `notice` (e.g. "daemon not reachable") tops the screen,
+    `footer` (the keys, or a prompt) is its last line."""
+    return DashboardView(snapshot, notice, footer)
 
 
 class DashboardView:
     """A size-adaptive renderable of one snapshot."""
 
-    def __init__(self, snapshot: dict[str, Any] | None, notice: str | None = None):
+    def __init__(
+        self,
+        snapshot: dict[str, Any] | None,
+        notice: str | None = None,
+        footer: Text | None = None,
+    ):
         self.snapshot = snapshot if isinstance(snapshot, dict) else {}
         self.notice = notice
+        self.footer = footer
 
     def __rich_console__(self, console: Console, options: ConsoleOptions) -> RenderResult:
         width = options.max_width
@@ -116,6 +125,13 @@ class DashboardView:
 
     def layout(self, width: int, height: int) -> Layout:
         """The rich Layout for a screen of `width` x `height` cells."""
+        if self.footer is not None and height > 2:
+            layout = Layout()
+            layout.split_column(
+                Layout(DashboardView(self.snapshot, self.notice).layout(width, height - 1)),
+                Layout(self.footer, name="footer", size=1),
+            )
+            return layout
         if width < COMPACT_WIDTH or height < COMPACT_HEIGHT:
             return _compact_layout(self.snapshot, self.notice, width, height)
         return _standard_layout(self.snapshot, self.notice, width, height)

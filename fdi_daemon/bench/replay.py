@@ -143,8 +143,10 @@ def bench_replay(
         journal = write_recording(folder / "rec-archive.csv", hour)
         hour_parquet = archive_csv(journal)
         assert hour_parquet is not None
-        # untimed: loads (or, on a fresh install, compiles) the kernels into numba's cache
-        subprocess.run(_replay_argv(one_s, model), check=True, capture_output=True, timeout=3600)
+        if warm_up:  # untimed: loads (on a fresh install, compiles) the kernels into the cache
+            subprocess.run(
+                _replay_argv(one_s, model), check=True, capture_output=True, timeout=3600
+            )
         if day:
             day_rec = _recording(base_s, DAY_S, fs, seed)
             day_file = write_recording(folder / "day.parquet", day_rec)

@@ -115,14 +115,31 @@ def run(args: argparse.Namespace) -> int:
             return _paced(monitor, rec, stopped=stopped)
         return _batch(monitor, rec, math.gcd(shown, stride))
 
-    replay = replay_recording(
-        args.recording,
-        args.model,
-        runner,
-        columns=args.columns,
-        alarm_settings=settings,
-        status_period_s=status_period_s,
-    )
+    bar: list = []  # a streamed replay's progress bar (Progress, task), made at its first piece
+
+    def streamed(done: int, total: int) -> None:
+        if not bar:
+            if total < 100_000:
+                return
+            bar.extend(_progress(total, "replay"))
+            bar[0].start()
+        bar[0].update(bar[1], completed=done)
+
+    try:
+        replay = replay_recording(
+            args.recording,
+            args.model,
+            runner,
+            columns=args.columns,
+            alarm_settings=settings,
+            status_period_s=status_period_s,
+            # a Parquet file piece by piece (flat memory), unless paced or plotted whole
+            stream=not (args.realtime or args.plot),
+            progress=streamed,
+        )
+    finally:
+        if bar:
+            bar[0].stop()
     rec, monitor, events, trace, summary = (
         replay.recording,
         replay.monitor,

@@ -17,7 +17,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.signal import lfilter
 
 __all__ = ["IIRFilter", "frequency_response"]
 
@@ -108,6 +107,8 @@ class IIRFilter:
             return self._b0 * x
         if x.size == 0:
             return x.copy()
+        from scipy.signal import lfilter  # here: its import is slow (core/filter_design.py)
+
         y, zf = lfilter(self._b_arr, self._a_arr, x, zi=np.array(self._z, dtype=float))
         self._z = zf.tolist()
         return y

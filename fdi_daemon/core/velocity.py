@@ -34,8 +34,8 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter
 
+from fdi_daemon.core.filter_design import butter
 from fdi_daemon.core.iir import IIRFilter, frequency_response
 
 __all__ = ["VelocityEstimator", "DEFAULT_SETTINGS", "INTEGRATORS"]
@@ -188,7 +188,7 @@ class VelocityEstimator:
 def _design(
     fs_hz: float, highpass_hz: float, order: int, integrator: str
 ) -> tuple[np.ndarray, np.ndarray]:
-    b_hp, a_hp = butter(order, highpass_hz, btype="high", fs=fs_hz)
+    b_hp, a_hp = butter(order, highpass_hz, fs_hz, "high")
     gain = b_hp[0]  # b_hp = gain · (1 - q⁻¹)^order for the bilinear Butterworth
     zeros = np.array([1.0])
     for _ in range(order - 1):

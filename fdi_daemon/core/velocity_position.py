@@ -29,7 +29,6 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.signal import bilinear
 
 from fdi_daemon.core.iir import IIRFilter, frequency_response
 
@@ -66,6 +65,9 @@ class PositionVelocityObserver:
         if not (math.isfinite(damping) and 0.3 <= damping <= 2.0):
             raise ValueError(f"damping must lie in [0.3, 2], got {damping!r}")
         self.fs_hz, self.crossover_hz, self.damping = fs_hz, crossover_hz, damping
+        # here, used by position-fusing models only: scipy.signal's import is slow
+        from scipy.signal import bilinear
+
         w = 2 * math.pi * crossover_hz
         den = [1.0, 2 * damping * w, w * w]
         self.position_path = IIRFilter(*bilinear([2 * damping * w, w * w, 0.0], den, fs_hz))

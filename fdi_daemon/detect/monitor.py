@@ -283,12 +283,16 @@ class Monitor:
 
     # ------------------------------------------------------------------ batch
     def run(
-        self, rec: Recording, trace_every: int = 1, progress=None
+        self, rec: Recording, trace_every: int = 1, progress=None, final: bool = True
     ) -> tuple[list[dict[str, Any]], MonitorTrace]:
         """Replay a recording through the batch path; same events as ``step`` per sample.
 
         trace_every: keep every n-th sample in the trace (1: all). progress(done, total) is
-        called after every chunk.
+        called after every chunk. A recording in pieces (a file streamed chunk by chunk) is
+        one ``run`` per piece with ``final=False`` but for the last: the events, trace rows
+        and final state are those of one ``run`` over the whole (a run of bad samples
+        across pieces stays one event; without ``seq``, the time step from the previous
+        piece's last sample tells a gap).
         """
         cols = rec.columns
         n = len(cols["t"])
@@ -305,6 +309,9 @@ class Monitor:
         parts: dict[str, list[np.ndarray]] = {k: [] for k in TRACE_NAMES}
         start = 0
         limit = math.inf if self.accel_limit_mps2 is None else float(self.accel_limit_mps2)
+        # a piece that continues an earlier one, without seq: its first sample's number
+        # comes from the time step after the previous piece's last sample (general path)
+        resumed = seq is None and self._last_seq is not None and math.isfinite(self._last_t)
         while start < n:
             stop = min(n, start + _CHUNK)
             chunk = (
@@ -322,6 +329,7 @@ class Monitor:
                 first = 0 if self._last_seq is None else self._last_seq + 1
             if (
                 not self._bad_run
+                and not (resumed and start == 0)
                 and (self._last_seq is None or first == self._last_seq + 1)
                 and _clean_chunk(
                     t,
@@ -343,6 +351,10 @@ class Monitor:
             else:
                 if seq is not None:
                     numbers = seq[start:stop]
+                elif resumed and start == 0:
+                    with_last = np.concatenate(([self._last_t], t[:stop]))
+                    numbers = self.sample_numbers(with_last, self._last_seq)[1:]
+                    last = int(numbers[-1])
                 else:
                     lo = max(start - 1, 0)
                     numbers = self.sample_numbers(t[lo:stop], last)[start - lo :]
@@ -351,7 +363,8 @@ class Monitor:
             start = stop
             if progress is not None:
                 progress(stop, n)
-        events.extend(self.finish())
+        if final:
+            events.extend(self.finish())
         trace = MonitorTrace(
             every=trace_every,
             **{k: (np.concatenate(v) if v else np.empty(0)) for k, v in parts.items()},

@@ -31,9 +31,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter
 
 from fdi_daemon.core.compiled import Arena
+from fdi_daemon.core.filter_design import butter
 from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.core.kernels import sums_floats
 from fdi_daemon.core.velocity_observer import trusted_from_hz, velocity_from_settings
@@ -167,7 +167,7 @@ class Pipeline:
         plant = None if self.external_plant else self.plant
         self.trusted_from_hz = trusted_from_hz(vel, trust_phase_deg)
         low = (
-            IIRFilter(*butter(2, self.trusted_from_hz, fs=model.fs))
+            IIRFilter(*(c.tolist() for c in butter(2, self.trusted_from_hz, model.fs)))
             if self.trusted_from_hz > 0
             else None
         )  # None: v̂ is trusted everywhere

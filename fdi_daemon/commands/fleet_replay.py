@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     files = find_recordings(args.recordings)
     check_outputs({"--out": args.out}, files)
     # absolute paths: a --scheduler's workers resolve a relative one in their own folder
-    jobs = [(_absolute(file), _absolute(models.model_for(file))) for file in files]
+    jobs = [(os.path.abspath(file), _absolute(models.model_for(file))) for file in files]
 
     progress, task = _progress(len(jobs))
     started = time.monotonic()

@@ -4,6 +4,7 @@ identification; a table on screen and JSON."""
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 HELP = "measure the monitor (per tick, batch, against baselines), the simulator and identification"
 
@@ -118,14 +119,13 @@ def _measure(key: str, quick: bool, results: dict) -> dict:
         from fdi_daemon.bench.e2e import default_model_path
         from fdi_daemon.bench.replay import bench_replay
 
+        short: dict[str, Any] = (
+            {"base_s": 20.0, "repeats": 1, "day": False, "span_s": 600.0, "warm_up": False}
+            if quick
+            else {}
+        )
         replay = bench_replay(
-            default_model_path(),
-            results["monitor"]["batch_samples_per_s"],
-            **(
-                {"base_s": 20.0, "repeats": 1, "day": False, "span_s": 600.0, "warm_up": False}
-                if quick
-                else {}
-            ),
+            default_model_path(), results["monitor"]["batch_samples_per_s"], **short
         )
         results["archive"] = {"bytes_per_rig_hour": replay.pop("archive_bytes_per_rig_hour")}
         return replay

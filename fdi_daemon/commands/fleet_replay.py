@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     files = find_recordings(args.recordings)
     check_outputs({"--out": args.out}, files)
     # absolute paths: a --scheduler's workers resolve a relative one in their own folder
-    jobs = [(_absolute(file), _absolute(models.model_for(file))) for file in files]
+    jobs = [(os.path.abspath(file), _absolute(models.model_for(file))) for file in files]
 
     shown = sys.stderr.isatty() if args.progress is None else args.progress
     progress, (files_task, samples_task) = _progress(len(jobs), shown)

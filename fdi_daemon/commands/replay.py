@@ -314,6 +314,7 @@ def _paced(monitor, rec, on_tick=None, stopped: dict | None = None):
             if on_tick is not None:
                 on_tick(monitor, float(t[k]), new)
                 continue
+            assert progress is not None  # made when there is no on_tick
             for event in new:
                 progress.console.print(_line(event), highlight=False, soft_wrap=True)
             if k % 256 == 0:

@@ -538,7 +538,9 @@ def theta_plot(monitor: dict[str, Any], trace: Series, layers: list[Series]) -> 
     if data_range([trace]) is None:
         return BraillePlot(series=[], empty_text=empty)
     layers.append(trace)
-    return BraillePlot(series=layers, y_range=padded_range(*data_range(layers)), empty_text=empty)
+    y_data = data_range(layers)
+    assert y_data is not None  # the trace has data
+    return BraillePlot(series=layers, y_range=padded_range(*y_data), empty_text=empty)
 
 
 def theta_title(monitor: dict[str, Any], index: int, width: int, where: str) -> Text:
@@ -591,7 +593,9 @@ def theta_plane(monitor: dict[str, Any]) -> tuple[BraillePlot, str]:
     layers += [trace, latest]
     xs = [x for s in layers for x in s.t if math.isfinite(x)]
     x_range = padded_range(min(xs), max(xs))
-    plot = BraillePlot(series=layers, y_range=padded_range(*data_range(layers)), x_range=x_range)
+    y_data = data_range(layers)
+    assert y_data is not None  # the latest point is finite
+    plot = BraillePlot(series=layers, y_range=padded_range(*y_data), x_range=x_range)
     return plot, f"θ1 {x_range[0]:.3g} … {x_range[1]:.3g}"
 
 
@@ -633,7 +637,9 @@ def _trend_layers(alarm: dict[str, Any]) -> tuple[list[Series], tuple[float, flo
             if base + step > data[1]:
                 break  # the next step to cross; higher ones would squash the trace
     layers += [high, mean]
-    return layers, padded_range(*data_range(layers))
+    y_data = data_range(layers)
+    assert y_data is not None  # mean and high have data
+    return layers, padded_range(*y_data)
 
 
 def trend_title(alarm: dict[str, Any]) -> Text:
@@ -783,6 +789,7 @@ def _standard_layout(
         )
     layout["right"].split_column(plots)
     if trend_size:
+        assert isinstance(alarm, dict)  # trend_size is 0 otherwise
         layout["right"].add_split(Layout(trend_panel(alarm), name="trend", size=trend_size))
     layout["right"].add_split(
         Layout(
@@ -800,7 +807,7 @@ def _compact_layout(
     """Small terminals: header, three summary lines, small plots if they fit, last alarms."""
     link, monitor = _section(snapshot, "link"), _section(snapshot, "monitor")
     alarms = _sequence(snapshot.get("alarms"))
-    latency = link.get("tick_latency_us") if isinstance(link.get("tick_latency_us"), dict) else {}
+    latency = _section(link, "tick_latency_us")
     summary = [
         _line(
             ("θ1 ", "dim"),

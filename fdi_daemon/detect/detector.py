@@ -86,7 +86,7 @@ class Detector:
         gamma_f: float,
         baseline: bool = False,
         arena: Arena | None = None,
-        baseline_bins: tuple | None = None,
+        baseline_bins: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> None:
         """``baseline``: the level's excess is taken over a commissioning baseline (else
         the calibration's level is the fault-free one); ``baseline_bins``: its (edges,
@@ -196,13 +196,15 @@ class Detector:
         self.restart()
 
     # ------------------------------------------------------------------ state in the arena
-    def _int(k):  # noqa: N805 - a property factory for the ints of the kernel's block
+    @staticmethod
+    def _int(k: int) -> property:  # a property factory for the ints of the kernel's block
         return property(
             lambda self: int(self.arena.i[self.io + k]),
             lambda self, v: self.arena.i.__setitem__(self.io + k, int(v)),
         )
 
-    def _float(k):  # noqa: N805
+    @staticmethod
+    def _float(k: int) -> property:
         return property(
             lambda self: float(self.arena.f[self.fo + k]),
             lambda self, v: self.arena.f.__setitem__(self.fo + k, float(v)),
@@ -308,7 +310,7 @@ class Detector:
         extra = {"friction_evidence": self.level_path if kind == "level" else kind} if kind else {}
         return [self._event(t, "friction_isolated", theta1, theta2, coulomb_change=change, **extra)]
 
-    def _calibrate(self, t, theta1, theta2) -> list[dict[str, Any]]:
+    def _calibrate(self, t: float, theta1: float, theta2: float) -> list[dict[str, Any]]:
         o = self.fo + K.E_CAL
         n = self.calibration_samples
         cal = self.arena.f[o : o + 2 * n].reshape(n, 2)
@@ -339,7 +341,9 @@ class Detector:
             )
         ]
 
-    def _event(self, t, kind, theta1, theta2, **extra) -> dict[str, Any]:
+    def _event(
+        self, t: float, kind: str, theta1: float | None, theta2: float | None, **extra: Any
+    ) -> dict[str, Any]:
         return make_event(
             t,
             kind,

@@ -25,7 +25,14 @@ import numpy as np
 
 from fdi_daemon.core.compiled import jit
 from fdi_daemon.core.cusum import cusum_increment
-from fdi_daemon.core.kernels import packed_row_into, solve_packed, sums_floats, sums_push
+from fdi_daemon.core.kernels import (
+    F64,
+    I64,
+    packed_row_into,
+    solve_packed,
+    sums_floats,
+    sums_push,
+)
 
 __all__ = [
     "episode_start",
@@ -177,7 +184,9 @@ def episode_layout(fo: int, n: int, m: int) -> tuple[int, ...]:
 
 
 @jit
-def _reset_sums(f, ii, ro, n, w, ip):  # pragma: no cover - jit
+def _reset_sums(
+    f: F64, ii: I64, ro: int, n: int, w: int, ip: int
+) -> None:  # pragma: no cover - jit
     for k in range(ro, ro + (n + 3) * w):
         f[k] = 0.0
     ii[ip] = 0
@@ -185,7 +194,7 @@ def _reset_sums(f, ii, ro, n, w, ip):  # pragma: no cover - jit
 
 
 @jit
-def episode_restart(f, ii, eo):  # pragma: no cover - jit
+def episode_restart(f: F64, ii: I64, eo: int) -> None:  # pragma: no cover - jit
     """After a data gap: the windows restart, the episode goes on."""
     n = ii[eo + P_N]
     m = ii[eo + P_M]
@@ -203,7 +212,7 @@ def episode_restart(f, ii, eo):  # pragma: no cover - jit
 
 
 @jit
-def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
+def episode_start(f: F64, ii: I64, eo: int, res: int, level: int) -> None:  # pragma: no cover - jit
     """A new episode against the residual test ``res`` (its ints' base) as it is now: θ_ref
     and σ²_ref frozen, the post window filled with the rows since the reference ended."""
     episode_restart(f, ii, eo)
@@ -250,7 +259,7 @@ def episode_rebase(f: np.ndarray, ii: np.ndarray, eo: int, ref: int) -> None:  #
 
 
 @jit
-def _window_theta(f, ii, eo, ro, ip):  # pragma: no cover - jit
+def _window_theta(f: F64, ii: I64, eo: int, ro: int, ip: int) -> bool:  # pragma: no cover - jit
     """θ (g1, g2 only) of a window's packed sums into th[0:2]; ok."""
     n = ii[eo + P_N]
     if ii[ip + 1] < ii[eo + P_ISO]:
@@ -268,7 +277,7 @@ def _window_theta(f, ii, eo, ro, ip):  # pragma: no cover - jit
 
 
 @jit
-def _friction_kind(f, ii, eo, fmin):  # pragma: no cover - jit
+def _friction_kind(f: F64, ii: I64, eo: int, fmin: float) -> int:  # pragma: no cover - jit
     """Given a rise of the Coulomb coefficient: harmonics (g1 explains the innovation
     beyond a linear change of the plant), a stopped load, or nothing."""
     n = ii[eo + P_N]
@@ -296,25 +305,25 @@ def _friction_kind(f, ii, eo, fmin):  # pragma: no cover - jit
 
 @jit
 def episode_tick(
-    f,
-    ii,
-    eo,
-    tick,
-    state,
-    r,
-    g1,
-    g2,
-    xhat,
-    theta1,
-    theta2,
-    over,
-    trusted,
-    sliding,
-    clipped,
-    row,
-    band,
-    out,
-):  # pragma: no cover - jit
+    f: F64,
+    ii: I64,
+    eo: int,
+    tick: int,
+    state: int,
+    r: float,
+    g1: float,
+    g2: float,
+    xhat: float,
+    theta1: float,
+    theta2: float,
+    over: float,
+    trusted: bool,
+    sliding: bool,
+    clipped: bool,
+    row: int,
+    band: int,
+    out: F64,
+) -> int:  # pragma: no cover - jit
     """One episode tick; θ as reported in out[0], out[1]; returns the transition.
 
     ``state``: 3 fault_detected, 4 friction_isolated, 5 other_fault (`detector.STATES`);
@@ -462,7 +471,9 @@ def episode_tick(
 
 
 @jit
-def _band_decision(f, ii, eo, state, ticks, theta1, theta2, band):  # pragma: no cover - jit
+def _band_decision(
+    f: F64, ii: I64, eo: int, state: int, ticks: int, theta1: float, theta2: float, band: int
+) -> int:  # pragma: no cover - jit
     """The paper's band method: track the signature (1, γ_f), clear inside the band."""
     sc = ii[eo + P_O_SCAL]
     if state == 3:

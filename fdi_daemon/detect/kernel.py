@@ -41,6 +41,8 @@ import numpy as np
 from fdi_daemon.core.compiled import jit
 from fdi_daemon.core.cusum import cusum_increment
 from fdi_daemon.core.kernels import (
+    F64,
+    I64,
     iir_step,
     itest_flush_p,
     itest_insert_p,
@@ -176,7 +178,9 @@ STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER
 
 
 @jit
-def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
+def chain_tick(
+    f: F64, ii: I64, io: int, v_in: float, accel: float, position: float, xext: float
+) -> None:  # pragma: no cover - jit
     """One tick of the signal chain (see the module docstring); results at its C_OUT."""
     L = ii[io + C_WIDTH]
     bo = ii[io + C_B]
@@ -280,7 +284,7 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
 
 
 @jit(inline=True)
-def _clip_tick(f, out, accel, n):  # pragma: no cover - jit
+def _clip_tick(f: F64, out: int, accel: float, n: int) -> bool:  # pragma: no cover - jit
     """Rail detection on the raw ẍ (module docstring, ``clipped``): a flat top at the value
     of the previous one of its sign, which ended at most ``n`` ticks before, is clipping to
     its last sample. True while the last clipped sample is less than ``n`` ticks old."""
@@ -289,7 +293,7 @@ def _clip_tick(f, out, accel, n):  # pragma: no cover - jit
     f[out + O_ACCEL_LAST] = accel
     f[out + O_RAIL_AGE_POS] += 1.0
     f[out + O_RAIL_AGE_NEG] += 1.0
-    clip_age = f[out + O_CLIP_AGE] + 1.0
+    clip_age: float = f[out + O_CLIP_AGE] + 1.0
     if run >= CLIP_RUN:
         rail, age = (O_RAIL_POS, O_RAIL_AGE_POS) if accel > 0.0 else (O_RAIL_NEG, O_RAIL_AGE_NEG)
         if run == CLIP_RUN:
@@ -306,8 +310,23 @@ def _clip_tick(f, out, accel, n):  # pragma: no cover - jit
 
 @jit
 def chain_run(
-    f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums, counts, moving, v_rms
-):  # pragma: no cover - jit
+    f: F64,
+    ii: I64,
+    io: int,
+    v_in: np.ndarray,
+    accel: np.ndarray,
+    position: np.ndarray,
+    xext: np.ndarray,
+    xhat: np.ndarray,
+    r: np.ndarray,
+    vel: np.ndarray,
+    g1: np.ndarray,
+    g2: np.ndarray,
+    sums: np.ndarray,
+    counts: np.ndarray,
+    moving: np.ndarray,
+    v_rms: np.ndarray,
+) -> None:  # pragma: no cover - jit
     """``chain_tick`` over arrays, every tick's signals and window sums kept."""
     out = ii[io + C_OUT]
     n = ii[io + C_N]
@@ -327,7 +346,7 @@ def chain_run(
 
 
 @jit(inline=True)
-def detector_pre(f, ii, io):  # pragma: no cover - jit
+def detector_pre(f: F64, ii: I64, io: int) -> None:  # pragma: no cover - jit
     """The detector's work that does not need this tick's signals, done before the chain so
     that the reference solves' chains of divisions overlap with it: with a lag, the rows
     the reference windows have reached into their sums and the reference fits
@@ -344,7 +363,9 @@ def detector_pre(f, ii, io):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
+def detector_tick(
+    f: F64, ii: I64, io: int, v_in: float, over_baseline: float
+) -> int:  # pragma: no cover - jit
     """The detector's per-tick arithmetic and quiet decisions on this tick's signals (read
     at the chain's C_OUT, `chain_tick`); returns the tick's code."""
     out = ii[ii[io + D_CHAIN] + C_OUT]
@@ -491,7 +512,7 @@ def _drift_tick(
 
 
 @jit
-def _start(f, ii, io, res, level):  # pragma: no cover - jit
+def _start(f: F64, ii: I64, io: int, res: int, level: int) -> None:  # pragma: no cover - jit
     """fault_detected: an episode starts (level: raised by the level path); the reported
     friction level restarts from the new picks."""
     E.episode_start(f, ii, ii[io + D_EPI], res, level)
@@ -502,8 +523,23 @@ def _start(f, ii, io, res, level):  # pragma: no cover - jit
 
 @jit
 def _episode(
-    f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over, trusted, sliding, clipped
-):  # pragma: no cover - jit
+    f: F64,
+    ii: I64,
+    io: int,
+    fo: int,
+    res: int,
+    tick: int,
+    r: float,
+    g1: float,
+    g2: float,
+    xhat: float,
+    theta1: float,
+    theta2: float,
+    over: float,
+    trusted: bool,
+    sliding: bool,
+    clipped: bool,
+) -> int:  # pragma: no cover - jit
     """A tick of the running episode, and its transition applied to the detector."""
     ep = ii[io + D_EPI]
     band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
@@ -554,7 +590,9 @@ def _episode(
 
 
 @jit
-def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
+def monitor_tick(
+    f: F64, ii: I64, io: int, v_in: float, accel: float, position: float, xext: float
+) -> int:  # pragma: no cover - jit
     """``detector_pre``, ``chain_tick``, the reported friction level, then ``detector_tick``
     (with the level's excess over the baseline of the window's operating condition); returns
     the tick's code (also in ii[io + D_CODE])."""
@@ -586,22 +624,22 @@ def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - 
 
 @jit
 def monitor_run(
-    f,
-    ii,
-    io,
-    v_in,
-    accel,
-    position,
-    xext,
-    start,
-    stat,
-    state,
-    theta1,
-    theta2,
-    residual,
-    v_rms,
-    level,
-):  # pragma: no cover - jit
+    f: F64,
+    ii: I64,
+    io: int,
+    v_in: np.ndarray,
+    accel: np.ndarray,
+    position: np.ndarray,
+    xext: np.ndarray,
+    start: int,
+    stat: np.ndarray,
+    state: np.ndarray,
+    theta1: np.ndarray,
+    theta2: np.ndarray,
+    residual: np.ndarray,
+    v_rms: np.ndarray,
+    level: np.ndarray,
+) -> int:  # pragma: no cover - jit
     """``monitor_tick`` from index ``start`` on, traces kept; returns the index after the
     first tick whose code is not QUIET (its code in ii[io + D_CODE]), or the length."""
     chain = ii[io + D_CHAIN]
@@ -622,4 +660,4 @@ def monitor_run(
         if code != QUIET:
             return k + 1
     ii[io + D_CODE] = QUIET
-    return v_in.shape[0]
+    return int(v_in.shape[0])

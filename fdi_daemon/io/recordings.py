@@ -32,7 +32,7 @@ import zipfile
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -205,7 +205,7 @@ def check_sampling(
     fs = fs_hz if fs_hz is not None else nominal_fs_hz(t, seq)
     issues: list[SamplingIssue] = []
     if seq is not None:
-        steps = np.diff(seq.astype(np.int64))
+        steps: np.ndarray = np.diff(seq.astype(np.int64))
         for i in np.flatnonzero(steps != 1):
             step = int(steps[i])
             kind = "gap" if step > 1 else ("duplicate" if step == 0 else "backwards")
@@ -216,12 +216,12 @@ def check_sampling(
     steps = np.diff(t) * fs  # in samples
     bad = np.flatnonzero(np.abs(steps - 1.0) > DT_TOLERANCE)
     for i in bad:
-        step = float(steps[i])
-        if step > 1.0 + DT_TOLERANCE:
+        size = float(steps[i])
+        if size > 1.0 + DT_TOLERANCE:
             issues.append(
-                SamplingIssue("gap", int(i + 1), float(t[i + 1]), max(1, int(round(step)) - 1))
+                SamplingIssue("gap", int(i + 1), float(t[i + 1]), max(1, int(round(size)) - 1))
             )
-        elif step < -DT_TOLERANCE:
+        elif size < -DT_TOLERANCE:
             issues.append(SamplingIssue("backwards", int(i + 1), float(t[i + 1])))
         else:  # a step of less than 0.75 samples: the same sample again, or a clock slip
             issues.append(SamplingIssue("duplicate", int(i + 1), float(t[i + 1])))
@@ -277,31 +277,31 @@ def read_recording(
     ) as exc:
         raise RecordingError(f"{path}: cannot read recording: {_one_line(exc)}") from None
 
-    columns = (
+    data = (
         _renamed(columns_read, mapping, path) if (mapping := dict(columns or {})) else columns_read
     )
-    if fs_hz is not None and "t" not in columns and columns:
-        n = len(next(iter(columns.values())))
-        columns = {"t": np.arange(n) / fs_hz, **columns}
-    missing = [c for c in required if c not in columns]
+    if fs_hz is not None and "t" not in data and data:
+        n = len(next(iter(data.values())))
+        data = {"t": np.arange(n) / fs_hz, **data}
+    missing = [c for c in required if c not in data]
     if missing:
         raise RecordingError(
             f"{path}: missing column(s) {', '.join(missing)} "
-            f"(found: {', '.join(columns) or 'none'}; map other names with "
+            f"(found: {', '.join(data) or 'none'}; map other names with "
             f"--columns {','.join(f'{c}=COLUMN' for c in missing)})"
         )
-    if "t" in columns and not np.all(np.isfinite(columns["t"])):
-        bad = int(np.flatnonzero(~np.isfinite(columns["t"]))[0])
+    if "t" in data and not np.all(np.isfinite(data["t"])):
+        bad = int(np.flatnonzero(~np.isfinite(data["t"]))[0])
         raise RecordingError(f"{path}: time column t is not finite at row {bad}")
     try:
-        rec = Recording(columns, meta)
+        rec = Recording(data, meta)
     except RecordingError as exc:  # the message names no file
         raise RecordingError(f"{path}: {exc}") from None
     if len(rec) < 2:
         raise RecordingError(f"{path}: holds {len(rec)} sample(s); at least 2 are needed")
     fs_meta = _meta_fs(meta, path)
     try:
-        rec.sampling = check_sampling(rec.t, columns.get("seq"), fs_meta)
+        rec.sampling = check_sampling(rec.t, data.get("seq"), fs_meta)
     except RecordingError as exc:  # no rate to be found: the message names no file
         raise RecordingError(f"{path}: {exc}") from None
     if strict and not rec.sampling.ok:
@@ -345,7 +345,7 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
-def _open_text(path: Path):
+def _open_text(path: Path) -> IO[str]:
     # utf-8-sig: a spreadsheet's CSV starts with a byte order mark, which was read as part
     # of the first column's name ("missing column t (found: \ufefft, ...)")
     if path.name.lower().endswith(".gz"):
@@ -579,7 +579,7 @@ def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     return columns, meta
 
 
-def _pyarrow_parquet(path: Path):  # -> the pyarrow.parquet module
+def _pyarrow_parquet(path: Path) -> Any:  # the pyarrow.parquet module
     try:
         import pyarrow.parquet as pq
     except ImportError:
@@ -782,7 +782,11 @@ def write_recording(path: str | Path, rec: Recording) -> Path:
     try:
         with replaced_atomically(path) as target:
             if name.endswith(".npz"):
-                np.savez_compressed(target, __meta__=np.array(json.dumps(meta)), **rec.columns)
+                np.savez_compressed(
+                    target,
+                    __meta__=np.array(json.dumps(meta)),
+                    **rec.columns,  # type: ignore[arg-type]  # numpy's stub: **kwds as allow_pickle
+                )
             elif name.endswith(".mat"):
                 from scipy.io import savemat
 
@@ -830,7 +834,7 @@ def _write_csv(path: Path, columns: dict[str, np.ndarray], meta: dict[str, str],
     final name, which a .gz header holds (not that of the temporary file written)."""
     text = csv_header_lines(list(columns), meta) + format_csv_rows(columns)
     with contextlib.ExitStack() as stack:
-        fh = stack.enter_context(open(path, "wb"))
+        fh: io.BufferedWriter | gzip.GzipFile = stack.enter_context(open(path, "wb"))
         if path.name.lower().endswith(".gz"):
             fh = stack.enter_context(gzip.GzipFile(filename=name, mode="wb", fileobj=fh))
         out = stack.enter_context(io.TextIOWrapper(fh, encoding="utf-8", newline=""))

@@ -90,7 +90,7 @@ def plot_trend(
     rises = np.flatnonzero(np.diff(priority) > 0) + 1
     if priority.size and priority[0] > 0:
         rises = np.concatenate([[0], rises])
-    for k, i in enumerate(rises):
+    for k, i in enumerate(rises.tolist()):
         ax.axvline(
             t[i],
             color=STEP_COLOURS[(int(priority[i]) - 1) % len(STEP_COLOURS)],

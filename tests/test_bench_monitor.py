@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from fdi_daemon.bench.monitor import bench_monitor
 from fdi_daemon.cli import main
 
@@ -37,9 +39,17 @@ def test_the_incident_recording_holds_an_alarm_and_the_quiet_one_none():
 
 
 def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
+    import fdi_daemon.bench.fleet as bf
     import fdi_daemon.bench.ident as bi
     import fdi_daemon.bench.monitor as bm
     import fdi_daemon.bench.sim as bs
+
+    fleet = bf.bench_fleet  # the real fleet stage, on fewer and shorter files
+    monkeypatch.setattr(
+        bf,
+        "bench_fleet",
+        lambda model, **kw: fleet(model, files=3, span_s=20.0, short_files=3, base_s=5.0),
+    )
 
     small = bench_monitor(
         step_samples=600, batch_samples=5_000, baseline_samples=600, incident_s=0.0
@@ -72,8 +82,13 @@ def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
     # --quick leaves the daemon end to end out unless --e2e, and says so under its key
     assert data["e2e"] == {"skipped": "left out (--quick without --e2e)"}
     assert data["replay"]["span_s"] == 600.0 and "hour_parquet_samples_per_s" in data["replay"]
+    f = data["fleet"]
+    assert (f["files"], f["span_s"], f["short_files"]) == (3, 20.0, 3)
+    assert f["two_over_one"] == pytest.approx(f["one_worker_s"] / f["two_workers_s"])
+    assert 0 < f["per_file_overhead_s"] < f["one_worker_s"]
     out = capsys.readouterr().out
     assert "per-tick step p50" in out and "compiled chain without detector" in out
+    assert "fdi fleet-replay on a local cluster" in out
 
 
 def test_a_json_path_that_cannot_be_written_is_refused_before_measuring(

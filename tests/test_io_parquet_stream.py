@@ -10,7 +10,8 @@ import pytest
 from conftest_detect import MODEL, scenario_recording
 
 from fdi_daemon.errors import RecordingError
-from fdi_daemon.fleet.replay_one import replay_recording
+from fdi_daemon.detect.monitor import TRACE_NAMES
+from fdi_daemon.fleet.replay_one import READING_NAMES, LevelReadings, replay_recording
 from fdi_daemon.io import recordings
 from fdi_daemon.io.recordings import Recording, open_stream, read_recording, write_recording
 
@@ -48,8 +49,14 @@ def test_a_streamed_parquet_replays_as_the_whole_file(tmp_path, monkeypatch, def
     assert whole.events, "the scenario's fault must give events to compare"
     assert streamed.events == whole.events
     assert streamed.summary == whole.summary
-    for name in ("t", "theta1", "friction_level", "state"):
-        np.testing.assert_array_equal(getattr(streamed.trace, name), getattr(whole.trace, name))
+    # the stream keeps the alarm lifecycle's readings alone, unless the whole trace is asked
+    assert isinstance(streamed.trace, LevelReadings)
+    traced = replay_recording(path, MODEL, stream=True, trace_every=whole.trace.every)
+    assert traced.events == whole.events
+    for name in TRACE_NAMES:
+        np.testing.assert_array_equal(getattr(traced.trace, name), getattr(whole.trace, name))
+        if name in READING_NAMES:
+            np.testing.assert_array_equal(getattr(streamed.trace, name), getattr(whole.trace, name))
 
 
 def test_the_stream_renames_columns_and_reads_only_the_monitors(tmp_path):

@@ -385,3 +385,25 @@ def test_ctrl_c_in_a_paced_replay_keeps_what_was_replayed(files, tmp_path, capsy
     kinds = [e["kind"] for e in read_events(out["ev.jsonl"])]
     assert kinds[:2] == ["calibrated", "fault_detected"]  # the fault comes at 2.9 s
     assert len(_trace_rows(out["trace.csv"])[1]) == summary["samples"]
+
+
+@pytest.mark.parametrize("every", [1, 5])
+def test_a_streamed_parquet_writes_the_trace_of_the_whole_file(files, tmp_path, every):
+    """`fdi replay X.parquet --trace F` (read piece by piece) writes the rows the whole
+    file's replay writes; it crashed with a zero slice step (stop 50)."""
+    pytest.importorskip("pyarrow")
+    from fdi_daemon.io.recordings import open_stream, read_recording
+
+    root, model, rec = files
+    whole = read_recording(rec)
+    meta = {**whole.meta, "fs": "256"}
+    parquet = write_recording(tmp_path / "rec.parquet", Recording(whole.columns, meta))
+    assert open_stream(parquet) is not None, "the replay must stream this file"
+    written = {}
+    for name, path in (("whole", rec), ("streamed", parquet)):
+        out = tmp_path / f"{name}.csv"
+        argv = ["replay", str(path), "--model", str(model), "--trace", str(out)]
+        assert main(argv + ["--trace-every", str(every)]) == 0
+        written[name] = _trace_rows(out)
+    assert written["streamed"] == written["whole"]
+    assert len(written["whole"][1]) == -(-len(whole) // every)

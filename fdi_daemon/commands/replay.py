@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
 
     settings, status_period_s = _alarm_settings(args.alarms)
     # rows the trace file or the plot shows (the batch path traces them and the readings')
-    shown = 1
+    shown = args.trace_every if args.trace else 1  # a streamed replay calls no runner
     stopped: dict = {}  # a paced replay stopped by Ctrl-C: where
 
     def runner(monitor, rec, stride):
@@ -136,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
             # a Parquet file piece by piece (flat memory), unless paced or plotted whole
             stream=not (args.realtime or args.plot),
             progress=streamed,
+            trace_every=args.trace_every if args.trace else None,
         )
     finally:
         if bar:

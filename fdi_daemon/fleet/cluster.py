@@ -49,7 +49,9 @@ def dask_client(scheduler: str | None, workers: int):
             # no dashboard, yet the scheduler's HTTP server took port
             # 8787 (and warned "already in use" beside another run)
             scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-            silence_logs=logging.ERROR,
+            # a worker's errors are its files' rows; Ctrl-C under load made a busy worker
+            # log "Failed to communicate with scheduler during heartbeat" with a traceback
+            silence_logs=logging.CRITICAL,
         )
     interrupted = False
     try:

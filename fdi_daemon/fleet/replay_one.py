@@ -52,8 +52,24 @@ class Replay:
     recording: Any  # fdi_daemon.io.recordings.Recording
     monitor: Any  # fdi_daemon.detect.monitor.Monitor
     events: list[dict[str, Any]]
-    trace: Any  # fdi_daemon.detect.monitor.MonitorTrace
+    trace: Any  # fdi_daemon.detect.monitor.MonitorTrace, or `LevelReadings` (streamed)
     summary: dict[str, Any]
+
+
+#: the trace's arrays that the alarm lifecycle (`alarms.replay.alarm_events`) and the
+#: summary's final level read
+READING_NAMES = ("t", "v_rms", "friction_level")
+
+
+@dataclass
+class LevelReadings:
+    """The rows of a `MonitorTrace` that the alarm lifecycle reads, alone (``every``-th
+    sample; a streamed day keeps 3 of the trace's 9 arrays: 21 MB instead of 56 MB)."""
+
+    every: int
+    t: Any  # s
+    v_rms: Any  # m/s, the window's velocity RMS
+    friction_level: Any  # the reported level
 
 
 def run_batch(monitor, rec, stride: int):
@@ -61,12 +77,15 @@ def run_batch(monitor, rec, stride: int):
     return monitor.run(rec, trace_every=stride)
 
 
-def run_pieces(monitor, stream, stride: int, progress=None):
+def run_pieces(monitor, stream, stride: int, progress=None, full_trace: bool = True):
     """`Monitor.run` over a `RecordingStream` piece by piece (the streaming contract of
-    `Monitor.run`: the events and trace of one run over the whole); (events, trace)."""
+    `Monitor.run`: the events and trace of one run over the whole), traced every
+    ``stride`` samples; (events, trace). full_trace False keeps the `LevelReadings` alone."""
     import numpy as np
 
     from fdi_daemon.detect.monitor import TRACE_NAMES, MonitorTrace
+
+    kept = TRACE_NAMES if full_trace else READING_NAMES
 
     events: list[dict[str, Any]] = []
     # the trace's rows go into arrays made once for the whole file (at most one row per
@@ -74,9 +93,7 @@ def run_pieces(monitor, stream, stride: int, progress=None):
     # between each piece's large temporary ones fragmented the heap (RSS grew by some
     # 10 bytes per sample over a day)
     size = -(-stream.rows // stride) + 1
-    arrays = {
-        name: np.empty(size, dtype=np.int8 if name == "state" else float) for name in TRACE_NAMES
-    }
+    arrays = {name: np.empty(size, dtype=np.int8 if name == "state" else float) for name in kept}
     done = rows = 0
     for piece in stream.pieces():
         done += len(piece)
@@ -86,7 +103,7 @@ def run_pieces(monitor, stream, stride: int, progress=None):
         if rows + n > size:  # more rows than samples/stride: duplicates traced one by one
             size = 2 * (rows + n)
             arrays = {k: np.resize(v, size) for k, v in arrays.items()}
-        for name in TRACE_NAMES:
+        for name in kept:
             arrays[name][rows : rows + n] = getattr(trace, name)
         rows += n
         del trace, piece
@@ -94,7 +111,8 @@ def run_pieces(monitor, stream, stride: int, progress=None):
             progress(done, stream.rows)
     if done < stream.rows:  # cannot happen with a file that does not change under us
         events.extend(monitor.finish())
-    return events, MonitorTrace(every=stride, **{k: v[:rows] for k, v in arrays.items()})
+    made = MonitorTrace if full_trace else LevelReadings
+    return events, made(every=stride, **{k: v[:rows] for k, v in arrays.items()})
 
 
 def replay_recording(
@@ -107,6 +125,7 @@ def replay_recording(
     stream: bool = False,
     progress: Callable[[int, int], None] | None = None,
     model=None,
+    trace_every: int | None = None,
 ) -> Replay:
     """Replay ``recording`` with the model file ``model_path``; UserError on bad input.
 
@@ -115,9 +134,13 @@ def replay_recording(
     the daemon's) set the alarm lifecycle as the daemon's config would.
     stream: a Parquet recording that names its rate is read and replayed piece by piece
     (`open_stream`; memory stays flat on a day-long file) through the batch path, not
-    ``runner``; `Replay.recording` is then None. progress(samples done, total) after each
+    ``runner``; `Replay.recording` is then None, and `Replay.trace` the `LevelReadings`
+    alone unless ``trace_every`` (samples) asks for the whole `MonitorTrace` (every
+    gcd(trace_every, stride)-th sample). progress(samples done, total) after each
     piece. model: the loaded model file (`FdiModel`) when the caller has it already.
     """
+    import math
+
     import numpy as np
 
     from fdi_daemon.alarms.replay import STATUS_PERIOD_S, alarm_events, merge_events, status_stride
@@ -140,7 +163,8 @@ def replay_recording(
     monitor = Monitor(model)
     stride = status_stride(model.fs, status_period_s or STATUS_PERIOD_S)
     if rec is None:
-        events, trace = run_pieces(monitor, pieces, stride, progress)
+        every = stride if trace_every is None else math.gcd(trace_every, stride)
+        events, trace = run_pieces(monitor, pieces, every, progress, trace_every is not None)
     else:
         events, trace = runner(monitor, rec, stride)
     events = merge_events(events, alarm_events(monitor, events, trace, stride, alarm_settings))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from conftest_detect import MODEL, scenario_recording
 
-from fdi_daemon.errors import RecordingError
 from fdi_daemon.detect.monitor import TRACE_NAMES
+from fdi_daemon.errors import RecordingError
 from fdi_daemon.fleet.replay_one import READING_NAMES, LevelReadings, replay_recording
 from fdi_daemon.io import recordings
 from fdi_daemon.io.recordings import Recording, open_stream, read_recording, write_recording

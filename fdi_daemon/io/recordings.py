@@ -388,35 +388,10 @@ def _read_csv_arrow(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]] 
             data = fh.read()
     else:
         data = path.read_bytes()
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
-    meta: dict[str, str] = {}
-    pos = 0
-    header: list[str] | None = None
-    while pos < len(data):
-        end = data.find(b"\n", pos)
-        end = len(data) if end < 0 else end
-        try:
-            line = data[pos:end].decode("utf-8")
-        except UnicodeDecodeError:
-            return None
-        pos = end + 1
-        line = line[:-1] if line.endswith("\r") else line
-        if any(c in line for c in _OTHER_LINE_ENDS):
-            return None
-        stripped = line.strip()
-        if not stripped:
-            continue
-        if stripped.startswith("#"):
-            key, sep, value = stripped[1:].partition(":")
-            if sep and key.strip():
-                meta[key.strip()] = value.strip()
-            continue
-        delimiter = _delimiter(stripped)
-        header = [h.strip().strip('"').strip() for h in stripped.split(delimiter)]
-        break
-    if header is None or len(set(header)) != len(header) or any(not h for h in header):
+    preamble = csv_preamble(data)
+    if preamble is None:
         return None
+    meta, header, delimiter, pos = preamble
     body = data[pos:]
     if not body.strip() or b"#" in body or b'"' in body or b"\r" in body.replace(b"\r\n", b""):
         return None
@@ -437,6 +412,46 @@ def _read_csv_arrow(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]] 
     if "seq" in columns:
         columns["seq"] = _as_counter(columns["seq"], path)
     return columns, meta
+
+
+def csv_preamble(
+    data: bytes, whole: bool = True
+) -> tuple[dict[str, str], list[str], str, int] | None:
+    """(metadata, header, delimiter, offset of the body) of a plain CSV recording's first
+    bytes ``data`` (the whole file, or its start when not ``whole``): comment lines and the
+    header as `_read_csv_numpy` reads them. None where the NumPy reader must judge (not
+    UTF-8, other line ends than \n and \r\n, an empty or repeated name, no header in
+    ``data``)."""
+    start = 3 if data.startswith(b"\xef\xbb\xbf") else 0
+    meta: dict[str, str] = {}
+    pos = start
+    while pos < len(data):
+        end = data.find(b"\n", pos)
+        if end < 0 and not whole:
+            return None  # the header may go on past the bytes read
+        end = len(data) if end < 0 else end
+        try:
+            line = data[pos:end].decode("utf-8")
+        except UnicodeDecodeError:
+            return None
+        pos = end + 1
+        line = line[:-1] if line.endswith("\r") else line
+        if any(c in line for c in _OTHER_LINE_ENDS):
+            return None
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            key, sep, value = stripped[1:].partition(":")
+            if sep and key.strip():
+                meta[key.strip()] = value.strip()
+            continue
+        delimiter = _delimiter(stripped)
+        header = [h.strip().strip('"').strip() for h in stripped.split(delimiter)]
+        if len(set(header)) != len(header) or any(not h for h in header):
+            return None
+        return meta, header, delimiter, pos
+    return None
 
 
 def _read_csv_numpy(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
@@ -634,24 +649,30 @@ class RecordingStream:
             with pq.ParquetFile(self.path, pre_buffer=False) as file:
                 for group in range(file.metadata.num_row_groups):
                     batch = file.read_row_group(group, columns=list(names), use_threads=False)
-                    columns = {
-                        names[col]: _column(
-                            np.asarray(batch.column(col).to_numpy(zero_copy_only=False)),
-                            names[col],
-                            self.path,
-                        )
-                        for col in batch.schema.names
-                    }
-                    t = columns["t"]
-                    if not np.all(np.isfinite(t)):
-                        bad = offset + int(np.flatnonzero(~np.isfinite(t))[0])
-                        raise RecordingError(
-                            f"{self.path}: time column t is not finite at row {bad}"
-                        )
-                    offset += len(t)
-                    yield Recording(columns, dict(self.meta))
+                    piece = self.piece(batch, offset)
+                    offset += len(piece)
+                    yield piece
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise RecordingError(f"{self.path}: cannot read recording: {_one_line(exc)}") from None
+
+    def piece(self, batch: Any, offset: int) -> Recording:
+        """One piece from a pyarrow table or record batch of the file's columns (its
+        first row is row ``offset`` of the file), checked as `read_recording` checks."""
+        names = {source: name for name, source in self.sources.items()}
+        columns = {
+            names[col]: _column(
+                np.asarray(batch.column(col).to_numpy(zero_copy_only=False)),
+                names[col],
+                self.path,
+            )
+            for col in batch.schema.names
+            if col in names
+        }
+        t = columns["t"]
+        if not np.all(np.isfinite(t)):
+            bad = offset + int(np.flatnonzero(~np.isfinite(t))[0])
+            raise RecordingError(f"{self.path}: time column t is not finite at row {bad}")
+        return Recording(columns, dict(self.meta))
 
 
 def open_stream(
@@ -659,12 +680,20 @@ def open_stream(
     columns: Mapping[str, str] | None = None,
     required: tuple[str, ...] = REQUIRED_COLUMNS,
 ) -> RecordingStream | None:
-    """A `RecordingStream` of a Parquet recording that names its rate (``fs`` in its
-    metadata), holds at least 2 samples and the ``required`` columns; None for any other
-    file, and for one that is not that (`read_recording` of the whole file then gives its
-    findings and errors, word for word). ``columns``: as `read_recording`'s."""
+    """A `RecordingStream` of a Parquet recording, or of a plain CSV recording of
+    `ARROW_CSV_MIN_BYTES` or more (`fdi_daemon.io.csv_stream`), that names its rate (``fs``
+    in its metadata), holds at least 2 samples and the ``required`` columns; None for any
+    other file, and for one that is not that (`read_recording` of the whole file then gives
+    its findings and errors, word for word). ``columns``: as `read_recording`'s."""
     path = Path(path)
-    if not path.name.lower().endswith(".parquet") or not path.is_file():
+    name = path.name.lower()
+    if not path.is_file():
+        return None
+    if name.endswith((".csv", ".csv.gz")) and path.stat().st_size >= ARROW_CSV_MIN_BYTES:
+        from fdi_daemon.io.csv_stream import open_csv_stream
+
+        return open_csv_stream(path, columns, required)
+    if not name.endswith(".parquet"):
         return None
     try:
         pq = _pyarrow_parquet(path)
@@ -675,6 +704,24 @@ def open_stream(
     except (RecordingError, OSError, ValueError, KeyError, TypeError):
         return None
     meta = {k.decode(): v.decode() for k, v in raw.items() if k not in _FOREIGN_META}
+    found_ok = stream_columns(path, meta, found, rows, columns, required)
+    if found_ok is None:
+        return None
+    fs, wanted = found_ok
+    return RecordingStream(path, meta, fs, rows, wanted)
+
+
+def stream_columns(
+    path: Path,
+    meta: dict[str, str],
+    found: list[str],
+    rows: int,
+    columns: Mapping[str, str] | None,
+    required: tuple[str, ...],
+) -> tuple[float, dict[str, str]] | None:
+    """(rate Hz, fdi name -> the file's column of each of `MONITOR_COLUMNS` it has) of a
+    file with the columns ``found`` and ``rows`` rows; None unless it names its rate, holds
+    2 rows or more and the ``required`` columns (through the renaming ``columns``)."""
     try:
         fs = _meta_fs(meta, path)
         # each column's number through the renaming: fdi name -> the file's column
@@ -685,8 +732,7 @@ def open_stream(
         return None
     if fs is None or rows < 2 or any(c not in sources for c in required):
         return None
-    wanted = {name: str(col) for name, col in sources.items() if name in MONITOR_COLUMNS}
-    return RecordingStream(path, meta, fs, rows, wanted)
+    return fs, {name: str(col) for name, col in sources.items() if name in MONITOR_COLUMNS}
 
 
 def parquet_column_type(name: str, values: np.ndarray) -> str:

@@ -23,11 +23,19 @@ THREE_TONE = G.OPERATIONS["three-tone 2.5/6/8.5 Hz"]
 LOW = G.OPERATIONS["low 1.2/2/2.9 Hz"]
 
 
+#: an accelerometer bias step after the drift path's raise (9.16 s on the three-tone ramp):
+#: a fault off friction's direction that the residual test alarms on
+BIAS_T_S, BIAS_MPS2 = 12.0, 2.0
+
+
 @functools.cache
-def _ramp(operation_name: str, seed: int = 4):
+def _ramp(operation_name: str, seed: int = 4, bias: bool = False):
+    """The 1 s half-size ramp from 8 s (14 s long); ``bias``: with the bias step."""
     from hil_sim.scenarios import scenario_from_dict, simulate
 
-    spec = G.ramp_spec(G.OPERATIONS[operation_name], {}, duration_s=14.0)
+    spec = G.ramp_spec(G.OPERATIONS[operation_name], {}, duration_s=14.0 + 2.0 * bias)
+    if bias:
+        spec["events"].append({"t_s": BIAS_T_S, "fault": "accel_bias", "value": BIAS_MPS2})
     return simulate(scenario_from_dict(spec), seed=seed)
 
 
@@ -51,10 +59,36 @@ def test_without_the_drift_path_the_growing_friction_is_not_found():
     assert _events(model, _ramp("three-tone 2.5/6/8.5 Hz")) == []
 
 
-def test_the_drift_path_is_bit_equal_per_tick_and_in_batch():
+def test_a_drift_raised_episode_stays_unconfirmed_past_the_isolation_timeout():
+    """The drift path tests friction's direction only: without friction isolated and
+    without the residual test's alarm (the fast path's evidence of a fault), the episode
+    is neither other_fault nor cleared (before: other_fault at +3.16 s, timeout 2 s)."""
+    model = sim_rig_model()
+    rec = _ramp("three-tone 2.5/6/8.5 Hz")
+    events = _events(model, rec)
+    detected = first_event(events, "fault_detected")
+    timeout_s = Monitor(model).detector.settings.isolation_timeout_s
+    assert rec.t[-1] > detected["t"] + timeout_s + 1.0
+    assert [e["kind"] for e in events] == ["fault_detected"]
+
+
+def test_a_drift_raised_episode_is_other_fault_a_timeout_after_the_residual_test_alarms():
+    """A bias step of the accelerometer during the drift-raised episode: the residual test's
+    alarm is the evidence of a fault, and with no friction isolated within the isolation
+    timeout from it the episode is other_fault."""
+    model = sim_rig_model()
+    events = _events(model, _ramp("three-tone 2.5/6/8.5 Hz", bias=True))
+    timeout_s = Monitor(model).detector.settings.isolation_timeout_s
+    assert [e["kind"] for e in events] == ["fault_detected", "other_fault"]
+    assert events[0]["path"] == "drift" and events[0]["t"] < BIAS_T_S
+    assert BIAS_T_S + timeout_s < events[1]["t"] <= BIAS_T_S + timeout_s + 0.1
+
+
+@pytest.mark.parametrize("bias", [False, True], ids=["ramp", "ramp_then_bias"])
+def test_the_drift_path_is_bit_equal_per_tick_and_in_batch(bias):
     """The step/batch contract: the same events and the same final CUSUM (one sample at a
     time against `Monitor.run`, whose kernel returns to Python only on event ticks)."""
-    rec = _ramp("three-tone 2.5/6/8.5 Hz")
+    rec = _ramp("three-tone 2.5/6/8.5 Hz", bias=bias)
     batch_monitor = Monitor(sim_rig_model())
     batch, trace = batch_monitor.run(rec)
     mon = Monitor(sim_rig_model())

@@ -132,11 +132,11 @@ def fmt(m):
     return f"{d}, then {later}, isolated {i}, {m['false_before']} before onset"
 
 
-def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201)):
+def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201), model=None):
     """The fault-free CUSUM's excursions (runs of S > 0) on an hour of changing operation
-    that no test replays (seed 7), the shipped model with the alarm out of reach: how many
-    peak above each level (the threshold's basis, docs/detector.md). One `Monitor.step` a
-    sample, about 3 minutes."""
+    that no test replays (seed 7), the model (default: the shipped one) with the alarm out
+    of reach: how many peak above each level (the threshold's basis, docs/detector.md). One
+    `Monitor.step` a sample, about 3 minutes."""
     import copy
 
     import numpy as np
@@ -145,13 +145,15 @@ def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201)):
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.io.sample import Sample
 
-    model = copy.deepcopy(sim_rig_model())
+    model = copy.deepcopy(sim_rig_model() if model is None else model)
     model.detector = {**(model.detector or {}), "drift_correlation_samples": 10**6}
     rec = scenario_recording("fault_free_hour", seed=seed)
+    position = np.asarray(rec.columns["position"], dtype=float)
     mon = Monitor(model)
     peaks, peak = [], 0.0
     for k in range(len(rec)):
-        mon.step(Sample(k, float(rec.t[k]), float(rec.v_in[k]), float(rec.accel[k])))
+        sample = Sample(k, float(rec.t[k]), float(rec.v_in[k]), float(rec.accel[k]), position[k])
+        mon.step(sample)
         s = mon.detector.drift_statistic
         if s > 0.0:
             peak = max(peak, s)

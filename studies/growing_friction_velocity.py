@@ -2,7 +2,7 @@
 operation? (issue 43; docs/detector.md §3, "Growing friction", and §4a). Run:
 ``python studies/growing_friction_velocity.py [default|v0|v1 ...] [--hours] [--tail]`` (one
 to two minutes per rig; ``--hours`` adds the fault-free hours of seeds 0–2 for every model
-of the default rig, about a minute each; ``--tail`` the fault-free excursion tail of the
+on every rig, 10–60 s each; ``--tail`` the fault-free excursion tail of the
 drift path's CUSUM (`growing_friction_detection.excursion_tail`, seed 7) for the position
 model matched to ``POSITION_SHIFT`` on the default rig, about 3 minutes).
 
@@ -156,6 +156,18 @@ def theta1_reading(model, rig, operation, seed: int) -> float:
     return median(AFTER_S) - median(BEFORE_S)
 
 
+def fault_free_hour(rig: dict, seed: int):
+    """`configs/scenarios/fault_free_hour.yaml` (changing operation, 1–9 Hz) on the rig."""
+    import yaml
+    from test_detect_other_rig import SCENARIOS
+
+    from hil_sim.scenarios import scenario_from_dict, simulate
+
+    spec = yaml.safe_load((SCENARIOS / "fault_free_hour.yaml").read_text())
+    spec["rig"] = {**spec.get("rig", {}), **rig}
+    return simulate(scenario_from_dict(spec), seed=seed)
+
+
 def main(argv: list[str]) -> None:
     import growing_friction_detection as G
     from conftest_detect import scenario_recording
@@ -181,6 +193,15 @@ def main(argv: list[str]) -> None:
                         f"{peak} / {m['h']:.0f} | {th:.3f} |",
                         flush=True,
                     )
+            if "--hours" in argv:
+                for seed in (0, 1, 2):
+                    rec = fault_free_hour(rig, seed)
+                    events = Monitor(model).run(rec, trace_every=len(rec))[0]
+                    raised = [e for e in events if e["kind"] == "fault_detected"]
+                    print(
+                        f"{rig_name} {name} fault-free hour seed {seed}: {len(raised)} episode(s)",
+                        flush=True,
+                    )
             if rig_name != "default":
                 continue
             for case, fault_s in (("test_case_1", 3.05), ("test_case_2", 2.9)):
@@ -191,14 +212,6 @@ def main(argv: list[str]) -> None:
                 print(f"{name} {case}: {delay}, {kinds}", flush=True)
             if "--tail" in argv and name.endswith(str(POSITION_SHIFT)):
                 G.excursion_tail(model=model)
-            if "--hours" in argv:
-                for seed in (0, 1, 2):
-                    rec = scenario_recording("fault_free_hour", seed=seed)
-                    events = Monitor(model).run(rec, trace_every=len(rec))[0]
-                    raised = [e for e in events if e["kind"] == "fault_detected"]
-                    print(
-                        f"{name} fault-free hour seed {seed}: {len(raised)} episode(s)", flush=True
-                    )
 
 
 if __name__ == "__main__":

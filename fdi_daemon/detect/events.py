@@ -7,9 +7,10 @@ non-finite numbers are stored as None so that each line is strict JSON. Kinds:
 - ``fault_detected``: the sequential test (or the paper's band) raised an alarm (``path``:
   fast, level, baseline or drift; the drift path's alarm is ``unconfirmed: true``);
 - ``friction_isolated``: (θ1, θ2) track the friction signature (1, γ_f);
-- ``other_fault``: an alarm whose estimates do not track the signature within the isolation
-  timeout of the residual test's alarm (with
-  ``accel_clipping: true`` when the accelerometer sat at its rail during the episode);
+- ``other_fault``: an alarm whose estimates do not track the signature within
+  ``isolation_timeout_s`` of the detection (for the drift path's: of the residual test's
+  alarm; with ``accel_clipping: true`` when the accelerometer sat at its rail during the
+  episode);
 - ``cleared``: the estimates and the test statistic are back to normal;
 - ``data_gap``: samples missing (``missing_samples``); the estimator restarts;
 - ``link_lost`` / ``link_restored``: emitted by the service's link layer, not the monitor;

@@ -5,7 +5,8 @@ linearly over 1 s (bearing supply 80 -> 62 %, `ramp_spec`), under two operations
 cases and a fault-free record on the same models (docs/detector.md §3, "Growing friction").
 Run: ``python studies/growing_friction_detection.py [default|v0|v1 ...]`` (a minute or two
 per rig); ``python studies/growing_friction_detection.py tail`` prints the fault-free
-excursion tail the threshold's τ comes from (about 3 minutes).
+excursion tail the threshold's τ comes from (about 3 minutes); ``... during`` the ramp with
+another fault stepped in during the drift path's episode (`faults_during_episode`).
 
 Prints per rig, operation and seed the first `fault_detected` after the onset (delay in s,
 its path) and what followed, before the path (``drift_shift_level: 0``) and with it; for
@@ -132,11 +133,11 @@ def fmt(m):
     return f"{d}, then {later}, isolated {i}, {m['false_before']} before onset"
 
 
-def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201)):
+def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201), model=None):
     """The fault-free CUSUM's excursions (runs of S > 0) on an hour of changing operation
-    that no test replays (seed 7), the shipped model with the alarm out of reach: how many
-    peak above each level (the threshold's basis, docs/detector.md). One `Monitor.step` a
-    sample, about 3 minutes."""
+    that no test replays (seed 7), the model (default: the shipped one) with the alarm out
+    of reach: how many peak above each level (the threshold's basis, docs/detector.md). One
+    `Monitor.step` a sample, about 3 minutes."""
     import copy
 
     import numpy as np
@@ -145,13 +146,15 @@ def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201)):
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.io.sample import Sample
 
-    model = copy.deepcopy(sim_rig_model())
+    model = copy.deepcopy(sim_rig_model() if model is None else model)
     model.detector = {**(model.detector or {}), "drift_correlation_samples": 10**6}
     rec = scenario_recording("fault_free_hour", seed=seed)
+    position = np.asarray(rec.columns["position"], dtype=float)
     mon = Monitor(model)
     peaks, peak = [], 0.0
     for k in range(len(rec)):
-        mon.step(Sample(k, float(rec.t[k]), float(rec.v_in[k]), float(rec.accel[k])))
+        sample = Sample(k, float(rec.t[k]), float(rec.v_in[k]), float(rec.accel[k]), position[k])
+        mon.step(sample)
         s = mon.detector.drift_statistic
         if s > 0.0:
             peak = max(peak, s)
@@ -164,9 +167,45 @@ def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201)):
         print(f"  above {level}: {int((p > level).sum())}")
 
 
+#: faults stepped in at 12 s, during the drift path's episode of the three-tone ramp
+FAULTS_DURING_EPISODE = (
+    ("accel_bias", 0.3),
+    ("accel_bias", 1.0),
+    ("accel_bias", 2.0),
+    ("valve_gain", 0.6),
+    ("valve_gain", 0.3),
+    ("supply_pressure", 0.5),
+)
+
+
+def faults_during_episode(seed: int = 4, fault_t_s: float = 12.0):
+    """The three-tone ramp (default rig, shipped model, 16 s) with another fault stepped in
+    at ``fault_t_s``, after the drift path's raise: the events, and the residual test's
+    peak T over the second after the step (the evidence an episode of the drift path
+    waits for before the isolation timeout counts, docs/detector.md §3)."""
+    import numpy as np
+    from conftest_detect import sim_rig_model
+
+    from fdi_daemon.detect.monitor import Monitor
+    from hil_sim.scenarios import scenario_from_dict, simulate
+
+    for fault, value in FAULTS_DURING_EPISODE:
+        spec = ramp_spec(OPERATIONS["three-tone 2.5/6/8.5 Hz"], duration_s=16.0)
+        spec["events"].append({"t_s": fault_t_s, "fault": fault, "value": value})
+        rec = simulate(scenario_from_dict(spec), seed=seed)
+        events, trace = Monitor(sim_rig_model()).run(rec)
+        after = (trace.t >= fault_t_s) & (trace.t < fault_t_s + 1.0)
+        shown = [f"{e['kind']} {e['t']:.2f} s" for e in events if e["kind"] != "calibrated"]
+        peak = float(np.nanmax(trace.statistic[after]))
+        print(f"{fault} {value}: T peak {peak:.1f}; " + ", ".join(shown), flush=True)
+
+
 def main(argv):
     if argv[:1] == ["tail"]:
         excursion_tail()
+        return
+    if argv[:1] == ["during"]:
+        faults_during_episode()
         return
     names = tuple(argv) or ("default", "v0", "v1")
     for name, (rig, model) in models(names).items():

@@ -20,7 +20,9 @@ reference ended: an increase of the Coulomb coefficient by ``friction_min_level`
 the calibrated signature), held for ``track_samples`` ticks, is friction once the fault
 has persisted (the frozen-reference test still above the threshold on samples an
 isolation window after the detection: a knock or glitch does not persist); gain (x̂̈) or offset (1) changes without it, or no
-friction evidence within ``isolation_timeout_s``, are another fault.
+friction evidence within ``isolation_timeout_s``, are another fault. An episode the
+growing-fault path raised (a CUSUM along friction's direction only) counts that timeout
+from the residual test's alarm: until then it stays ``fault_detected``, unconfirmed.
 
 The level path catches friction that creeps in (wear), that starts while the guard holds,
 or that is there from the start: the Coulomb coefficient θ1 (eq. 17) above its fault-free

@@ -95,6 +95,7 @@ MIN_RCOND = 1e-6
     P_O_G,
     P_WARMUP,
     P_CLIPPED,
+    P_FAULT_AT,
 ) = (
     0,
     1,
@@ -128,8 +129,9 @@ MIN_RCOND = 1e-6
     34,
     35,
     36,
+    37,
 )
-EPISODE_INTS = 37
+EPISODE_INTS = 38
 # floats at P_O_SCAL
 (
     S_THETA_REF,
@@ -212,9 +214,12 @@ def episode_restart(f: F64, ii: I64, eo: int) -> None:  # pragma: no cover - jit
 
 
 @jit
-def episode_start(f: F64, ii: I64, eo: int, res: int, level: int) -> None:  # pragma: no cover - jit
+def episode_start(
+    f: F64, ii: I64, eo: int, res: int, level: int, drift: int
+) -> None:  # pragma: no cover - jit
     """A new episode against the residual test ``res`` (its ints' base) as it is now: θ_ref
-    and σ²_ref frozen, the post window filled with the rows since the reference ended."""
+    and σ²_ref frozen, the post window filled with the rows since the reference ended
+    (``level``, ``drift``: raised by the level path, by the growing-fault path)."""
     episode_restart(f, ii, eo)
     sc = ii[eo + P_O_SCAL]
     th = ii[res + 20]
@@ -237,6 +242,9 @@ def episode_start(f: F64, ii: I64, eo: int, res: int, level: int) -> None:  # pr
     ii[eo + P_HOLD_UNTIL] = 0
     ii[eo + P_PERSISTED] = level
     ii[eo + P_LEVEL] = level
+    # the isolation timeout counts from the detection, except for the growing-fault path,
+    # which tests friction's direction only: from the residual test's alarm (below)
+    ii[eo + P_FAULT_AT] = -1 if drift else 0
     ii[eo + P_KIND] = KIND_NONE
     ii[eo + P_CLIPPED] = 0
     f[sc + S_LEVEL_CHANGE] = math.nan
@@ -320,6 +328,7 @@ def episode_tick(
     trusted: bool,
     sliding: bool,
     clipped: bool,
+    alarm: bool,
     row: int,
     band: int,
     out: F64,
@@ -331,7 +340,8 @@ def episode_tick(
     calibrated band (lo1, hi1, lo2, hi2), −1 without one; θ: the pipeline's window θ (NaN
     at rest); ``trusted``, ``sliding``, ``clipped``: the window's velocity lies where v̂ is
     right, the load moves freely, the accelerometer sits at its rail (`kernel.chain_tick`;
-    a clipped window is no friction evidence; the episode remembers it saw one)."""
+    a clipped window is no friction evidence; the episode remembers it saw one); ``alarm``:
+    the residual test's alarm holds (T > h for ``persistence_samples`` ticks, armed)."""
     n = ii[eo + P_N]
     m = ii[eo + P_M]
     iso = ii[eo + P_ISO]
@@ -339,6 +349,8 @@ def episode_tick(
     moving = math.isfinite(theta1)
     ticks = ii[eo + P_TICKS] + 1
     ii[eo + P_TICKS] = ticks
+    if alarm and ii[eo + P_FAULT_AT] < 0:
+        ii[eo + P_FAULT_AT] = ticks
     sums_push(f, ii, ii[eo + P_O_POST], n, W, eo + P_POST, row)
     tr = sc + S_THETA_REF
     acc = f[tr] * g1
@@ -439,7 +451,12 @@ def episode_tick(
             f[sc + S_LEVEL_CHANGE] = f[sc + S_EVIDENCE]
             ii[eo + P_QUIET] = 0
             return TO_ISOLATED
-        if state == 3 and ticks >= ii[eo + P_TIMEOUT]:
+        # no friction evidence within the timeout of the fault's evidence: another fault.
+        # An episode the growing-fault path raised (friction's direction only) has that
+        # evidence once the residual test's alarm holds (what raises a fast episode); until
+        # then it stays unconfirmed
+        fault_at = ii[eo + P_FAULT_AT]
+        if state == 3 and fault_at >= 0 and ticks - fault_at >= ii[eo + P_TIMEOUT]:
             ii[eo + P_QUIET] = 0
             return TO_OTHER
     if state == 4:

@@ -4,10 +4,13 @@ Every event is a flat dict ``{"t": s, "kind": k, "theta1": x|None, "theta2": x|N
 non-finite numbers are stored as None so that each line is strict JSON. Kinds:
 
 - ``calibrated``: the fault-free calibration period is over (band and baseline set);
-- ``fault_detected``: the sequential test (or the paper's band) raised an alarm;
+- ``fault_detected``: the sequential test (or the paper's band) raised an alarm (``path``:
+  fast, level, baseline or drift; the drift path's alarm is ``unconfirmed: true``);
 - ``friction_isolated``: (θ1, θ2) track the friction signature (1, γ_f);
-- ``other_fault``: an alarm whose estimates do not track the signature (with
-  ``accel_clipping: true`` when the accelerometer sat at its rail during the episode);
+- ``other_fault``: an alarm whose estimates do not track the signature within
+  ``isolation_timeout_s`` of the detection (for the drift path's: of the residual test's
+  alarm; with ``accel_clipping: true`` when the accelerometer sat at its rail during the
+  episode);
 - ``cleared``: the estimates and the test statistic are back to normal;
 - ``data_gap``: samples missing (``missing_samples``); the estimator restarts;
 - ``link_lost`` / ``link_restored``: emitted by the service's link layer, not the monitor;

@@ -410,7 +410,11 @@ def detector_tick(
     else:
         over = (theta1 - f[fo + E_LEVEL_BASE]) / f[fo + E_FRICTION_MIN]
     f[fo + E_OVER] = over
+    armed = ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL]
     if ii[io + D_EPISODE]:
+        # the residual test's alarm, counted as on the quiet path: the evidence of a fault
+        # an episode of the growing-fault path waits for (`episode_tick`)
+        ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if armed and stat > f[fo + E_THRESHOLD] else 0
         return _episode(
             f,
             ii,
@@ -428,6 +432,7 @@ def detector_tick(
             f[out + O_TRUSTED] != 0.0,
             f[out + O_SLIDING] != 0.0,
             f[out + O_CLIPPED] != 0.0,
+            ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE],
         )
     if tick < ii[io + D_HOLD_UNTIL]:
         ii[io + D_ABOVE] = 0
@@ -438,7 +443,7 @@ def detector_tick(
     if ii[io + D_LEVEL_ABOVE] >= ii[io + D_LEVEL_SAMPLES]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
-        _start(f, ii, io, res, 1)
+        _start(f, ii, io, res, 1, 0)
         return LEVEL_ALARM
     if ii[io + D_STATE] == STATE_CALIBRATING:
         c = ii[io + D_CAL_COUNT]
@@ -456,7 +461,6 @@ def detector_tick(
             or theta2 > f[fo + E_HI2]
         )
     else:
-        armed = ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL]
         alarm = armed and stat > f[fo + E_THRESHOLD]
         _drift_tick(f, ii, res, fo, out, armed, r, g1, g2, xhat)
     ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if alarm else 0
@@ -464,12 +468,12 @@ def detector_tick(
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
         f[fo + E_DRIFT] = 0.0
-        _start(f, ii, io, res, 0)
+        _start(f, ii, io, res, 0, 0)
         return FAST_ALARM
     if f[fo + E_DRIFT] > f[fo + E_DRIFT_H]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
-        _start(f, ii, io, res, 0)
+        _start(f, ii, io, res, 0, 1)
         E.episode_rebase(f, ii, ii[io + D_EPI], fo + E_DRIFT_REF)
         return DRIFT_ALARM
     return QUIET
@@ -512,10 +516,12 @@ def _drift_tick(
 
 
 @jit
-def _start(f: F64, ii: I64, io: int, res: int, level: int) -> None:  # pragma: no cover - jit
-    """fault_detected: an episode starts (level: raised by the level path); the reported
-    friction level restarts from the new picks."""
-    E.episode_start(f, ii, ii[io + D_EPI], res, level)
+def _start(
+    f: F64, ii: I64, io: int, res: int, level: int, drift: int
+) -> None:  # pragma: no cover - jit
+    """fault_detected: an episode starts (level, drift: raised by the level path, by the
+    growing-fault path); the reported friction level restarts from the new picks."""
+    E.episode_start(f, ii, ii[io + D_EPI], res, level, drift)
     level_restart(f, ii, ii[io + D_LEVEL])
     ii[io + D_EPISODE] = 1
     ii[io + D_STATE] = STATE_DETECTED
@@ -539,6 +545,7 @@ def _episode(
     trusted: bool,
     sliding: bool,
     clipped: bool,
+    alarm: bool,
 ) -> int:  # pragma: no cover - jit
     """A tick of the running episode, and its transition applied to the detector."""
     ep = ii[io + D_EPI]
@@ -562,6 +569,7 @@ def _episode(
         trusted,
         sliding,
         clipped,
+        alarm,
         ii[res + 16],
         band,
         f[fo + E_THETA1 : fo + E_THETA2 + 1],

@@ -45,34 +45,40 @@ def _open(path: Path) -> IO[bytes]:
     return open(path, "rb")
 
 
-def _plain(data: bytes) -> bool:
-    """No comment, quote, lone \\r, blank line or line starting with a blank in ``data``
-    (single bytes found at memchr speed, the bytes after each line end by NumPy: Python's
+def _plain_rows(data: bytes) -> int | None:
+    """Line ends in ``data[1:]``, where ``data[0]`` is the byte before them (a line end at
+    the body's start); None where ``data`` holds a comment, a quote, a lone \\r, a blank line
+    or a line starting with a blank. Single bytes are found at memchr speed, the bytes after
+    each line end by NumPy (a line starts with a number, above the blank 0x20; Python's
     search for two bytes ran at 250 MB/s, a regular expression at 14 MB/s)."""
     if b"#" in data or b'"' in data:
-        return False
+        return None
     if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
-        return False
+        return None
     raw = np.frombuffer(data, dtype=np.uint8)
-    after_line_end = raw[1:][raw[:-1] == ord("\n")]
-    return not np.isin(after_line_end, list(b"\n\r \t")).any()
+    line_end = raw == ord("\n")
+    starts = raw[1:][line_end[:-1]]
+    if starts.size and starts.min() <= ord(" "):
+        return None
+    return int(np.count_nonzero(line_end[1:]))
 
 
 def _body_rows(path: Path, body_offset: int) -> int | None:
     """Rows of a plain body (its line ends), read once block by block; None where it is
     not plain or does not end with a line end."""
     rows = 0
-    tail = b"\n"  # the byte before the block (the body starts a line), searched again
+    tail = b"\n"  # the byte before the block (the body starts a line)
     with _open(path) as fh:
         fh.seek(body_offset)
         while block := fh.read(BLOCK_BYTES):
             if block.endswith(b"\r"):  # its \n, if any, belongs to this block
                 block += fh.read(1)
-            if not _plain(tail + block):
+            found = _plain_rows(tail + block)
+            if found is None:
                 return None
-            rows += block.count(b"\n")
+            rows += found
             tail = block[-1:]
-    return rows if tail.endswith(b"\n") else None
+    return rows if tail == b"\n" else None
 
 
 @dataclass

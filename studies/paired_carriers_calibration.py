@@ -101,6 +101,19 @@ def _summary(rec: Path, model: Path, root: Path) -> dict:
     return json.loads(out.read_text())
 
 
+def _steady_level_band(rec: Path, model: Path, root: Path) -> str:
+    """Median (5th-95th percentile) of the reported level from 10 s after the onset,
+    from `fdi replay --trace`."""
+    import numpy as np
+
+    trace = root / "trace.csv"
+    _fdi("replay", rec, "--model", model, "--trace", trace)
+    d = np.genfromtxt(trace, delimiter=",", names=True)
+    level = d["friction_level"][(d["t"] >= STEADY[1] + 10.0) & np.isfinite(d["friction_level"])]
+    lo, med, hi = np.percentile(level, [5, 50, 95])
+    return f"{med:.3f} ({lo:.2f}-{hi:.2f})"
+
+
 def column(model: Path, recs: dict[str, Path], root: Path) -> list[str]:
     from fdi_daemon.io.model_file import load_model
 
@@ -127,6 +140,7 @@ def column(model: Path, recs: dict[str, Path], root: Path) -> list[str]:
     rows.append("-" if iso is None else f"{iso - STEADY[1]:.2f} s")
     rows.append(f"{s['alarm_episodes']} / {s['event_counts'].get('cleared', 0)} cleared")
     rows.append(f"{s['friction_level_final']:.3f}")
+    rows.append(_steady_level_band(recs[STEADY[0]], model, root))
     rows.append(
         " / ".join(
             str(_summary(recs[f"hour{seed}"], model, root)["alarm_episodes"]) for seed in (0, 1)
@@ -146,6 +160,7 @@ ROWS = (
     "  time to friction_isolated after onset",
     "  alarm episodes / cleared",
     "  friction level (final)",
+    "  friction level from 10 s after onset: median (5-95 %)",
     "fault-free hour, seeds 0 / 1: alarm episodes",
 )
 
@@ -171,7 +186,7 @@ def main(extra: list[str]) -> None:
         models.update({Path(m).stem: Path(m) for m in extra})
         cols = {name: column(path, recs, root) for name, path in models.items()}
     truth = truths()
-    cols = {"truth": ["3.33", "", "", truth[0], "", truth[1], "", "", "", truth[2], ""], **cols}
+    cols = {"truth": ["3.33", "", "", truth[0], "", truth[1], "", "", "", truth[2], "", ""], **cols}
     print("| | " + " | ".join(cols) + " |")
     print("|---|" + "---|" * len(cols))
     for i, row in enumerate(ROWS):

@@ -5,6 +5,7 @@ afresh when only that other module changes (numba alone would load the stale cod
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -96,3 +97,36 @@ def test_cache_files_of_the_old_scheme_are_removed(tmp_path):
     assert _run(tmp_path) == (2.5, 0)
     assert not any(f.exists() for f in old)
     assert keep.exists()
+
+
+def test_processes_starting_together_compile_a_kernel_once(tmp_path):
+    # two processes call the kernel at the same moment on a fresh cache (the daemon and the
+    # device simulator after an install, the test workers): one compiles, the other waits
+    # for its lock and loads what the first one saved (without the lock both compiled)
+    _package(tmp_path, factor=2.0, offset=0.5)
+    go = tmp_path / "go"
+    environ = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+    environ.update(PYTHONPATH=f"{tmp_path}{os.pathsep}{REPO}", PYTHONDONTWRITEBYTECODE="1")
+    procs = []
+    for k in range(2):
+        ready = tmp_path / f"ready{k}"
+        code = (
+            "import os, time\n"
+            "from kpkg.caller import kernel\n"
+            f"open({str(ready)!r}, 'w').close()\n"
+            f"while not os.path.exists({str(go)!r}): time.sleep(0.002)\n"
+            + RUN.partition(";")[2].strip()
+        )
+        procs.append(
+            subprocess.Popen(
+                [sys.executable, "-c", code], env=environ, stdout=subprocess.PIPE, text=True
+            )
+        )
+    deadline = time.monotonic() + 120
+    while not all((tmp_path / f"ready{k}").exists() for k in range(2)):
+        assert time.monotonic() < deadline and all(p.poll() is None for p in procs)
+        time.sleep(0.01)
+    go.touch()
+    outs = sorted(p.communicate(timeout=120)[0].split()[1] for p in procs)
+    assert [p.returncode for p in procs] == [0, 0]
+    assert outs == ["0", "1"]  # compiled by one, loaded from the cache by the other

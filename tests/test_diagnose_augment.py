@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 import pytest
 from scipy import signal
@@ -114,18 +116,27 @@ def test_model_file_round_trip(kind):
     np.testing.assert_allclose(back.run(u), _plant(kind).run(u), rtol=1e-12, atol=1e-12)
 
 
-@pytest.mark.parametrize(
-    "hidden,named",
-    [
-        (lambda: recording("coulomb_friction"), "coulomb_friction"),
-        # the refit's damping line (`mode_lines`), an output effect with its own filter
-        (lambda: changed_recording("damping_n_s_per_m", 1.5), "mode_damping"),
-    ],
-)
-def test_augmented_plant_reproduces_the_workflow(hidden, named):
-    rec = hidden()
+#: the recordings diagnosed here, by the effect they hide
+HIDDEN = {
+    "coulomb_friction": lambda: recording("coulomb_friction"),
+    # the refit's damping line (`mode_lines`), an output effect with its own filter
+    "mode_damping": lambda: changed_recording("damping_n_s_per_m", 1.5),
+}
+
+
+@cache
+def _diagnosed(hidden: str):
+    """(recording, its diagnosis against the nominal plant), once per process: two tests
+    read the Coulomb friction's (~20 s of CPU) and neither changes it."""
+    rec = HIDDEN[hidden]()
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    return rec, run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+
+
+@pytest.mark.parametrize("named", list(HIDDEN))
+def test_augmented_plant_reproduces_the_workflow(named):
+    rec, result = _diagnosed(named)
+    b, a = nominal_model()
     assert named in [e.name for e in result.selection.named]
     model = FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": result.plant.to_extra()})
     plant = AugmentedPlant.from_model(model_from_dict(model.to_dict()))
@@ -167,9 +178,8 @@ def test_monitor_pipeline_uses_the_augmented_model_and_its_residual_shrinks(tmp_
     from fdi_daemon.io.model_file import FaultFilter, save_model
     from fdi_daemon.io.recordings import write_recording
 
-    rec = recording("coulomb_friction")
+    rec, result = _diagnosed("coulomb_friction")
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
     ff = FaultFilter(b=np.array([0.01, 0.02]), f=np.array([1.0, -0.5]), nk=0, gamma_f=1.0)
     plain = FdiModel(fs=FS, plant_b=b, plant_a=a, fault_filter=ff)
     augmented = model_from_dict(

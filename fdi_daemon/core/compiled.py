@@ -78,32 +78,86 @@ def jit(func: Any = None, *, inline: bool = False, nrt: bool = False) -> Any:
         if cache_dir is None:
             return _compiling_indices_as_given(_njit(**options)(f))
         with _numba_cache_dir(cache_dir):
-            return _compiling_indices_as_given(_njit(cache=True, **options)(f))
+            dispatcher = _njit(cache=True, **options)(f)
+        lock = Path(cache_dir) / "locks" / f"{f.__module__}.{f.__qualname__}.lock"
+        return _compiling_indices_as_given(dispatcher, lock)
 
     return wrap(func) if func is not None else wrap
 
 
-def _compiling_indices_as_given(dispatcher: Any) -> Any:
+def _compiling_indices_as_given(dispatcher: Any, lock: Path | None = None) -> Any:
     """``dispatcher``, compiling with every integer index taken as it is
     (`_indices_as_given`). Each of the two numba internals this rests on falls back to plain
     ``njit`` (slower, the same results) when a numba release refuses it: the private
     ``_nrt`` option (`_without_private_nrt`) and the swapped index lowering (a compile that
-    fails with it is compiled again with numba's own)."""
+    fails with it is compiled again with numba's own). With a cached kernel, ``lock`` is its
+    file lock among processes (`_compile_lock`)."""
     compile_signature = dispatcher.compile
 
     @functools.wraps(compile_signature)
     def compile(sig: Any) -> Any:
-        try:
-            with _indices_as_given():
+        from numba.core.compiler_lock import global_compiler_lock
+
+        # numba's lock first, then the file lock: a thread waiting for the file lock holds
+        # no other thread's way to it
+        with global_compiler_lock, _compile_lock(lock, dispatcher, sig):
+            try:
+                with _indices_as_given():
+                    return _compile_allowing_nrt_refusal(dispatcher, compile_signature, sig)
+            except Exception as exc:  # numba wraps the failure in its own error types
+                if not _caused_by_index_swap(exc):
+                    raise
+                _warn_fallback("the swapped index lowering (arrayobj.fix_integer_index)", exc)
                 return _compile_allowing_nrt_refusal(dispatcher, compile_signature, sig)
-        except Exception as exc:  # numba wraps the failure in its own error types
-            if not _caused_by_index_swap(exc):
-                raise
-            _warn_fallback("the swapped index lowering (arrayobj.fix_integer_index)", exc)
-            return _compile_allowing_nrt_refusal(dispatcher, compile_signature, sig)
 
     dispatcher.compile = compile
     return dispatcher
+
+
+#: the compile locks this process holds (a kernel compiling itself again takes none)
+_held_locks: set[Path] = set()
+
+
+@contextlib.contextmanager
+def _compile_lock(lock: Path | None, dispatcher: Any, sig: Any) -> Iterator[None]:
+    """Held while ``dispatcher`` compiles ``sig`` (or loads it from the cache): one process
+    at a time per kernel, so processes that start together on a fresh cache (the daemon and
+    the device simulator, the instances of fdi@.service after an upgrade, the test workers)
+    compile a kernel once: numba looks in the cache only after the lock is taken, and finds
+    there what the first one compiled. No lock where ``fcntl`` is missing, the lock file
+    cannot be made, or the signature is compiled in this process already."""
+    if lock is None or lock in _held_locks or _compiled_here(dispatcher, sig):
+        yield
+        return
+    try:
+        import fcntl
+
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        _held_locks.add(lock)
+        try:
+            yield
+        finally:
+            _held_locks.discard(lock)
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def _compiled_here(dispatcher: Any, sig: Any) -> bool:
+    """Whether ``dispatcher`` holds ``sig`` compiled (numba then returns it at once)."""
+    try:
+        from numba.core import sigutils
+
+        normalize: Any = sigutils.normalize_signature  # untyped in numba
+        args, _ = normalize(sig)
+        return tuple(args) in dispatcher.overloads
+    except Exception:  # another numba's internals: take the lock
+        return False
 
 
 class _IndexSwapRefused(Exception):

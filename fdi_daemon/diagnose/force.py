@@ -319,6 +319,47 @@ def _shifts(w: np.ndarray, width: int) -> np.ndarray:
     return np.column_stack([np.concatenate([np.zeros(i), w[: len(w) - i]]) for i in range(width)])
 
 
+#: regressor kinds whose force dissipates (a friction: it opposes the motion)
+DISSIPATIVE = (_SIGN, _VEL)
+
+
+def friction_bounds(cols: list, n_ff: int, width: int, per_column: int) -> np.ndarray:
+    """Upper bounds of a force-loop parameter vector [fed-forward, per column] (``width``
+    numbers per column when ``per_column`` is ``width``, an amplitude when 1): a friction
+    column's leading coefficient ≤ 0, every other number free (+inf).
+
+    The leading coefficient b_j0 of B_F/Â (Â monic) is the force path's high-frequency
+    gain: a force on the mass accelerates it at once in the force's direction (+1/m), so
+    a friction F = −F_c sign v (or −c v) with F_c, c ≥ 0 has b_j0 ≤ 0. An amplitude on the
+    input's path B̂ is minus the friction's input equivalent (the reported level), ≤ 0 too.
+    """
+    upper = np.full(n_ff + len(cols) * per_column, np.inf)
+    for j, (kind, _) in enumerate(cols):
+        if kind in DISSIPATIVE:
+            upper[n_ff + j * per_column] = 0.0
+    return upper
+
+
+def bounded_least_squares(x: np.ndarray, y: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """min ‖y − xθ‖ subject to θ ≤ ``upper`` (0 or +inf per number): an active set, each
+    violating number held at its bound in turn (the worst first) and the rest refitted
+    (`effects.least_squares` on the Gram matrix), until every number is within bounds."""
+    from fdi_daemon.diagnose.effects import solve_gram
+
+    gram, xty = x.T @ x, x.T @ y
+    held = np.zeros(len(upper), dtype=bool)
+    theta = np.zeros(len(upper))
+    for _ in range(int(np.sum(np.isfinite(upper))) + 1):
+        free = ~held
+        theta[:] = 0.0
+        theta[free] = solve_gram(gram[np.ix_(free, free)], xty[free])
+        over = np.where(free & (theta > upper), theta - upper, 0.0)
+        if not np.any(over > 0):
+            break
+        held[int(np.argmax(over))] = True
+    return np.minimum(theta, upper)
+
+
 def in_the_loop(
     ctx, effects: list, previous: list | None = None, spring: bool = True, joint: bool = True
 ) -> tuple[list, np.ndarray]:
@@ -351,7 +392,6 @@ def in_the_loop(
         SPECS,
         FittedEffect,
         columns,
-        least_squares,
         physical_report,
     )
 
@@ -377,6 +417,14 @@ def in_the_loop(
     )
     n_ff = x_ff.shape[1]
     cols = [c for e in fb for c in kinds(e.name, e.param)]
+    # a friction's force path: its high-frequency gain b_j0 ≤ 0 (`friction_bounds`); on an
+    # acceleration output b_j0 is the direct term, elsewhere the path's leading terms are
+    # the state chain's and are left free
+    upper = (
+        friction_bounds(cols, n_ff, width, width)
+        if ctx.chain[0] == 0
+        else np.full(n_ff + len(cols) * width, np.inf)
+    )
 
     def run(theta_ff, nums):
         with np.errstate(all="ignore"):
@@ -400,7 +448,10 @@ def in_the_loop(
         x_fb = np.column_stack(
             [signal.lfilter(b_path, ctx.a_dom, _phi(k, p, ctx.v, ctx.x)) for k, p in cols]
         )
-        theta = least_squares(np.column_stack([x_ff, x_fb])[fit], ctx.target[fit])
+        amp_upper = friction_bounds(cols, n_ff, width, 1)
+        theta = bounded_least_squares(
+            np.column_stack([x_ff, x_fb])[fit], ctx.target[fit], amp_upper
+        )
         for _ in range(SHRINKS):  # a start whose loop diverges: towards the linear model
             if np.isfinite(run(theta[:n_ff], np.outer(theta[n_ff:], b_path))[1]):
                 break
@@ -412,7 +463,12 @@ def in_the_loop(
         r0 = residual(theta)
         with np.errstate(all="ignore"):
             sol = least_squares_nl(
-                residual, theta, method="trf", x_scale="jac", max_nfev=30 * theta.size
+                residual,
+                theta,
+                bounds=(-np.inf, amp_upper),
+                method="trf",
+                x_scale="jac",
+                max_nfev=30 * theta.size,
             )
         if float(sol.fun @ sol.fun) < float(r0 @ r0):
             theta = sol.x
@@ -428,7 +484,7 @@ def in_the_loop(
                 _shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), width)
                 for j in range(len(cols))
             ]
-            target = least_squares(np.column_stack(xs)[fit], ctx.target[fit])
+            target = bounded_least_squares(np.column_stack(xs)[fit], ctx.target[fit], upper)
             start = np.concatenate([best_ff, best_nums.ravel()])
             before = best
             for frac in (1.0, 0.5, 0.25, 0.125):
@@ -446,14 +502,19 @@ def in_the_loop(
         """4. every coefficient at once by output-error least squares with the motion in
         the loop (finite-difference Jacobian): the passes of step 3 regress on the states
         of the previous run and stop short of the optimum."""
-        x0 = np.concatenate([best_ff, best_nums.ravel()])
+        x0 = np.minimum(np.concatenate([best_ff, best_nums.ravel()]), upper)
 
         def residual(th):
             return training_error(th[:n_ff], th[n_ff:].reshape(len(cols), width))
 
         with np.errstate(all="ignore"):
             sol = least_squares_nl(
-                residual, x0, method="trf", x_scale="jac", max_nfev=JOINT_ITERATIONS
+                residual,
+                x0,
+                bounds=(-np.inf, upper),
+                method="trf",
+                x_scale="jac",
+                max_nfev=JOINT_ITERATIONS,
             )
         theta_ff, nums = sol.x[:n_ff], sol.x[n_ff:].reshape(len(cols), width)
         traced, sse = run(theta_ff, nums)

@@ -29,6 +29,17 @@ def code_digest() -> str:
     return h.hexdigest()
 
 
+def _fixtures_folder(config: pytest.Config) -> Path:
+    """pytest's cache folder for the products; the same folder where the cache plugin is off
+    (``-p no:cacheprovider``)."""
+    cache = getattr(config, "cache", None)
+    if cache is not None:
+        return Path(cache.mkdir("fixtures"))
+    root = Path(config.rootpath) / ".pytest_cache" / "d" / "fixtures"
+    root.mkdir(parents=True, exist_ok=True)
+    return root
+
+
 def cached_build(
     config: pytest.Config, name: str, inputs: Iterable[Path], build: Callable[[Path], None]
 ) -> Path:
@@ -36,7 +47,7 @@ def cached_build(
     h = hashlib.sha256(name.encode() + b"\0" + code_digest().encode())
     for path in inputs:
         h.update(b"\0" + Path(path).read_bytes())
-    root = config.cache.mkdir("fixtures")
+    root = _fixtures_folder(config)
     final = root / f"{name}-{h.hexdigest()[:16]}"
     with FileLock(str(final) + ".lock"):
         if not final.exists():

@@ -69,6 +69,9 @@ def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
     assert main(["bench", "--quick", "--json", str(tmp_path / "b.json")]) == 0
     data = json.loads((tmp_path / "b.json").read_text())
     assert data["monitor"] == small and {"sim", "ident", "machine"} <= set(data)
+    # --quick leaves the daemon end to end out unless --e2e, and says so under its key
+    assert data["e2e"] == {"skipped": "left out (--quick without --e2e)"}
+    assert data["replay"]["span_s"] == 600.0 and "hour_parquet_samples_per_s" in data["replay"]
     out = capsys.readouterr().out
     assert "per-tick step p50" in out and "compiled chain without detector" in out
 
@@ -86,3 +89,23 @@ def test_a_json_path_that_cannot_be_written_is_refused_before_measuring(
     assert main(["bench", "--quick", "--json", str(tmp_path / "no" / "b.json")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "does not exist" in err
+
+
+def test_e2e_flags_that_contradict_are_one_line(capsys):
+    assert main(["bench", "--quick", "--e2e", "--skip-e2e"]) == 2
+    assert main(["bench", "--e2e"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        "fdi bench: error: --e2e and --skip-e2e contradict each other",
+        "fdi bench: error: --e2e is for --quick (the full run includes it unless --skip-e2e)",
+    ]
+
+
+def test_a_short_replay_span_gives_no_rate_within_the_noise():
+    from fdi_daemon.bench.replay import MIN_MARGINAL_S, _hour_s, _rate
+
+    assert _rate(1000, MIN_MARGINAL_S / 2, 6.0) is None  # --quick: 10 min scaled to an hour
+    assert _rate(1000, 0.5, 6.0) == 2000.0
+    assert _rate(1000, 0.1, 1.0) == 10000.0  # an hour is measured as it is
+    assert _hour_s(9.0, 2.0, 1000, None, 6.0) is None
+    assert _hour_s(9.0, 2.0, 1000, 500.0, 6.0) == 4.0

@@ -45,6 +45,42 @@ def test_commands_that_do_not_run_the_monitor_never_import_numba(tmp_path, argv)
     assert last == "False 0", done.stdout[-500:] + done.stderr[-2000:]
 
 
+SLOW_IMPORTS = ("scipy.signal", "matplotlib", "dask", "pydantic", "pyarrow")
+
+PROBE_SLOW = """
+import sys
+from fdi_daemon.cli import main
+code = main(sys.argv[1:])
+print(sorted(m for m in %r if m in sys.modules), code)
+"""
+
+
+def test_replay_of_a_short_file_imports_none_of_the_slow_packages(tmp_path):
+    """The fixed cost of `fdi replay` (issue 45): the monitor needs numba and numpy, not
+    scipy.signal (core/filter_design.py), the plots, Dask, pydantic or (for a short CSV)
+    pyarrow."""
+    rows = "".join(f"{k / 256:.9f},{k},0.5,0.1\n" for k in range(512))
+    (tmp_path / "IN.csv").write_text("# fs: 256\nt,seq,v_in,accel\n" + rows)
+    model = REPO / "fdi_daemon" / "data" / "model_sim_rig.yaml"
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            PROBE_SLOW % (SLOW_IMPORTS,),
+            "replay",
+            "IN.csv",
+            "--model",
+            str(model),
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"},
+    )
+    assert done.stdout.strip().splitlines()[-1] == "[] 0", done.stdout[-500:] + done.stderr[-2000:]
+
+
 def test_the_probe_sees_numba_when_the_monitor_runs(tmp_path):
     """The counter-check: the same probe reports numba once the monitor is imported."""
     code = PROBE.replace("from fdi_daemon.cli import main", "import fdi_daemon.detect.monitor")

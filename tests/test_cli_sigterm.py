@@ -19,7 +19,7 @@ def test_sigterm_stops_the_command_and_the_processes_it_started(tmp_path, starte
     # part; Python's default for SIGTERM ended the bench at once and left both running, and
     # a SIGTERM while the device was still starting left the device behind (it then wrote
     # its address into the closed pipe: "cannot serve the modbus-tcp device: Broken pipe")
-    proc = start_fdi("bench", "--quick", cwd=tmp_path)
+    proc = start_fdi("bench", "--quick", "--e2e", cwd=tmp_path)
     seen = wait_for_children(proc, started, command="fdi_daemon")
     proc.send_signal(signal.SIGTERM)  # the bench itself, not its process group
     out, err = proc.communicate(timeout=60)

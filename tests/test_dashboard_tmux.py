@@ -119,3 +119,60 @@ def test_realtime_replay_with_dashboard_in_tmux(tmp_path):
         assert "classification friction" in screen.text(history_lines=50)
     finally:
         screen.close()
+
+
+def test_alarm_keys_in_tmux_acknowledge_and_shelve_on_the_daemons_socket(sock_path):
+    """The footer's keys on a real status socket server with the daemon's alarm keeper: who
+    and why reach the event the daemon logs, the shelving its duration."""
+    import threading
+
+    from fdi_daemon.alarms.lifecycle import AlarmSettings
+    from fdi_daemon.service.alarm_keeper import AlarmKeeper
+    from fdi_daemon.service.sinks import StatusBoard, StatusSocketServer
+
+    keeper = AlarmKeeper(AlarmSettings(), "m", allow_remote=True)
+    keeper.detector_event({"t": 1.0, "kind": "fault_detected"})
+    board, stop = StatusBoard(), threading.Event()
+
+    def publish() -> None:  # a fresh snapshot, as the daemon's loop keeps publishing
+        while not stop.is_set():
+            snapshot = make_snapshot("friction_isolated", wall_time=time.time())
+            board.publish({**snapshot, "alarm": keeper.summary()})
+            stop.wait(0.1)
+
+    publisher = threading.Thread(target=publish, daemon=True)
+    publisher.start()
+    server = StatusSocketServer(sock_path, board, requests=keeper.handle)
+    screen = TmuxScreen([*dashboard_command(sock_path), "--by", "tester"])
+    try:
+        text = screen.wait_for("a acknowledge  s shelve  u unshelve  q quit")
+        assert "ALARM P1 unacknowledged" in text
+        screen.keys("a")
+        screen.wait_for("acknowledge the alarm, as tester. Why?")
+        screen.keys("-l", "pressure checked")
+        screen.keys("Enter")
+        screen.wait_for("acknowledged by tester; alarm #1: acknowledged")
+        screen.wait_for("alarm P1 acknowledged")  # the trend panel's border, next snapshot
+        screen.keys("s")
+        screen.wait_for("shelve for how long? [30m]")
+        screen.keys("-l", "15m")
+        screen.keys("Enter")
+        screen.keys("-l", "valve swap")
+        screen.keys("Enter")
+        screen.wait_for("shelved by tester")
+        screen.wait_for("shelved until")
+        screen.keys("q")
+        assert screen.wait_until_dead()
+    finally:
+        screen.close()
+        server.close()
+        stop.set()
+        publisher.join(2.0)
+    acknowledged, shelved = keeper.take_pending()
+    assert (acknowledged["kind"], acknowledged["by"], acknowledged["why"]) == (
+        "alarm_acknowledged",
+        "tester (status socket)",
+        "pressure checked",
+    )
+    assert (shelved["kind"], shelved["why"]) == ("alarm_shelved", "valve swap")
+    assert shelved["until"] - shelved["time"] == pytest.approx(900.0)

@@ -311,3 +311,56 @@ def test_rig_at_rest_then_moving_raises_no_alarm():
     assert [e["kind"] for e in events] == ["calibrated"]
     at_rest = trace.t < 8.0
     assert np.isnan(trace.theta1[at_rest]).mean() > 0.5  # invalid windows, no estimate
+
+
+def _pieces_run(model, rec, cuts, trace_every):
+    """`Monitor.run` over ``rec`` cut at ``cuts`` (final=False but for the last piece)."""
+    mon = Monitor(model)
+    events, traces = [], []
+    bounds = [0, *cuts, len(rec)]
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        part = Recording({k: v[a:b] for k, v in rec.columns.items()}, dict(rec.meta))
+        ev, tr = mon.run(part, trace_every=trace_every, final=b == len(rec))
+        events.extend(ev)
+        traces.append(tr)
+    return mon, events, traces
+
+
+@pytest.mark.parametrize("with_seq", [True, False])
+def test_a_recording_in_pieces_gives_the_events_trace_and_state_of_one_run(with_seq):
+    """The streaming contract of `Monitor.run` (a day-long file read chunk by chunk):
+    random cuts, some inside a run of bad samples, beside a gap, a duplicate and samples
+    going backwards, give the events, trace rows and final state of one whole run."""
+    rec = scenario_recording("fault_free_hour", duration_s=120.0)
+    n = len(rec)
+    cols = {k: np.array(v, dtype=float) for k, v in rec.columns.items()}
+    cols["seq"] = np.arange(n)
+    cols["accel"][5_000:5_600] = np.nan  # more than 1 s of bad samples: two events
+    cols["v_in"][9_000] = np.inf
+    order = list(range(n))
+    del order[12_000:12_020]  # a gap of 20
+    b = order.index(20_000)
+    order[b:b] = list(range(19_990, 20_000))  # 10 samples again
+    d = order.index(24_000)
+    order.insert(d, 23_999)  # a duplicate
+    cols = {k: v[order] for k, v in cols.items()}
+    if not with_seq:
+        del cols["seq"]
+    rec = Recording(cols, dict(rec.meta))
+    model = sim_rig_model()
+    whole = Monitor(model)
+    ev_whole, tr_whole = whole.run(rec, trace_every=7)
+    kinds = [e["kind"] for e in ev_whole]
+    assert kinds.count("data_gap") == 1 and kinds.count("bad_sample") >= 4
+    rng = np.random.default_rng(45)
+    cuts = sorted({*rng.integers(1, len(rec) - 1, 12).tolist(), 5_100, 5_101, 12_000, 20_005})
+    mon, events, traces = _pieces_run(model, rec, cuts, 7)
+    assert events == ev_whole
+    for name in ("t", "theta1", "theta2", "statistic", "state", "friction_level"):
+        np.testing.assert_array_equal(
+            np.concatenate([getattr(t, name) for t in traces]), getattr(tr_whole, name)
+        )
+    np.testing.assert_array_equal(mon.arena.f, whole.arena.f)
+    np.testing.assert_array_equal(mon.arena.i, whole.arena.i)
+    assert mon.snapshot() == whole.snapshot()
+    assert (mon._last_seq, mon._samples) == (whole._last_seq, whole._samples)

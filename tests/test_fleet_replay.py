@@ -488,9 +488,27 @@ def test_relative_paths_reach_the_workers_absolute_and_all_failing_exits_1(
     assert row["model"] == str(tmp_path / "m.yaml")
     assert table.schema.metadata[b"fdi_version"]
     assert "M samples/s" in capsys.readouterr().out
-    assert main(["fleet-replay", "recs", "--model", "m.yaml", "--workers", "1"]) == 0
+    assert main(["fleet-replay", "recs", "--model", "m.yaml", "--workers", "1", "--progress"]) == 0
     assert long_name in capsys.readouterr().out  # captured: not a terminal
     (tmp_path / "recs" / "bad.csv").write_text("t,v_in\n0,1\n")
     (tmp_path / "recs" / long_name).write_text("t,v_in\n0,1\n")
     assert main(["fleet-replay", "recs", "--model", "m.yaml", "--workers", "1"]) == 1
     assert "2 recording(s): 0 with alarms, 2 with errors" in capsys.readouterr().out
+
+
+def test_a_worker_loads_each_version_of_a_model_once(tmp_path):
+    """Per-worker caching: the same model file gives the same loaded model to every file;
+    a changed file (size or modification time) is loaded again."""
+    import os
+
+    from fdi_daemon.fleet.replay_one import cached_model, warm_worker
+
+    model = tmp_path / "m.yaml"
+    model.write_bytes(MODEL.read_bytes())
+    first = cached_model(str(model))
+    assert cached_model(str(model)) is first
+    model.write_bytes(MODEL.read_bytes() + b"\n# changed\n")
+    os.utime(model, ns=(1, 1))
+    again = cached_model(str(model))
+    assert again is not first and again.fs == first.fs
+    assert warm_worker() is True

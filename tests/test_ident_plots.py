@@ -52,6 +52,11 @@ def test_phase_of_noisy_data_stays_on_the_models_branch():
     assert high - low < np.ptp(model_deg) + 400  # the band's phase is not flattened
     x0, x1 = ax_zoom.get_lines()[0].get_xdata()[[0, -1]]
     assert x1 - x0 <= 0.5 and 29.5 < x0 < 30.5  # a few periods, where the misfit is
+    zoom_legend = ax_zoom.get_legend()  # the zoom had none: which trace is which?
+    assert [x.get_text() for x in zoom_legend.get_texts()] == [
+        "measured",
+        "simulated (fit 90.0 %)",
+    ]
     legends_off_the_data(fig)
 
 
@@ -97,3 +102,6 @@ def test_signature_figure_labels_what_was_fitted_and_gives_gamma_a_unit():
     x0, x1 = ax_z.get_lines()[0].get_xdata()[[0, -1]]
     assert x1 - x0 <= 1.0
     legends_off_the_data(fig)
+    # the first panel's legend sat below it, under its t axis's label: now above its axes
+    assert ax_t.get_legend().get_window_extent().y0 >= ax_t.get_window_extent().y1
+    assert fig.get_suptitle().startswith("Residual and filtered friction signal")

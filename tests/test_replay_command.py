@@ -93,6 +93,7 @@ def test_replay_writes_events_summary_and_plot(files, capsys):
     lines = out.splitlines()
     isolated = next(line for line in lines if "friction_isolated" in line)
     assert " θ1=" in isolated and " s/m" in isolated  # θ2 with its unit
+    assert " friction_level=" in isolated  # beside θ, "- (not measured yet)" when None
     raised = next(line for line in lines if "alarm_raised" in line)
     assert "level=- (not measured yet)" in raised  # not the level from before the fault
     assert events[2]["level"] is None and "level_before" in events[2]

@@ -126,6 +126,7 @@ class Device:
             self.link = {"kind": "serial", "port": self.where}
 
     def _read_lines(self) -> None:
+        assert self.proc.stdout is not None  # started with stdout=PIPE
         for line in self.proc.stdout:
             self._lines.put(line)
         self._lines.put("")
@@ -137,6 +138,7 @@ class Device:
             raise RuntimeError(f"fdi sim serve did not answer within {timeout_s:g} s") from None
 
     def command(self, cmd: dict) -> dict:
+        assert self.proc.stdin is not None  # started with stdin=PIPE
         self.proc.stdin.write(json.dumps(cmd) + "\n")
         self.proc.stdin.flush()
         answer = json.loads(self._line(10.0) or "{}")
@@ -313,6 +315,8 @@ def measure_link(
         time.sleep(cpu_window_s)
         cpu1, wall1 = daemon.cpu_s(), time.monotonic()
         last = daemon.snapshot()
+        if first is None or last is None:
+            raise RuntimeError("the daemon's status socket stopped answering")
         cpu = {
             "percent_of_one_core": 100.0 * (cpu1 - cpu0) / (wall1 - wall0),
             "window_s": wall1 - wall0,

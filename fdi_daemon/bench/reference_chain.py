@@ -112,9 +112,13 @@ class ReferenceChain:
     @classmethod
     def from_model(cls, model, window_samples: int) -> ReferenceChain:
         """The chain of a monitor built on ``model`` (its Ĝ, velocity estimator and G_e)."""
+        from fdi_daemon.core.iir import IIRFilter
+        from fdi_daemon.core.velocity import VelocityEstimator
         from fdi_daemon.detect.pipeline import Pipeline
 
         pl = Pipeline(model, window_samples)
+        # the reference chain is that of Ĝ and the high-pass velocity estimator
+        assert isinstance(pl.plant, IIRFilter) and isinstance(pl.velocity, VelocityEstimator)
         return cls(
             [
                 (pl.plant.b, pl.plant.a),

@@ -4,9 +4,6 @@ running daemon's status socket (who, when and why land in its event log)."""
 from __future__ import annotations
 
 import argparse
-import re
-import time
-from typing import Any
 
 from fdi_daemon.errors import UserError
 
@@ -15,22 +12,15 @@ HELP = (
     "(over its status socket; the daemon logs who and why)"
 )
 
-#: ``--for`` units (seconds each)
-_DURATION_UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*([smhd]?)\s*$")
-
-#: the socket's name for each action of the command line
-_REQUESTS = {"ack": "acknowledge", "shelve": "shelve", "unshelve": "unshelve"}
-
 
 def duration_s(text: str) -> float:
-    """``90``, ``90s``, ``30m``, ``8h``, ``1d`` as seconds (> 0)."""
-    match = _DURATION.match(text)
-    if match is None or float(match.group(1)) <= 0:
-        raise argparse.ArgumentTypeError(
-            f"not a duration: {text!r} (a positive number with s, m, h or d, e.g. 30m)"
-        )
-    return float(match.group(1)) * _DURATION_UNITS[match.group(2) or "s"]
+    """``90``, ``90s``, ``30m``, ``8h``, ``1d`` as seconds (> 0), for argparse."""
+    from fdi_daemon.dashboard.operator import parse_duration
+
+    try:
+        return parse_duration(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -73,60 +63,28 @@ def socket_path(args: argparse.Namespace) -> str:
     return str(path)
 
 
-def alarm_line(alarm: dict[str, Any]) -> str:
-    """The alarm section of a snapshot in one line."""
-    if not alarm:
-        return "alarm: none (this daemon keeps no alarm)"
-    if alarm.get("state", "normal") == "normal" and not alarm.get("alarm_id"):
-        return "alarm: normal (no alarm since the state began)"
-    started = alarm.get("started")
-    since = (
-        time.strftime("%Y-%m-%d %H:%M:%S %z", time.localtime(started))
-        if isinstance(started, (int, float))
-        else "?"
-    )
-    text = (
-        f"alarm #{alarm.get('alarm_id')}: {str(alarm.get('state')).replace('_', ' ')}, "
-        f"P{alarm.get('priority')} (peak P{alarm.get('peak_priority')}), since {since}"
-    )
-    level = alarm.get("level")
-    if isinstance(level, (int, float)):
-        text += f", level {level:.3g} above the baseline"
-    until = alarm.get("shelved_until")
-    if isinstance(until, (int, float)) and until > time.time():
-        text += f", shelved until {time.strftime('%H:%M:%S', time.localtime(until))}"
-    return text
-
-
 def run(args: argparse.Namespace) -> int:
-    import getpass
-
     from fdi_daemon.dashboard.client import DaemonUnreachable, StatusConnection
+    from fdi_daemon.dashboard.operator import alarm_line, alarm_request, outcome, requester
 
     if args.action == "shelve" and args.duration_s is None:
         raise UserError("shelve needs --for DURATION (e.g. --for 30m)")
     if args.action != "shelve" and args.duration_s is not None:
         raise UserError(f"--for is for shelve only, not {args.action}")
     path = socket_path(args)
-    who = args.by if args.by is not None else getpass.getuser()
+    who = requester(args.by)
     try:
         with StatusConnection(path, timeout_s=5.0) as connection:
             if args.action == "list":
                 print(alarm_line(connection.request().get("alarm") or {}))
                 return 0
-            answer = connection.ask(
-                {
-                    "request": _REQUESTS[args.action],
-                    "by": who,
-                    "why": args.reason,
-                    "duration_s": args.duration_s,
-                }
-            )
+            answer = connection.ask(alarm_request(args.action, who, args.reason, args.duration_s))
     except DaemonUnreachable as exc:
         raise UserError(
             f"no daemon answers on the status socket {path} ({exc}); is `fdi run` running?"
         ) from None
-    if not answer.get("ok"):
-        raise UserError(f"{args.action} refused: {answer.get('error')}")
-    print(f"{answer.get('result')} by {who}; {alarm_line(answer.get('alarm') or {})}")
+    ok, line = outcome(args.action, who, answer)
+    if not ok:
+        raise UserError(line)
+    print(line)
     return 0

@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import argparse
 
+from fdi_daemon.commands.alarm import duration_s
 from fdi_daemon.errors import UserError
 
-HELP = "show a running daemon's live status (state, θ plots, link health, alarms); q quits"
+HELP = (
+    "show a running daemon's live status (state, θ plots, link health, alarms); "
+    "keys: a acknowledge, s shelve, u unshelve the alarm, q quit"
+)
 
 
 def _refresh_hz(text: str) -> float:
@@ -42,6 +46,20 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="print one frame and exit (a text capture; size from --width/"
         "--height); no daemon: one line naming the socket, exit 2",
     )
+    parser.add_argument(
+        "--by",
+        metavar="WHO",
+        default=None,
+        help="who acknowledges or shelves with the keys (default: your login name)",
+    )
+    parser.add_argument(
+        "--shelve-for",
+        type=duration_s,
+        default=1800.0,
+        metavar="DURATION",
+        help="shelving offered by the s key when Enter is pressed at its 'how long' "
+        "(default 30m; the daemon allows at most alarms.max_shelve_s)",
+    )
     parser.add_argument("--width", type=int, default=None, help="frame width for --once")
     parser.add_argument("--height", type=int, default=None, help="frame height for --once")
 
@@ -65,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
 
     from fdi_daemon.dashboard.app import run_dashboard
     from fdi_daemon.dashboard.client import SocketProvider
+    from fdi_daemon.dashboard.operator import AlarmKeys, requester
     from fdi_daemon.dashboard.render import render
 
     path = args.connect or default_socket_path(args.config)
@@ -80,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
                 )
             console.print(render(frame.snapshot, frame.notice))
             return 0 if frame.notice is None else 1
-        run_dashboard(provider, refresh_hz=args.refresh_hz)
+        keys = AlarmKeys(provider.ask, requester(args.by), shelve_for_s=args.shelve_for)
+        run_dashboard(provider, refresh_hz=args.refresh_hz, controls=keys)
         return 0
     finally:
         provider.close()

@@ -37,6 +37,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="worker processes of the local cluster (default: CPU count)",
     )
     parser.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="a progress bar over files and samples on stderr (default: when stderr is a terminal)",
+    )
+    parser.add_argument(
         "--out",
         metavar="RESULTS.csv|.parquet",
         help="write the table (.parquet needs pyarrow); default: print it",
@@ -45,7 +51,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fdi_daemon.errors import UserError
-    from fdi_daemon.fleet.cluster import dask_client, replay_fleet
+    from fdi_daemon.fleet.cluster import dask_client, replay_fleet, warm_workers
     from fdi_daemon.fleet.inputs import ModelMap, find_recordings
     from fdi_daemon.fleet.table import write_table
     from fdi_daemon.io.outputs import check_outputs
@@ -61,13 +67,20 @@ def run(args: argparse.Namespace) -> int:
     files = find_recordings(args.recordings)
     check_outputs({"--out": args.out}, files)
     # absolute paths: a --scheduler's workers resolve a relative one in their own folder
-    jobs = [(_absolute(file), _absolute(models.model_for(file))) for file in files]
+    jobs = [(os.path.abspath(file), _absolute(models.model_for(file))) for file in files]
 
-    progress, task = _progress(len(jobs))
+    shown = sys.stderr.isatty() if args.progress is None else args.progress
+    progress, (files_task, samples_task) = _progress(len(jobs), shown)
+
+    def on_row(row: dict) -> None:
+        progress.advance(files_task)
+        progress.advance(samples_task, row["samples"] or 0)
+
     started = time.monotonic()
     with dask_client(args.scheduler, workers) as client, progress:
+        warm_workers(client)
         ready = time.monotonic()
-        rows = replay_fleet(jobs, client, on_row=lambda row: progress.advance(task))
+        rows = replay_fleet(jobs, client, on_row=on_row)
         done = time.monotonic()
     if args.out is not None:
         write_table(args.out, rows)
@@ -86,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         f"{recorded_s:.0f} s of recordings replayed in {done - ready:.1f} s "
         f"({recorded_s / busy_s:.0f}x real time, {samples / busy_s / 1e6:.2f} M samples/s, "
         f"{len(rows) / busy_s:.1f} files/s) after "
-        f"{ready - started:.1f} s to start (or reach) the cluster"
+        f"{ready - started:.1f} s to start (or reach) the cluster and load the kernels"
     )
     return 1 if rows and errors == len(rows) else 0
 
@@ -95,7 +108,9 @@ def _absolute(path: str | None) -> str | None:
     return None if path is None else os.path.abspath(path)
 
 
-def _progress(total: int):
+def _progress(total: int, shown: bool):
+    """A transient bar on stderr with two rows: files (of ``total``) and samples replayed
+    (their total is known as files finish); hidden unless ``shown``."""
     from rich.console import Console
     from rich.progress import (
         BarColumn,
@@ -106,14 +121,17 @@ def _progress(total: int):
     )
 
     progress = Progress(
-        TextColumn("fleet replay"),
+        TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeRemainingColumn(),
         console=Console(stderr=True),
         transient=True,
+        disable=not shown,
     )
-    return progress, progress.add_task("fleet replay", total=total)
+    files = progress.add_task("fleet replay: files", total=total)
+    samples = progress.add_task("samples", total=None)
+    return progress, (files, samples)
 
 
 def _print_table(rows: list[dict]) -> None:

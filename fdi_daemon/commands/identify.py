@@ -119,9 +119,10 @@ def run(args: argparse.Namespace) -> int:
         (args.recording, args.validate),
         plots=("--plot",),
     )
-    band = None
+    band: tuple[float, float] | None = None
     if args.band is not None:
-        band = parse_range(args.band, "--band")
+        lo, hi = parse_range(args.band, "--band")
+        band = (lo, hi)
         if not 0 <= band[0] < band[1]:
             raise UserError(f"--band needs 0 <= LO < HI, got {args.band}")
     rec, u, y = load_io(args.recording, args.columns)

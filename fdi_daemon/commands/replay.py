@@ -115,14 +115,31 @@ def run(args: argparse.Namespace) -> int:
             return _paced(monitor, rec, stopped=stopped)
         return _batch(monitor, rec, math.gcd(shown, stride))
 
-    replay = replay_recording(
-        args.recording,
-        args.model,
-        runner,
-        columns=args.columns,
-        alarm_settings=settings,
-        status_period_s=status_period_s,
-    )
+    bar: list = []  # a streamed replay's progress bar (Progress, task), made at its first piece
+
+    def streamed(done: int, total: int) -> None:
+        if not bar:
+            if total < 100_000:
+                return
+            bar.extend(_progress(total, "replay"))
+            bar[0].start()
+        bar[0].update(bar[1], completed=done)
+
+    try:
+        replay = replay_recording(
+            args.recording,
+            args.model,
+            runner,
+            columns=args.columns,
+            alarm_settings=settings,
+            status_period_s=status_period_s,
+            # a Parquet file piece by piece (flat memory), unless paced or plotted whole
+            stream=not (args.realtime or args.plot),
+            progress=streamed,
+        )
+    finally:
+        if bar:
+            bar[0].stop()
     rec, monitor, events, trace, summary = (
         replay.recording,
         replay.monitor,
@@ -297,6 +314,7 @@ def _paced(monitor, rec, on_tick=None, stopped: dict | None = None):
             if on_tick is not None:
                 on_tick(monitor, float(t[k]), new)
                 continue
+            assert progress is not None  # made when there is no on_tick
             for event in new:
                 progress.console.print(_line(event), highlight=False, soft_wrap=True)
             if k % 256 == 0:
@@ -326,6 +344,8 @@ def _line(event: dict) -> str:
         extra = f"  θ1={event['theta1']:.3g}  θ2={event['theta2']:.3g} s/m"
     if event.get("friction_level") is not None:
         extra += f"  friction_level={event['friction_level']:.3g}"
+    elif "friction_level" in event:  # an episode's level restarts: it takes a few seconds
+        extra += "  friction_level=- (not measured yet)"
     if "count" in event:
         extra += f"  count={event['count']} ({event.get('reason', '')})"
     if "missing_samples" in event:

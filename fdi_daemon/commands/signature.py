@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from fdi_daemon.io.columns import add_columns_option
 
@@ -224,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
         referenced=args.reference_window is not None,
         resonance_hz=plant_resonance_hz(model.plant_a, float(model.fs)),
     )
-    fits = []
+    fits: list[tuple[Any, ...]] = []
     for candidate in candidates:
         if fits and fits[-1][0] >= sig.LOW_VAF_PERCENT:
             break  # the signature fits: keep the estimator tried first

@@ -33,7 +33,9 @@ import os
 import shutil
 import sys
 import tempfile
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any, TypeVar, overload
 
 import numpy as np
 
@@ -43,23 +45,32 @@ JIT_ENABLED = os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
 
 try:  # pragma: no cover - numba is a dependency; the fallback keeps the arithmetic usable
     from numba import njit as _njit
-    from numba.core import config as _numba_config
+    from numba.core import config as _config
+
+    _numba_config: Any = _config  # its settings (CACHE_DIR) are set at run time
 except ImportError:  # pragma: no cover
-    _njit = None
+    _njit = None  # type: ignore[assignment]  # numba missing: the plain-Python fallback
     JIT_ENABLED = False
 
 log = logging.getLogger("fdi.compiled")
 
 
-def jit(func=None, *, inline: bool = False, nrt: bool = False):
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+@overload
+def jit(func: _F, *, inline: bool = False, nrt: bool = False) -> _F: ...
+@overload
+def jit(func: None = None, *, inline: bool = False, nrt: bool = False) -> Callable[[_F], _F]: ...
+def jit(func: Any = None, *, inline: bool = False, nrt: bool = False) -> Any:
     """``numba.njit(cache=True, nogil=True)``, cached per version of the package's sources;
     ``inline``: inlined into its callers; ``nrt``: with numba's runtime (needed to allocate
     arrays; see the module docstring)."""
 
-    def wrap(f):
+    def wrap(f: Any) -> Any:
         if not JIT_ENABLED or _njit is None:
             return f
-        options = {"nogil": True, "_nrt": nrt}
+        options: dict[str, Any] = {"nogil": True, "_nrt": nrt}
         if inline:
             options["inline"] = "always"
         package = _package_of(f)
@@ -72,7 +83,7 @@ def jit(func=None, *, inline: bool = False, nrt: bool = False):
     return wrap(func) if func is not None else wrap
 
 
-def _compiling_indices_as_given(dispatcher):
+def _compiling_indices_as_given(dispatcher: Any) -> Any:
     """``dispatcher``, compiling with every integer index taken as it is
     (`_indices_as_given`). Each of the two numba internals this rests on falls back to plain
     ``njit`` (slower, the same results) when a numba release refuses it: the private
@@ -81,7 +92,7 @@ def _compiling_indices_as_given(dispatcher):
     compile_signature = dispatcher.compile
 
     @functools.wraps(compile_signature)
-    def compile(sig):
+    def compile(sig: Any) -> Any:
         try:
             with _indices_as_given():
                 return _compile_allowing_nrt_refusal(dispatcher, compile_signature, sig)
@@ -113,7 +124,7 @@ def _caused_by_index_swap(exc: BaseException | None) -> bool:
     return False
 
 
-def _compile_allowing_nrt_refusal(dispatcher, compile_signature, sig):
+def _compile_allowing_nrt_refusal(dispatcher: Any, compile_signature: Any, sig: Any) -> Any:
     """``compile_signature(sig)``; when numba refuses the private ``_nrt`` option (an
     unknown option is a KeyError or TypeError naming it), the option is dropped from the
     dispatcher and the kernel compiled as plain ``njit`` (with numba's runtime)."""
@@ -144,14 +155,14 @@ def _numba_version() -> str:
     return str(numba.__version__)
 
 
-def _index_as_given(context, builder, idxty, idx, size):
+def _index_as_given(context: Any, builder: Any, idxty: Any, idx: Any, size: Any) -> Any:
     """numba's ``fix_integer_index`` without its wrap-around of a negative index."""
     from numba.core import types
 
     return context.cast(builder, idx, idxty, types.intp if idxty.signed else types.uintp)
 
 
-def _guarded_index_as_given(context, builder, idxty, idx, size):
+def _guarded_index_as_given(context: Any, builder: Any, idxty: Any, idx: Any, size: Any) -> Any:
     """`_index_as_given`; any failure (a numba whose lowering calls it differently) is
     `_IndexSwapRefused`, on which the kernel is compiled again with numba's own."""
     try:
@@ -161,7 +172,7 @@ def _guarded_index_as_given(context, builder, idxty, idx, size):
 
 
 @contextlib.contextmanager
-def _indices_as_given():
+def _indices_as_given() -> Iterator[None]:
     """While a kernel compiles (its callees and inlined helpers with it), an integer index
     is lowered as it is: numba otherwise tests every signed index for a negative value to
     wrap it around (Python's ``a[-1]``), an unsigned one excepted (numba PR #929; an opt-out
@@ -175,7 +186,7 @@ def _indices_as_given():
     try:
         from numba.np import arrayobj
     except ImportError:  # pragma: no cover - another numba layout
-        arrayobj = None
+        arrayobj = None  # type: ignore[assignment]  # numba without the module
     with global_compiler_lock:
         saved = getattr(arrayobj, "fix_integer_index", None)
         if saved is None:  # a numba without this hook: its own indexing, the same results
@@ -188,7 +199,7 @@ def _indices_as_given():
             arrayobj.fix_integer_index = saved
 
 
-def _package_of(func) -> Path | None:
+def _package_of(func: Any) -> Path | None:
     """The folder of the top-level package ``func`` is defined in; None outside a package."""
     top = sys.modules.get(func.__module__.partition(".")[0])
     folders = list(getattr(top, "__path__", []))
@@ -221,7 +232,7 @@ def _package_cache_dir(package: Path) -> str | None:
     return None
 
 
-def _cache_roots(package: Path):
+def _cache_roots(package: Path) -> Iterator[Path]:
     """Where the cache may go, in order: $NUMBA_CACHE_DIR if set, the package's __pycache__,
     systemd's CacheDirectory, the user's cache folder."""
     if _numba_config.CACHE_DIR:
@@ -259,7 +270,7 @@ def _writable(folder: Path) -> bool:
 
 
 @contextlib.contextmanager
-def _numba_cache_dir(folder: str):
+def _numba_cache_dir(folder: str) -> Iterator[None]:
     """numba's cache folder while a function is decorated (its cache is located then)."""
     saved = _numba_config.CACHE_DIR
     _numba_config.CACHE_DIR = folder

@@ -15,11 +15,16 @@ and leaves the block in the state the same samples fed one at a time would have 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
+import numpy.typing as npt
 
 __all__ = ["IIRFilter", "frequency_response"]
+
+
+#: filter coefficients: a sequence or a 1-D array
+Coeffs = Sequence[float] | npt.NDArray[np.float64]
 
 
 class IIRFilter:
@@ -27,9 +32,7 @@ class IIRFilter:
 
     __slots__ = ("_b", "_a", "_b_arr", "_a_arr", "_z", "_n", "_taps", "_b0", "_bn", "_an")
 
-    def __init__(
-        self, b: Sequence[float], a: Sequence[float] = (1.0,), state: Sequence[float] | None = None
-    ) -> None:
+    def __init__(self, b: Coeffs, a: Coeffs = (1.0,), state: Sequence[float] | None = None) -> None:
         b_arr = np.atleast_1d(np.asarray(b, dtype=float))
         a_arr = np.atleast_1d(np.asarray(a, dtype=float))
         if b_arr.ndim != 1 or a_arr.ndim != 1 or b_arr.size == 0 or a_arr.size == 0:
@@ -40,7 +43,7 @@ class IIRFilter:
             raise ValueError("a[0] must be non-zero")
         b_arr = b_arr / a_arr[0]
         a_arr = a_arr / a_arr[0]
-        n = max(b_arr.size, a_arr.size) - 1
+        n: int = max(b_arr.size, a_arr.size) - 1
         self._b_arr = np.concatenate([b_arr, np.zeros(n + 1 - b_arr.size)])
         self._a_arr = np.concatenate([a_arr, np.zeros(n + 1 - a_arr.size)])
         self._b_arr.flags.writeable = False
@@ -78,7 +81,7 @@ class IIRFilter:
         return np.array(self._z, dtype=float)
 
     @state.setter
-    def state(self, value: Sequence[float]) -> None:
+    def state(self, value: Coeffs) -> None:
         arr = np.asarray(value, dtype=float).reshape(-1)
         if arr.size != self._n:
             raise ValueError(f"state must have {self._n} elements, got {arr.size}")
@@ -105,18 +108,24 @@ class IIRFilter:
         if x.ndim != 1:
             raise ValueError("run() takes a 1-D array")
         if not self._n:
-            return self._b0 * x
+            out: np.ndarray = self._b0 * x
+            return out
         if x.size == 0:
-            return x.copy()
+            empty: np.ndarray = x.copy()
+            return empty
+        from scipy.signal import lfilter  # here: its import is slow (core/filter_design.py)
+
         y, zf = lfilter(self._b_arr, self._a_arr, x, zi=np.array(self._z, dtype=float))
         self._z = zf.tolist()
-        return y
+        return np.asarray(y)
 
     def __repr__(self) -> str:
         return f"IIRFilter(b={self._b}, a={self._a})"
 
 
-def frequency_response(b, a, freq_hz, fs_hz: float):
+def frequency_response(
+    b: npt.ArrayLike, a: npt.ArrayLike, freq_hz: npt.ArrayLike, fs_hz: float
+) -> Any:
     """B(e^{jω})/A(e^{jω}) at ``freq_hz`` (Hz; a number or an array) for coefficients in
     powers of z⁻¹."""
     zinv = np.exp(-2j * np.pi * np.asarray(freq_hz) / fs_hz)

@@ -22,9 +22,18 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from fdi_daemon.core.compiled import Arena, jit
-from fdi_daemon.core.kernels import ITEST_INTS, itest_floats, itest_groups, itest_tick, sums_floats
+from fdi_daemon.core.kernels import (
+    F64,
+    I64,
+    ITEST_INTS,
+    itest_floats,
+    itest_groups,
+    itest_tick,
+    sums_floats,
+)
 from fdi_daemon.core.normal_equations import packed_width
 
 __all__ = ["InnovationTest", "packed_row"]
@@ -135,7 +144,8 @@ class InnovationTest:
     @property
     def theta(self) -> list[float]:
         th = self._o(20)
-        return self.arena.f[th : th + self.p].tolist()
+        theta: list[float] = self.arena.f[th : th + self.p].tolist()
+        return theta
 
     @property
     def sigma2(self) -> float:
@@ -176,7 +186,9 @@ class InnovationTest:
 
 
 @jit
-def _itest_run(f, ii, io, phi, y, stat, ok, theta):  # pragma: no cover - jit
+def _itest_run(
+    f: F64, ii: I64, io: int, phi: F64, y: F64, stat: F64, ok: npt.NDArray[np.bool_], theta: F64
+) -> None:  # pragma: no cover - jit
     p = ii[io]
     ph = ii[io + 15]
     th = ii[io + 20]

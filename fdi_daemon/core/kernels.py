@@ -21,6 +21,7 @@ Offsets are absolute indices into the float array ``f`` and the int array ``ii``
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from fdi_daemon.core.compiled import jit
 
@@ -46,14 +47,22 @@ __all__ = [
 #: (the hot loops; every operand of its arithmetic must be unsigned too)
 unsigned = np.uint64
 
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+#: an offset or count: a Python int, or `unsigned` inside the hot loops
+Index = int | np.uint64
+
 
 @jit(inline=True)
-def iir_step(f, bo, ao, zo, n, x):  # pragma: no cover - jit
+def iir_step(
+    f: F64, bo: Index, ao: Index, zo: Index, n: Index, x: float
+) -> float:  # pragma: no cover - jit
     """One sample through b = f[bo:bo+n+1], a = f[ao:..] (a0 = 1), state f[zo:zo+n]
     (offsets `unsigned` inside)."""
     bo = unsigned(bo)
     if n == 0:
-        return f[bo] * x
+        y: float = f[bo] * x
+        return y
     one = unsigned(1)
     ao = unsigned(ao)
     zo = unsigned(zo)
@@ -71,7 +80,9 @@ def sums_floats(n: int, w: int) -> int:
 
 
 @jit(inline=True)
-def sums_push(f, ii, ro, n, w, ip, src):  # pragma: no cover - jit
+def sums_push(
+    f: F64, ii: I64, ro: Index, n: Index, w: Index, ip: Index, src: Index
+) -> None:  # pragma: no cover - jit
     """Push row f[src:src+w] into the sums block at ``ro`` (pos, count in ii[ip], ii[ip+1]);
     the window sums are then at ro + (n + 2)·w (module docstring)."""
     fresh, prev, sl, rp, end = _slot(ii, ro, n, w, ip)
@@ -82,14 +93,18 @@ def sums_push(f, ii, ro, n, w, ip, src):  # pragma: no cover - jit
 
 
 @jit
-def solve_packed(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
+def solve_packed(
+    f: F64, so: Index, p: Index, min_pivot: float, scr: Index, to: Index
+) -> tuple[float, bool]:  # pragma: no cover - jit
     """θ (into f[to:to+p]), SSE and ok from the packed sums f[so:..] of p regressors;
     scratch f[scr:scr + 2p² + p]. The float path of `core.normal_equations.solve_packed`."""
     return _solve(f, so, p, min_pivot, scr, to)
 
 
 @jit(inline=True)
-def _solve(f, so, p, min_pivot, scr, to):  # pragma: no cover - jit
+def _solve(
+    f: F64, so: Index, p: Index, min_pivot: float, scr: Index, to: Index
+) -> tuple[float, bool]:  # pragma: no cover - jit
     """`solve_packed`, inlined where p is a constant (the loops then unroll). One division
     per pivot: its reciprocal, kept on L's unit diagonal, multiplies. Offsets are
     `unsigned`: no negative-index test per access, and the compiler sees which scratch entries
@@ -168,7 +183,9 @@ def itest_floats(p: int, n: int, lag: int, m: int, every: int) -> int:
 
 
 @jit(inline=True)
-def _slot(ii, ro, n, w, ip):  # pragma: no cover - jit
+def _slot(
+    ii: I64, ro: Index, n: Index, w: Index, ip: Index
+) -> tuple[Index, Index, Index, Index, bool]:  # pragma: no cover - jit
     """The `unsigned` offsets of a sums block's fresh, previous and sliding rows and
     of the ring row this push writes, and whether it ends the block (the row count grows up
     to n)."""
@@ -181,7 +198,9 @@ def _slot(ii, ro, n, w, ip):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def _column(f, fresh, prev, sl, rp, k, value, end):  # pragma: no cover - jit
+def _column(
+    f: F64, fresh: Index, prev: Index, sl: Index, rp: Index, k: Index, value: float, end: bool
+) -> None:  # pragma: no cover - jit
     """One column of `sums_push`."""
     c = f[fresh + k] + value
     if end:
@@ -196,7 +215,9 @@ def _column(f, fresh, prev, sl, rp, k, value, end):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def group_products(f, fifo, cap, head, count, p, dst):  # pragma: no cover - jit
+def group_products(
+    f: F64, fifo: Index, cap: Index, head: Index, count: Index, p: Index, dst: Index
+) -> None:  # pragma: no cover - jit
     """The packed products of ``count`` rows of (φ, y) from a FIFO (``cap`` rows of p + 1
     floats at ``fifo``, the first at index ``head``), summed row after row into
     f[dst:dst+w], and the row count into f[dst+w]. With four regressors (the monitor's
@@ -217,7 +238,17 @@ def group_products(f, fifo, cap, head, count, p, dst):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def _group_column(f, fifo, cap, head, count, q, a, b, dst):  # pragma: no cover - jit
+def _group_column(
+    f: F64,
+    fifo: Index,
+    cap: Index,
+    head: Index,
+    count: Index,
+    q: Index,
+    a: Index,
+    b: Index,
+    dst: Index,
+) -> None:  # pragma: no cover - jit
     """One column of `group_products`: Σ φ_a·φ_b over the rows (index p stands for y)."""
     c = 0.0
     slot = head
@@ -228,7 +259,9 @@ def _group_column(f, fifo, cap, head, count, q, a, b, dst):  # pragma: no cover 
 
 
 @jit(inline=True)
-def _group_products_4(f, fifo, cap, head, count, dst):  # pragma: no cover - jit
+def _group_products_4(
+    f: F64, fifo: Index, cap: Index, head: Index, count: Index, dst: Index
+) -> None:  # pragma: no cover - jit
     """`group_products` for p = 4, the sums in registers (the order of `packed_row`)."""
     s00 = s01 = s02 = s03 = s11 = s12 = s13 = s22 = s23 = s33 = 0.0
     s0y = s1y = s2y = s3y = syy = 0.0
@@ -275,7 +308,7 @@ def _group_products_4(f, fifo, cap, head, count, dst):  # pragma: no cover - jit
 
 
 @jit
-def packed_row_into(f, src, p, dst):  # pragma: no cover - jit
+def packed_row_into(f: F64, src: Index, p: Index, dst: Index) -> None:  # pragma: no cover - jit
     """The packed row of (φ, y) = f[src:src+p+1] into f[dst:..]."""
     y = f[src + p]
     c = dst
@@ -290,7 +323,7 @@ def packed_row_into(f, src, p, dst):  # pragma: no cover - jit
 
 
 @jit
-def itest_tick(f, ii, io):  # pragma: no cover - jit
+def itest_tick(f: F64, ii: I64, io: Index) -> float:  # pragma: no cover - jit
     """One tick of the innovation test whose ints start at ``io``; φ and y in its phi slots.
 
     Reference fit on the window ending ``lag`` ticks ago (re-solved when tick % every ==
@@ -308,7 +341,7 @@ def itest_tick(f, ii, io):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def _itest_tick_p(f, ii, io, p):  # pragma: no cover - jit
+def _itest_tick_p(f: F64, ii: I64, io: Index, p: Index) -> float:  # pragma: no cover - jit
     """`itest_tick`'s phases in their order: with a lag the reference is flushed and solved
     before this tick's row enters the FIFO (the row cannot be in it), without one after."""
     if ii[io + 2]:
@@ -323,7 +356,9 @@ def _itest_tick_p(f, ii, io, p):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def itest_flush_p(f, ii, io, p, keep):  # pragma: no cover - jit
+def itest_flush_p(
+    f: F64, ii: I64, io: Index, p: Index, keep: Index
+) -> None:  # pragma: no cover - jit
     """On a solve tick (countdown ii[io+7] at 0): the FIFO's rows but its newest ``keep``
     (those the reference window has reached since the last refit) summed into one group
     row (`group_products`) and pushed into the reference sums; other ticks move nothing."""
@@ -342,7 +377,7 @@ def itest_flush_p(f, ii, io, p, keep):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def itest_insert_p(f, ii, io, p):  # pragma: no cover - jit
+def itest_insert_p(f: F64, ii: I64, io: Index, p: Index) -> None:  # pragma: no cover - jit
     """This tick's (φ, y) at the FIFO's tail (it holds the rows the reference window has
     not reached: at most lag + every − 1 before a flush; its capacity lag + every)."""
     q = p + 1
@@ -356,7 +391,7 @@ def itest_insert_p(f, ii, io, p):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def itest_solve_p(f, ii, io, p):  # pragma: no cover - jit
+def itest_solve_p(f: F64, ii: I64, io: Index, p: Index) -> None:  # pragma: no cover - jit
     """On a solve tick (countdown ii[io+7] at 0, then ``every`` − 1 again): θ, σ² (floored)
     and 1/σ² of the reference window, and whether it is ok (all its rows there, pivots
     above 1e-9)."""
@@ -381,7 +416,7 @@ def itest_solve_p(f, ii, io, p):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def itest_statistic_p(f, ii, io, p):  # pragma: no cover - jit
+def itest_statistic_p(f: F64, ii: I64, io: Index, p: Index) -> float:  # pragma: no cover - jit
     """z² of this tick against the reference θ (0 while it is not ok) into the test window;
     returns T (also kept at the block's scalars)."""
     ph = ii[io + 15]
@@ -398,6 +433,6 @@ def itest_statistic_p(f, ii, io, p):  # pragma: no cover - jit
     else:
         f[sc + 3] = 0.0
     sums_push(f, ii, tst, m, 1, io + 13, sc + 3)
-    stat = f[tst + (m + 2)] * f[sc + 5]
+    stat: float = f[tst + (m + 2)] * f[sc + 5]
     f[sc + 2] = stat
     return stat

@@ -13,6 +13,9 @@ deficient or nearly so: the rig at rest, collinear regressors).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
 from fdi_daemon.core.compiled import jit
@@ -35,7 +38,9 @@ def packed_products(phi: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 @jit
-def _products_kernel(phi, y, out):  # pragma: no cover - jit
+def _products_kernel(
+    phi: np.ndarray, y: np.ndarray, out: np.ndarray
+) -> None:  # pragma: no cover - jit
     n, p = phi.shape
     for k in range(n):
         c = 0
@@ -49,7 +54,7 @@ def _products_kernel(phi, y, out):  # pragma: no cover - jit
         out[k, c] = y[k] * y[k]
 
 
-def solve_packed(row, p: int, min_pivot: float = 1e-9):
+def solve_packed(row: Sequence[Any], p: int, min_pivot: float = 1e-9) -> tuple[list[Any], Any, Any]:
     """θ, SSE and validity from one packed row (floats) or from columns (arrays).
 
     ``row`` is a sequence whose items are floats (one window) or 1-D arrays (many windows).
@@ -58,7 +63,8 @@ def solve_packed(row, p: int, min_pivot: float = 1e-9):
     """
     # unpack S (upper triangle) and s_y
     k = 0
-    s = [[None] * p for _ in range(p)]
+    # items are floats or arrays (module docstring): Any
+    s: list[list[Any]] = [[None] * p for _ in range(p)]
     for i in range(p):
         for j in range(i, p):
             s[i][j] = row[k]
@@ -66,9 +72,9 @@ def solve_packed(row, p: int, min_pivot: float = 1e-9):
     sy = [row[k + i] for i in range(p)]
     syy = row[k + p]
     # LDLᵀ: S = L D Lᵀ with unit lower-triangular L
-    low = [[None] * p for _ in range(p)]
-    d = [None] * p
-    inv = [None] * p  # 1/d: one division per pivot, then products
+    low: list[list[Any]] = [[None] * p for _ in range(p)]
+    d: list[Any] = [None] * p
+    inv: list[Any] = [None] * p  # 1/d: one division per pivot, then products
     ok = True
     for j in range(p):
         acc = s[j][j]
@@ -83,13 +89,13 @@ def solve_packed(row, p: int, min_pivot: float = 1e-9):
                 acc = acc - low[i][m] * low[j][m] * d[m]
             low[i][j] = acc * inv[j]
     # forward: L z = s_y ; diagonal: w = z / d ; backward: Lᵀ θ = w
-    z = [None] * p
+    z: list[Any] = [None] * p
     for i in range(p):
         acc = sy[i]
         for m in range(i):
             acc = acc - low[i][m] * z[m]
         z[i] = acc
-    theta = [None] * p
+    theta: list[Any] = [None] * p
     for i in range(p - 1, -1, -1):
         acc = z[i] * inv[i]
         for m in range(i + 1, p):
@@ -101,7 +107,7 @@ def solve_packed(row, p: int, min_pivot: float = 1e-9):
     return theta, sse, ok
 
 
-def _nonzero(value) -> bool:
+def _nonzero(value: Any) -> bool:
     """For floats: value != 0. Arrays divide anyway (errors suppressed by the caller)."""
     if isinstance(value, float):
         return value != 0.0

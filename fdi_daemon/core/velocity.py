@@ -34,9 +34,10 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter
+import numpy.typing as npt
 
-from fdi_daemon.core.iir import IIRFilter, frequency_response
+from fdi_daemon.core.filter_design import butter
+from fdi_daemon.core.iir import Coeffs, IIRFilter, frequency_response
 
 __all__ = ["VelocityEstimator", "DEFAULT_SETTINGS", "INTEGRATORS"]
 
@@ -163,13 +164,13 @@ class VelocityEstimator:
         return self._filter.state
 
     @state.setter
-    def state(self, value) -> None:
+    def state(self, value: Coeffs) -> None:
         self._filter.state = value
 
     def reset(self) -> None:
         self._filter.reset()
 
-    def response(self, f_hz):
+    def response(self, f_hz: npt.ArrayLike) -> Any:
         """V(e^jω)·jω at ``f_hz`` (Hz; a number or an array): v̂ over the true velocity, 1 for
         an exact integral."""
         return frequency_response(self.b, self.a, f_hz, self.fs_hz) * (
@@ -182,13 +183,13 @@ class VelocityEstimator:
 
     def gain_error(self, f_hz: float) -> float:
         """|V(e^jω)| · 2πf: 1 where the estimator integrates exactly."""
-        return abs(self.response(f_hz))
+        return float(abs(self.response(f_hz)))
 
 
 def _design(
     fs_hz: float, highpass_hz: float, order: int, integrator: str
 ) -> tuple[np.ndarray, np.ndarray]:
-    b_hp, a_hp = butter(order, highpass_hz, btype="high", fs=fs_hz)
+    b_hp, a_hp = butter(order, highpass_hz, fs_hz, "high")
     gain = b_hp[0]  # b_hp = gain · (1 - q⁻¹)^order for the bilinear Butterworth
     zeros = np.array([1.0])
     for _ in range(order - 1):
@@ -203,6 +204,6 @@ def _design(
     return gain * np.convolve(zeros, num_i), np.asarray(a_hp, dtype=float)
 
 
-def _phase_lead_deg(b, a, fs_hz: float, f_hz: float) -> float:
+def _phase_lead_deg(b: npt.ArrayLike, a: npt.ArrayLike, fs_hz: float, f_hz: float) -> float:
     """Phase of B/A minus that of an ideal integrator 1/(jω), in degrees."""
     return float(np.degrees(np.angle(frequency_response(b, a, float(f_hz), fs_hz) * 1j)))

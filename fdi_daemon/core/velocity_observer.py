@@ -34,6 +34,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from fdi_daemon.core.velocity import DEFAULT_SETTINGS as HIGHPASS_SETTINGS
 from fdi_daemon.core.velocity import VelocityEstimator
@@ -120,21 +121,22 @@ class ModelVelocityObserver:
     def run(self, accel: np.ndarray, xhat: np.ndarray) -> np.ndarray:
         accel = np.asarray(accel, dtype=float)
         xhat = np.asarray(xhat, dtype=float)
-        return self.model_path.run(xhat) + self.residual_path.run(accel - xhat)
+        out: np.ndarray = self.model_path.run(xhat) + self.residual_path.run(accel - xhat)
+        return out
 
     @property
     def state(self) -> tuple[np.ndarray, np.ndarray]:
         return self.model_path.state, self.residual_path.state
 
     @state.setter
-    def state(self, value) -> None:
+    def state(self, value: tuple[np.ndarray, np.ndarray]) -> None:
         self.model_path.state, self.residual_path.state = value
 
     def reset(self) -> None:
         self.model_path.reset()
         self.residual_path.reset()
 
-    def response(self, f_hz, model_error: complex = 0.0):
+    def response(self, f_hz: npt.ArrayLike, model_error: complex = 0.0) -> Any:
         """v̂/(ẍ/(jω)) at ``f_hz`` (Hz; a number or an array) when x̂̈ = (1 − model_error)·ẍ:
         1 for an exact integral.
 

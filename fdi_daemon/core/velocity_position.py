@@ -29,7 +29,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.signal import bilinear
+import numpy.typing as npt
 
 from fdi_daemon.core.iir import IIRFilter, frequency_response
 
@@ -66,6 +66,9 @@ class PositionVelocityObserver:
         if not (math.isfinite(damping) and 0.3 <= damping <= 2.0):
             raise ValueError(f"damping must lie in [0.3, 2], got {damping!r}")
         self.fs_hz, self.crossover_hz, self.damping = fs_hz, crossover_hz, damping
+        # here, used by position-fusing models only: scipy.signal's import is slow
+        from scipy.signal import bilinear
+
         w = 2 * math.pi * crossover_hz
         den = [1.0, 2 * damping * w, w * w]
         self.position_path = IIRFilter(*bilinear([2 * damping * w, w * w, 0.0], den, fs_hz))
@@ -112,14 +115,15 @@ class PositionVelocityObserver:
             position = np.where(last >= 0, position[np.maximum(last, 0)], start)
         if good.any():
             self._last_position = float(position[np.flatnonzero(good)[-1]])
-        return self.position_path.run(position) + self.accel_path.run(accel)
+        out: np.ndarray = self.position_path.run(position) + self.accel_path.run(accel)
+        return out
 
     @property
     def state(self) -> tuple[np.ndarray, np.ndarray, float]:
         return self.position_path.state, self.accel_path.state, self._last_position
 
     @state.setter
-    def state(self, value) -> None:
+    def state(self, value: tuple[np.ndarray, np.ndarray, float]) -> None:
         self.position_path.state, self.accel_path.state, self._last_position = value
 
     def reset(self) -> None:
@@ -127,7 +131,7 @@ class PositionVelocityObserver:
         self.accel_path.reset()
         self._last_position = math.nan
 
-    def response(self, f_hz):
+    def response(self, f_hz: npt.ArrayLike) -> Any:
         """v̂/(jω x) at ``f_hz`` (Hz; a number or an array) for a consistent pair
         ẍ = (jω)² x: 1 up to the bilinear transform's warping (the weights add up to one
         exactly for its own derivative)."""

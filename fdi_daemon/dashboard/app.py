@@ -10,7 +10,9 @@ can not slow the 256 Hz loop:
   loop `publish()` snapshots into a `LatestSnapshot` (a lock held only to swap a reference)
   and run the loop with `run_alongside(work, provider)`.
 
-`q` quits (stdin in cbreak mode when it is a terminal); Ctrl-C quits too. When the terminal
+`q` quits (stdin in cbreak mode when it is a terminal); Ctrl-C quits too. `fdi dashboard`
+passes `controls` that also send alarm requests (`fdi_daemon.dashboard.operator.AlarmKeys`),
+with the keys and prompts in a footer line. When the terminal
 goes away (an ssh drop, a closed window: reads see end of file, writes fail with EIO or
 EPIPE) the loop ends with "hangup" instead of drawing to nobody.
 """
@@ -29,10 +31,11 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, TextIO
 
 from rich.console import Console
 from rich.live import Live
+from rich.text import Text
 
 from fdi_daemon.dashboard.render import render
 from fdi_daemon.errors import UserError
@@ -67,6 +70,25 @@ class Frame:
 SnapshotProvider = Callable[[], Frame]
 
 
+class Controls(Protocol):
+    """What keys do: `feed` gets what was typed and returns True to quit; `footer` is the
+    line under the dashboard for the snapshot's alarm section (None: no footer)."""
+
+    def feed(self, typed: str) -> bool: ...
+
+    def footer(self, alarm: dict[str, Any] | None) -> Text | None: ...
+
+
+class QuitKey:
+    """`q` quits; no footer."""
+
+    def feed(self, typed: str) -> bool:
+        return "q" in typed.lower()
+
+    def footer(self, alarm: dict[str, Any] | None) -> Text | None:
+        return None
+
+
 class LatestSnapshot:
     """The in-process snapshot provider: the producer publishes, the dashboard reads.
 
@@ -95,7 +117,7 @@ class KeyReader:
     on exit; otherwise no keys are read and `wait` just sleeps.
     """
 
-    def __init__(self, stream=None):
+    def __init__(self, stream: TextIO | None = None) -> None:
         self._stream = stream if stream is not None else sys.stdin
         self._fd: int | None = None
         self._saved: list | None = None
@@ -153,17 +175,32 @@ def run_dashboard(
     console: Console | None = None,
     stop: threading.Event | None = None,
     keys: KeyReader | None = None,
+    controls: Controls | None = None,
 ) -> str:
     """Redraw at `refresh_hz` until `q`, Ctrl-C or `stop` is set; returns why it ended:
     "quit" (q), "interrupt" (Ctrl-C), "hangup" (the terminal went away: end of its input, or
     a write to it failed) or "stopped". `keys`, if given, is already entered by the caller;
-    otherwise stdin is read while the loop runs."""
+    otherwise stdin is read while the loop runs. `controls` handle what is typed (default:
+    `QuitKey`)."""
     if keys is None:
         with KeyReader() as own_keys:
             return run_dashboard(
-                provider, refresh_hz=refresh_hz, console=console, stop=stop, keys=own_keys
+                provider,
+                refresh_hz=refresh_hz,
+                console=console,
+                stop=stop,
+                keys=own_keys,
+                controls=controls,
             )
     console = console or DashboardConsole()
+    controls = controls or QuitKey()
+
+    def draw(live: Live) -> None:
+        frame = provider()
+        alarm = (frame.snapshot or {}).get("alarm")
+        footer = controls.footer(alarm if isinstance(alarm, dict) else None)
+        live.update(render(frame.snapshot, frame.notice, footer), refresh=True)
+
     period_s = 1.0 / refresh_hz
     try:
         with Live(
@@ -175,16 +212,15 @@ def run_dashboard(
         ) as live:
             next_frame = time.monotonic()
             while not (stop is not None and stop.is_set()):
-                frame = provider()
-                live.update(render(frame.snapshot, frame.notice), refresh=True)
+                draw(live)
                 next_frame += period_s
                 now = time.monotonic()
                 if next_frame < now:
                     next_frame = now
-                if "q" in keys.wait(next_frame - now).lower():
+                typed = keys.wait(next_frame - now)
+                if typed and controls.feed(typed):
                     return "quit"
-            frame = provider()  # stopped: leave the final state on screen
-            live.update(render(frame.snapshot, frame.notice), refresh=True)
+            draw(live)  # stopped: leave the final state on screen
     except KeyboardInterrupt:
         return "interrupt"
     except (TerminalGone, OSError) as exc:  # OSError: EIO/EPIPE writing to a dead terminal

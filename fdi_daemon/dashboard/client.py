@@ -190,5 +190,10 @@ class SocketProvider:
         self.last_error = reason
         return Frame(self._last, self._notice)
 
+    def ask(self, request: dict[str, Any]) -> dict[str, Any]:
+        """The daemon's answer to an alarm request, on the connection the snapshots come
+        through (`fdi_daemon.dashboard.operator`); raises `DaemonUnreachable`."""
+        return self._connection.ask(request)
+
     def close(self) -> None:
         self._connection.close()

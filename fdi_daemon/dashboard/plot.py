@@ -164,9 +164,9 @@ def _rasterise(
     grid = np.zeros((rows, cols), dtype=np.uint8)
     if series.level is not None:
         if math.isfinite(series.level) and y_lo <= series.level <= y_hi:
-            y = int(round((y_hi - series.level) * y_scale))
-            bits = _DOT_BITS[0, y & 3] | _DOT_BITS[1, y & 3]
-            grid[y >> 2, :: 2 if series.dashed else 1] = bits
+            row = int(round((y_hi - series.level) * y_scale))
+            bits = _DOT_BITS[0, row & 3] | _DOT_BITS[1, row & 3]
+            grid[row >> 2, :: 2 if series.dashed else 1] = bits
         return grid
     t = np.asarray(series.t, dtype=float)
     y = np.asarray(series.y, dtype=float)

@@ -97,17 +97,26 @@ ALARM_LABELS: dict[str, tuple[str, str]] = {
 }
 
 
-def render(snapshot: dict[str, Any] | None, notice: str | None = None) -> DashboardView:
-    """The dashboard for one snapshot; `notice` (e.g. "daemon not reachable") tops the screen."""
-    return DashboardView(snapshot, notice)
+def render(
+    snapshot: dict[str, Any] | None, notice: str | None = None, footer: Text | None = None
+) -> DashboardView:
+    """The dashboard for one snapshot; `notice` (e.g. "daemon not reachable") tops the screen,
+    `footer` (the keys, or a prompt) is its last line."""
+    return DashboardView(snapshot, notice, footer)
 
 
 class DashboardView:
     """A size-adaptive renderable of one snapshot."""
 
-    def __init__(self, snapshot: dict[str, Any] | None, notice: str | None = None):
+    def __init__(
+        self,
+        snapshot: dict[str, Any] | None,
+        notice: str | None = None,
+        footer: Text | None = None,
+    ):
         self.snapshot = snapshot if isinstance(snapshot, dict) else {}
         self.notice = notice
+        self.footer = footer
 
     def __rich_console__(self, console: Console, options: ConsoleOptions) -> RenderResult:
         width = options.max_width
@@ -116,6 +125,13 @@ class DashboardView:
 
     def layout(self, width: int, height: int) -> Layout:
         """The rich Layout for a screen of `width` x `height` cells."""
+        if self.footer is not None and height > 2:
+            layout = Layout()
+            layout.split_column(
+                Layout(DashboardView(self.snapshot, self.notice).layout(width, height - 1)),
+                Layout(self.footer, name="footer", size=1),
+            )
+            return layout
         if width < COMPACT_WIDTH or height < COMPACT_HEIGHT:
             return _compact_layout(self.snapshot, self.notice, width, height)
         return _standard_layout(self.snapshot, self.notice, width, height)
@@ -522,7 +538,9 @@ def theta_plot(monitor: dict[str, Any], trace: Series, layers: list[Series]) -> 
     if data_range([trace]) is None:
         return BraillePlot(series=[], empty_text=empty)
     layers.append(trace)
-    return BraillePlot(series=layers, y_range=padded_range(*data_range(layers)), empty_text=empty)
+    y_data = data_range(layers)
+    assert y_data is not None  # the trace has data
+    return BraillePlot(series=layers, y_range=padded_range(*y_data), empty_text=empty)
 
 
 def theta_title(monitor: dict[str, Any], index: int, width: int, where: str) -> Text:
@@ -575,7 +593,9 @@ def theta_plane(monitor: dict[str, Any]) -> tuple[BraillePlot, str]:
     layers += [trace, latest]
     xs = [x for s in layers for x in s.t if math.isfinite(x)]
     x_range = padded_range(min(xs), max(xs))
-    plot = BraillePlot(series=layers, y_range=padded_range(*data_range(layers)), x_range=x_range)
+    y_data = data_range(layers)
+    assert y_data is not None  # the latest point is finite
+    plot = BraillePlot(series=layers, y_range=padded_range(*y_data), x_range=x_range)
     return plot, f"θ1 {x_range[0]:.3g} … {x_range[1]:.3g}"
 
 
@@ -617,7 +637,9 @@ def _trend_layers(alarm: dict[str, Any]) -> tuple[list[Series], tuple[float, flo
             if base + step > data[1]:
                 break  # the next step to cross; higher ones would squash the trace
     layers += [high, mean]
-    return layers, padded_range(*data_range(layers))
+    y_data = data_range(layers)
+    assert y_data is not None  # mean and high have data
+    return layers, padded_range(*y_data)
 
 
 def trend_title(alarm: dict[str, Any]) -> Text:
@@ -767,6 +789,7 @@ def _standard_layout(
         )
     layout["right"].split_column(plots)
     if trend_size:
+        assert isinstance(alarm, dict)  # trend_size is 0 otherwise
         layout["right"].add_split(Layout(trend_panel(alarm), name="trend", size=trend_size))
     layout["right"].add_split(
         Layout(
@@ -784,7 +807,7 @@ def _compact_layout(
     """Small terminals: header, three summary lines, small plots if they fit, last alarms."""
     link, monitor = _section(snapshot, "link"), _section(snapshot, "monitor")
     alarms = _sequence(snapshot.get("alarms"))
-    latency = link.get("tick_latency_us") if isinstance(link.get("tick_latency_us"), dict) else {}
+    latency = _section(link, "tick_latency_us")
     summary = [
         _line(
             ("θ1 ", "dim"),

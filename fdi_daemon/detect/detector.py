@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from fdi_daemon.core.compiled import Arena
+from fdi_daemon.core.cusum import cusum_threshold
 from fdi_daemon.core.innovation_test import InnovationTest
 from fdi_daemon.detect import episode_kernel as E
 from fdi_daemon.detect import kernel as K
@@ -85,7 +86,7 @@ class Detector:
         gamma_f: float,
         baseline: bool = False,
         arena: Arena | None = None,
-        baseline_bins: tuple | None = None,
+        baseline_bins: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> None:
         """``baseline``: the level's excess is taken over a commissioning baseline (else
         the calibration's level is the fault-free one); ``baseline_bins``: its (edges,
@@ -147,11 +148,17 @@ class Detector:
         ii[epi + E.P_WARMUP] = self.warmup_samples
         ii[epi + E.P_O_POST : epi + E.P_O_G + 1] = E.episode_layout(epo, n, m)
         sc = int(ii[epi + E.P_O_SCAL])
+        #: the growing-fault path's threshold h = τ·ln(ARL₀): τ ticks per independent innovation (`core.cusum`)
+        self.drift_threshold = s.drift_correlation_samples * cusum_threshold(
+            s.drift_false_alarm_years, fs_hz
+        )
         f[sc + E.S_FMIN] = s.friction_min_level
         f[sc + E.S_THRESHOLD] = s.threshold
         f[sc + E.S_TOL1] = s.track_tolerance
         f[sc + E.S_TOL2] = s.track_tolerance * max(abs(self.gamma_f), 1.0)
         f[sc + E.S_GAMMA_F] = self.gamma_f
+        f[sc + E.S_DRIFT_SHIFT] = s.drift_shift_level if s.method == "sequential" else 0.0
+        f[sc + E.S_DRIFT_H] = self.drift_threshold
         ii[io + K.D_EPI] = epi
         ii[io + K.D_METHOD] = 1 if s.method == "band" else 0
         ii[io + K.D_HAS_BASELINE] = int(self.has_baseline)
@@ -166,6 +173,8 @@ class Detector:
         f[fo + K.E_THRESHOLD] = s.threshold
         f[fo + K.E_GUARD_THRESHOLD] = s.guard_threshold
         f[fo + K.E_FRICTION_MIN] = s.friction_min_level
+        f[fo + K.E_DRIFT_SHIFT] = s.drift_shift_level
+        f[fo + K.E_DRIFT_H] = self.drift_threshold
         if baseline_bins is not None:
             o = fo + K.E_CAL + 2 * self.calibration_samples
             f[o : o + 3 * bins + 1] = np.concatenate(
@@ -187,13 +196,15 @@ class Detector:
         self.restart()
 
     # ------------------------------------------------------------------ state in the arena
-    def _int(k):  # noqa: N805 - a property factory for the ints of the kernel's block
+    @staticmethod
+    def _int(k: int) -> property:  # a property factory for the ints of the kernel's block
         return property(
             lambda self: int(self.arena.i[self.io + k]),
             lambda self, v: self.arena.i.__setitem__(self.io + k, int(v)),
         )
 
-    def _float(k):  # noqa: N805
+    @staticmethod
+    def _float(k: int) -> property:
         return property(
             lambda self: float(self.arena.f[self.fo + k]),
             lambda self, v: self.arena.f.__setitem__(self.fo + k, float(v)),
@@ -209,6 +220,15 @@ class Detector:
     theta2 = _float(K.E_THETA2)
     level_base = _float(K.E_LEVEL_BASE)
     del _int, _float
+
+    @property
+    def drift_statistic(self) -> float:
+        """The growing-fault path's CUSUM S (`detect.kernel._drift_tick`), 0 outside a run."""
+        return float(self.arena.f[self.fo + K.E_DRIFT])
+
+    @drift_statistic.setter
+    def drift_statistic(self, value: float) -> None:
+        self.arena.f[self.fo + K.E_DRIFT] = float(value)
 
     @property
     def state(self) -> str:
@@ -231,6 +251,7 @@ class Detector:
         self._guard_until = 0
         self._above = 0
         self._level_above = 0
+        self.drift_statistic = 0.0
         self._hold_until = self.warmup_samples
         if self.state == "calibrating":
             self._cal_count = 0
@@ -261,6 +282,20 @@ class Detector:
             return [self._event(t, "fault_detected", theta1, theta2, path=self.level_path)]
         if code == K.FAST_ALARM:
             return [self._event(t, "fault_detected", theta1, theta2, path="fast")]
+        if code == K.DRIFT_ALARM:
+            # the growing-fault path (CUSUM): a fault, not yet confirmed as friction
+            return [
+                self._event(
+                    t,
+                    "fault_detected",
+                    theta1,
+                    theta2,
+                    path="drift",
+                    unconfirmed=True,
+                    drift_statistic=float(self.arena.f[self.fo + K.E_DRIFT]),
+                    drift_threshold=self.drift_threshold,
+                )
+            ]
         if code == K.CLEARED:
             return [self._event(t, "cleared", theta1, theta2)]
         ii, sc = self.arena.i, int(self.arena.i[self.epi + E.P_O_SCAL])
@@ -275,7 +310,7 @@ class Detector:
         extra = {"friction_evidence": self.level_path if kind == "level" else kind} if kind else {}
         return [self._event(t, "friction_isolated", theta1, theta2, coulomb_change=change, **extra)]
 
-    def _calibrate(self, t, theta1, theta2) -> list[dict[str, Any]]:
+    def _calibrate(self, t: float, theta1: float, theta2: float) -> list[dict[str, Any]]:
         o = self.fo + K.E_CAL
         n = self.calibration_samples
         cal = self.arena.f[o : o + 2 * n].reshape(n, 2)
@@ -306,7 +341,9 @@ class Detector:
             )
         ]
 
-    def _event(self, t, kind, theta1, theta2, **extra) -> dict[str, Any]:
+    def _event(
+        self, t: float, kind: str, theta1: float | None, theta2: float | None, **extra: Any
+    ) -> dict[str, Any]:
         return make_event(
             t,
             kind,

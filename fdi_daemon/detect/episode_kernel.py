@@ -21,12 +21,23 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.core.kernels import packed_row_into, solve_packed, sums_floats, sums_push
+from fdi_daemon.core.cusum import cusum_increment
+from fdi_daemon.core.kernels import (
+    F64,
+    I64,
+    packed_row_into,
+    solve_packed,
+    sums_floats,
+    sums_push,
+)
 
 __all__ = [
     "episode_start",
     "episode_restart",
+    "episode_rebase",
     "episode_tick",
     "EPISODE_INTS",
     "episode_floats",
@@ -135,8 +146,12 @@ EPISODE_INTS = 37
     S_GAMMA_F,
     S_Z,
     S_MOTION,
-) = (0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16)
-SCAL_FLOATS = 19
+    S_DRIFT,
+    S_DRIFT_SHIFT,
+    S_DRIFT_H,
+    S_DRIFT_S,
+) = (0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 19, 20, 21, 22)
+SCAL_FLOATS = 23
 
 
 def episode_floats(n: int, m: int) -> int:
@@ -169,7 +184,9 @@ def episode_layout(fo: int, n: int, m: int) -> tuple[int, ...]:
 
 
 @jit
-def _reset_sums(f, ii, ro, n, w, ip):  # pragma: no cover - jit
+def _reset_sums(
+    f: F64, ii: I64, ro: int, n: int, w: int, ip: int
+) -> None:  # pragma: no cover - jit
     for k in range(ro, ro + (n + 3) * w):
         f[k] = 0.0
     ii[ip] = 0
@@ -177,7 +194,7 @@ def _reset_sums(f, ii, ro, n, w, ip):  # pragma: no cover - jit
 
 
 @jit
-def episode_restart(f, ii, eo):  # pragma: no cover - jit
+def episode_restart(f: F64, ii: I64, eo: int) -> None:  # pragma: no cover - jit
     """After a data gap: the windows restart, the episode goes on."""
     n = ii[eo + P_N]
     m = ii[eo + P_M]
@@ -195,7 +212,7 @@ def episode_restart(f, ii, eo):  # pragma: no cover - jit
 
 
 @jit
-def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
+def episode_start(f: F64, ii: I64, eo: int, res: int, level: int) -> None:  # pragma: no cover - jit
     """A new episode against the residual test ``res`` (its ints' base) as it is now: θ_ref
     and σ²_ref frozen, the post window filled with the rows since the reference ended."""
     episode_restart(f, ii, eo)
@@ -224,10 +241,25 @@ def episode_start(f, ii, eo, res, level):  # pragma: no cover - jit
     ii[eo + P_CLIPPED] = 0
     f[sc + S_LEVEL_CHANGE] = math.nan
     f[sc + S_EVIDENCE] = math.nan
+    # the growing-fault test against the frozen reference starts at its threshold: what
+    # raised the episode is there until the innovations say otherwise
+    f[sc + S_DRIFT] = f[sc + S_DRIFT_H]
 
 
 @jit
-def _window_theta(f, ii, eo, ro, ip):  # pragma: no cover - jit
+def episode_rebase(f: np.ndarray, ii: np.ndarray, eo: int, ref: int) -> None:  # pragma: no cover
+    """An episode the growing-fault path raised is judged against the reference as it was
+    when that path's CUSUM run began (θ at f[ref..ref+3], 1/σ² at f[ref+4]): the moving
+    reference at the detection has learnt part of a fault that grows."""
+    sc = ii[eo + P_O_SCAL]
+    for q in range(4):
+        f[sc + S_THETA_REF + q] = f[ref + q]
+    f[sc + S_COULOMB_BASE] = f[ref]
+    f[sc + S_SIGMA2_REF] = 1.0 / f[ref + 4]
+
+
+@jit
+def _window_theta(f: F64, ii: I64, eo: int, ro: int, ip: int) -> bool:  # pragma: no cover - jit
     """θ (g1, g2 only) of a window's packed sums into th[0:2]; ok."""
     n = ii[eo + P_N]
     if ii[ip + 1] < ii[eo + P_ISO]:
@@ -245,7 +277,7 @@ def _window_theta(f, ii, eo, ro, ip):  # pragma: no cover - jit
 
 
 @jit
-def _friction_kind(f, ii, eo, fmin):  # pragma: no cover - jit
+def _friction_kind(f: F64, ii: I64, eo: int, fmin: float) -> int:  # pragma: no cover - jit
     """Given a rise of the Coulomb coefficient: harmonics (g1 explains the innovation
     beyond a linear change of the plant), a stopped load, or nothing."""
     n = ii[eo + P_N]
@@ -273,25 +305,25 @@ def _friction_kind(f, ii, eo, fmin):  # pragma: no cover - jit
 
 @jit
 def episode_tick(
-    f,
-    ii,
-    eo,
-    tick,
-    state,
-    r,
-    g1,
-    g2,
-    xhat,
-    theta1,
-    theta2,
-    over,
-    trusted,
-    sliding,
-    clipped,
-    row,
-    band,
-    out,
-):  # pragma: no cover - jit
+    f: F64,
+    ii: I64,
+    eo: int,
+    tick: int,
+    state: int,
+    r: float,
+    g1: float,
+    g2: float,
+    xhat: float,
+    theta1: float,
+    theta2: float,
+    over: float,
+    trusted: bool,
+    sliding: bool,
+    clipped: bool,
+    row: int,
+    band: int,
+    out: F64,
+) -> int:  # pragma: no cover - jit
     """One episode tick; θ as reported in out[0], out[1]; returns the transition.
 
     ``state``: 3 fault_detected, 4 friction_isolated, 5 other_fault (`detector.STATES`);
@@ -314,6 +346,15 @@ def episode_tick(
     acc = acc + f[tr + 2] * xhat
     acc = acc + f[tr + 3] * 1.0
     e = r - acc
+    # the growing-fault CUSUM against the frozen reference along s = g1 + γ g2 (S_DRIFT_S,
+    # set by the caller), capped at twice its threshold so that it falls below the
+    # threshold within a bounded time once the shift is gone
+    if f[sc + S_DRIFT_SHIFT] > 0.0:
+        cap = 2.0 * f[sc + S_DRIFT_H]
+        d = f[sc + S_DRIFT] + cusum_increment(
+            e, f[sc + S_DRIFT_S], 1.0 / f[sc + S_SIGMA2_REF], f[sc + S_DRIFT_SHIFT]
+        )
+        f[sc + S_DRIFT] = cap if d > cap else (d if d > 0.0 else 0.0)
     # isolated, the episode reports θ and waits to clear: the friction evidence (the post
     # window's refit, the innovation beyond a linear change, the stopped load) is not
     # looked at again, so its windows are not kept
@@ -417,7 +458,11 @@ def episode_tick(
         # an unconfirmed episode (fault_detected, other_fault) holds while the friction
         # level is still at least half its margin above normal (issue 43): a fault that
         # creeps in keeps its episode until the level path confirms it, never raise-clear
-        normal = frozen_stat <= threshold and not over >= 0.5
+        # ... and (growing-fault path) while the innovations against the frozen reference
+        # still show the shift along the signature (its CUSUM at or above h)
+        normal = (
+            frozen_stat <= threshold and not over >= 0.5 and f[sc + S_DRIFT] < f[sc + S_DRIFT_H]
+        )
         needed = ii[eo + P_CLEAR]
     ii[eo + P_QUIET] = ii[eo + P_QUIET] + 1 if normal and moving else 0
     if ii[eo + P_QUIET] >= needed:
@@ -426,7 +471,9 @@ def episode_tick(
 
 
 @jit
-def _band_decision(f, ii, eo, state, ticks, theta1, theta2, band):  # pragma: no cover - jit
+def _band_decision(
+    f: F64, ii: I64, eo: int, state: int, ticks: int, theta1: float, theta2: float, band: int
+) -> int:  # pragma: no cover - jit
     """The paper's band method: track the signature (1, γ_f), clear inside the band."""
     sc = ii[eo + P_O_SCAL]
     if state == 3:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 
 from fdi_daemon.core.compiled import Arena, jit
+from fdi_daemon.core.kernels import F64, I64
 
 __all__ = ["FrictionLevel", "level_tick", "level_restart", "LEVEL_INTS", "PICKS_PER_S"]
 
@@ -35,7 +36,9 @@ LEVEL_INTS = 7
 
 
 @jit(inline=True)
-def level_tick(f, ii, lo, level, valid):  # pragma: no cover - jit
+def level_tick(
+    f: F64, ii: I64, lo: int, level: float, valid: bool
+) -> None:  # pragma: no cover - jit
     """One tick: on a pick tick with a valid window, the window's level enters the ring and
     the median and the 25–75 % spread of the ring are recomputed (`_pick`); on every tick
     they are reported if the window is valid, else NaN. Inlined into the monitor's tick (as
@@ -57,7 +60,7 @@ def level_tick(f, ii, lo, level, valid):  # pragma: no cover - jit
 
 
 @jit
-def level_restart(f, ii, lo):  # pragma: no cover - jit
+def level_restart(f: F64, ii: I64, lo: int) -> None:  # pragma: no cover - jit
     """Forget the picks (an alarm episode begins or ends); the level is NaN until the next.
     The first pick comes one window after the restart, from the first window that holds
     none of the data before it, and the pick period counts from there: the level after a
@@ -71,7 +74,9 @@ def level_restart(f, ii, lo):  # pragma: no cover - jit
 
 
 @jit
-def _pick(f, ii, lo, ring, cap, held, level):  # pragma: no cover - jit
+def _pick(
+    f: F64, ii: I64, lo: int, ring: int, cap: int, held: int, level: float
+) -> None:  # pragma: no cover - jit
     """The level into the ring and into its sorted copy (in place of the value it
     overwrites, once the ring is full: one pass, not a sort); the median and 25–75 % range
     into f[held], f[held + 1]."""

@@ -44,6 +44,7 @@ class History:
         """The points held, oldest first: an array of rows (t, θ1, θ2)."""
         size = len(self._rows)
         if self._written <= size:
-            return self._rows[: self._written].copy()
+            held: np.ndarray = self._rows[: self._written].copy()
+            return held
         start = self._written % size
         return np.concatenate([self._rows[start:], self._rows[:start]])

@@ -36,8 +36,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from fdi_daemon.core.compiled import jit
+from fdi_daemon.core.cusum import cusum_increment
 from fdi_daemon.core.kernels import (
+    F64,
+    I64,
     iir_step,
     itest_flush_p,
     itest_insert_p,
@@ -63,11 +68,12 @@ __all__ = [
     "ISOLATED",
     "OTHER_FAULT",
     "CLEARED",
+    "DRIFT_ALARM",
 ]
 
 #: codes of a tick: nothing to tell, or the event Python formats (the calibration's end is
 #: computed there too)
-QUIET, LEVEL_ALARM, CALIBRATED, FAST_ALARM, ISOLATED, OTHER_FAULT, CLEARED = range(7)
+QUIET, LEVEL_ALARM, CALIBRATED, FAST_ALARM, ISOLATED, OTHER_FAULT, CLEARED, DRIFT_ALARM = range(8)
 
 # filters
 F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL, F_VEL_LOW = range(6)
@@ -162,13 +168,19 @@ DET_INTS = 23
     E_THETA1,
     E_THETA2,
     E_OVER,
-) = range(11)
-E_CAL = 11  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
+    E_DRIFT,
+    E_DRIFT_SHIFT,
+    E_DRIFT_H,
+    E_DRIFT_REF,  # .. +4: the reference θ (4) and 1/σ² frozen at the start of a CUSUM run
+) = range(15)
+E_CAL = 19  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
 STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER = range(1, 6)
 
 
 @jit
-def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
+def chain_tick(
+    f: F64, ii: I64, io: int, v_in: float, accel: float, position: float, xext: float
+) -> None:  # pragma: no cover - jit
     """One tick of the signal chain (see the module docstring); results at its C_OUT."""
     L = ii[io + C_WIDTH]
     bo = ii[io + C_B]
@@ -272,7 +284,7 @@ def chain_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - ji
 
 
 @jit(inline=True)
-def _clip_tick(f, out, accel, n):  # pragma: no cover - jit
+def _clip_tick(f: F64, out: int, accel: float, n: int) -> bool:  # pragma: no cover - jit
     """Rail detection on the raw ẍ (module docstring, ``clipped``): a flat top at the value
     of the previous one of its sign, which ended at most ``n`` ticks before, is clipping to
     its last sample. True while the last clipped sample is less than ``n`` ticks old."""
@@ -281,7 +293,7 @@ def _clip_tick(f, out, accel, n):  # pragma: no cover - jit
     f[out + O_ACCEL_LAST] = accel
     f[out + O_RAIL_AGE_POS] += 1.0
     f[out + O_RAIL_AGE_NEG] += 1.0
-    clip_age = f[out + O_CLIP_AGE] + 1.0
+    clip_age: float = f[out + O_CLIP_AGE] + 1.0
     if run >= CLIP_RUN:
         rail, age = (O_RAIL_POS, O_RAIL_AGE_POS) if accel > 0.0 else (O_RAIL_NEG, O_RAIL_AGE_NEG)
         if run == CLIP_RUN:
@@ -298,8 +310,23 @@ def _clip_tick(f, out, accel, n):  # pragma: no cover - jit
 
 @jit
 def chain_run(
-    f, ii, io, v_in, accel, position, xext, xhat, r, vel, g1, g2, sums, counts, moving, v_rms
-):  # pragma: no cover - jit
+    f: F64,
+    ii: I64,
+    io: int,
+    v_in: np.ndarray,
+    accel: np.ndarray,
+    position: np.ndarray,
+    xext: np.ndarray,
+    xhat: np.ndarray,
+    r: np.ndarray,
+    vel: np.ndarray,
+    g1: np.ndarray,
+    g2: np.ndarray,
+    sums: np.ndarray,
+    counts: np.ndarray,
+    moving: np.ndarray,
+    v_rms: np.ndarray,
+) -> None:  # pragma: no cover - jit
     """``chain_tick`` over arrays, every tick's signals and window sums kept."""
     out = ii[io + C_OUT]
     n = ii[io + C_N]
@@ -319,7 +346,7 @@ def chain_run(
 
 
 @jit(inline=True)
-def detector_pre(f, ii, io):  # pragma: no cover - jit
+def detector_pre(f: F64, ii: I64, io: int) -> None:  # pragma: no cover - jit
     """The detector's work that does not need this tick's signals, done before the chain so
     that the reference solves' chains of divisions overlap with it: with a lag, the rows
     the reference windows have reached into their sums and the reference fits
@@ -336,7 +363,9 @@ def detector_pre(f, ii, io):  # pragma: no cover - jit
 
 
 @jit(inline=True)
-def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
+def detector_tick(
+    f: F64, ii: I64, io: int, v_in: float, over_baseline: float
+) -> int:  # pragma: no cover - jit
     """The detector's per-tick arithmetic and quiet decisions on this tick's signals (read
     at the chain's C_OUT, `chain_tick`); returns the tick's code."""
     out = ii[ii[io + D_CHAIN] + C_OUT]
@@ -403,6 +432,7 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
     if tick < ii[io + D_HOLD_UNTIL]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
+        f[fo + E_DRIFT] = 0.0
         return QUIET
     ii[io + D_LEVEL_ABOVE] = ii[io + D_LEVEL_ABOVE] + 1 if over > 1.0 else 0
     if ii[io + D_LEVEL_ABOVE] >= ii[io + D_LEVEL_SAMPLES]:
@@ -426,18 +456,63 @@ def detector_tick(f, ii, io, v_in, over_baseline):  # pragma: no cover - jit
             or theta2 > f[fo + E_HI2]
         )
     else:
-        alarm = ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL] and stat > f[fo + E_THRESHOLD]
+        armed = ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL]
+        alarm = armed and stat > f[fo + E_THRESHOLD]
+        _drift_tick(f, ii, res, fo, out, armed, r, g1, g2, xhat)
     ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if alarm else 0
     if ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE]:
         ii[io + D_ABOVE] = 0
         ii[io + D_LEVEL_ABOVE] = 0
+        f[fo + E_DRIFT] = 0.0
         _start(f, ii, io, res, 0)
         return FAST_ALARM
+    if f[fo + E_DRIFT] > f[fo + E_DRIFT_H]:
+        ii[io + D_ABOVE] = 0
+        ii[io + D_LEVEL_ABOVE] = 0
+        _start(f, ii, io, res, 0)
+        E.episode_rebase(f, ii, ii[io + D_EPI], fo + E_DRIFT_REF)
+        return DRIFT_ALARM
     return QUIET
 
 
+@jit(inline=True)
+def _drift_tick(
+    f: np.ndarray,
+    ii: np.ndarray,
+    res: int,
+    fo: int,
+    out: int,
+    armed: bool,
+    r: float,
+    g1: float,
+    g2: float,
+    xhat: float,
+) -> None:  # pragma: no cover - jit
+    """The growing-fault path's statistic: Page's CUSUM (`core.cusum`) of the innovation
+    along the signature's regressor s = g1 + γ g2, matched to a shift of
+    ``drift_shift_level`` calibrated faults, against the residual test's reference as it
+    was when the CUSUM's run began (at S = 0; B&N §8.1's two-model approach: the moving
+    reference would learn a fault that grows, the frozen one does not); restarted from 0
+    while the reference is not ready or the operating-point guard holds (the innovations
+    then describe the operating point, not friction)."""
+    shift = f[fo + E_DRIFT_SHIFT]
+    if not armed or shift <= 0.0:
+        f[fo + E_DRIFT] = 0.0
+        return
+    ref = fo + E_DRIFT_REF
+    if f[fo + E_DRIFT] == 0.0:
+        th = ii[res + 20]
+        for q in range(4):
+            f[ref + q] = f[th + q]
+        f[ref + 4] = f[ii[res + 22] + 4]
+    e = r - (f[ref] * g1 + f[ref + 1] * g2 + f[ref + 2] * xhat + f[ref + 3])
+    s = g1 + f[out + O_GAMMA] * g2
+    total = f[fo + E_DRIFT] + cusum_increment(e, s, f[ref + 4], shift)
+    f[fo + E_DRIFT] = total if total > 0.0 else 0.0
+
+
 @jit
-def _start(f, ii, io, res, level):  # pragma: no cover - jit
+def _start(f: F64, ii: I64, io: int, res: int, level: int) -> None:  # pragma: no cover - jit
     """fault_detected: an episode starts (level: raised by the level path); the reported
     friction level restarts from the new picks."""
     E.episode_start(f, ii, ii[io + D_EPI], res, level)
@@ -448,11 +523,28 @@ def _start(f, ii, io, res, level):  # pragma: no cover - jit
 
 @jit
 def _episode(
-    f, ii, io, fo, res, tick, r, g1, g2, xhat, theta1, theta2, over, trusted, sliding, clipped
-):  # pragma: no cover - jit
+    f: F64,
+    ii: I64,
+    io: int,
+    fo: int,
+    res: int,
+    tick: int,
+    r: float,
+    g1: float,
+    g2: float,
+    xhat: float,
+    theta1: float,
+    theta2: float,
+    over: float,
+    trusted: bool,
+    sliding: bool,
+    clipped: bool,
+) -> int:  # pragma: no cover - jit
     """A tick of the running episode, and its transition applied to the detector."""
     ep = ii[io + D_EPI]
     band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
+    out = ii[ii[io + D_CHAIN] + C_OUT]
+    f[ii[ep + E.P_O_SCAL] + E.S_DRIFT_S] = g1 + f[out + O_GAMMA] * g2
     packed_row_into(f, ii[res + 15], 4, ii[res + 16])  # this tick's row of the residual fit
     change = E.episode_tick(
         f,
@@ -492,12 +584,15 @@ def _episode(
     ii[io + D_EPISODE] = 0
     level_restart(f, ii, ii[io + D_LEVEL])
     ii[io + D_ABOVE] = 0
+    f[fo + E_DRIFT] = 0.0
     ii[io + D_GUARD_UNTIL] = max(ii[io + D_GUARD_UNTIL], ii[io + D_TICK] + ii[io + D_HOLD])
     return CLEARED
 
 
 @jit
-def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - jit
+def monitor_tick(
+    f: F64, ii: I64, io: int, v_in: float, accel: float, position: float, xext: float
+) -> int:  # pragma: no cover - jit
     """``detector_pre``, ``chain_tick``, the reported friction level, then ``detector_tick``
     (with the level's excess over the baseline of the window's operating condition); returns
     the tick's code (also in ii[io + D_CODE])."""
@@ -529,22 +624,22 @@ def monitor_tick(f, ii, io, v_in, accel, position, xext):  # pragma: no cover - 
 
 @jit
 def monitor_run(
-    f,
-    ii,
-    io,
-    v_in,
-    accel,
-    position,
-    xext,
-    start,
-    stat,
-    state,
-    theta1,
-    theta2,
-    residual,
-    v_rms,
-    level,
-):  # pragma: no cover - jit
+    f: F64,
+    ii: I64,
+    io: int,
+    v_in: np.ndarray,
+    accel: np.ndarray,
+    position: np.ndarray,
+    xext: np.ndarray,
+    start: int,
+    stat: np.ndarray,
+    state: np.ndarray,
+    theta1: np.ndarray,
+    theta2: np.ndarray,
+    residual: np.ndarray,
+    v_rms: np.ndarray,
+    level: np.ndarray,
+) -> int:  # pragma: no cover - jit
     """``monitor_tick`` from index ``start`` on, traces kept; returns the index after the
     first tick whose code is not QUIET (its code in ii[io + D_CODE]), or the length."""
     chain = ii[io + D_CHAIN]
@@ -565,4 +660,4 @@ def monitor_run(
         if code != QUIET:
             return k + 1
     ii[io + D_CODE] = QUIET
-    return v_in.shape[0]
+    return int(v_in.shape[0])

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -211,7 +212,7 @@ class Monitor:
                 self._history.append(t, self.detector.theta1, self.detector.theta2)
             self._samples += 1
             return events
-        events: list[dict[str, Any]] = []
+        events = []  # typed by the fast path's `events` above
         if last is not None:
             if seq <= last:
                 reason = "duplicate" if seq == last else "backwards"
@@ -256,7 +257,7 @@ class Monitor:
         self._samples += 1
         return events
 
-    def _bad(self, t: float, reason: str, events: list) -> list[dict[str, Any]]:
+    def _bad(self, t: float, reason: str, events: list[dict[str, Any]]) -> list[dict[str, Any]]:
         if not self._bad_run:
             self._bad_t = t
             self._bad_reason = reason
@@ -283,12 +284,20 @@ class Monitor:
 
     # ------------------------------------------------------------------ batch
     def run(
-        self, rec: Recording, trace_every: int = 1, progress=None
+        self,
+        rec: Recording,
+        trace_every: int = 1,
+        progress: Callable[[int, int], object] | None = None,
+        final: bool = True,
     ) -> tuple[list[dict[str, Any]], MonitorTrace]:
         """Replay a recording through the batch path; same events as ``step`` per sample.
 
         trace_every: keep every n-th sample in the trace (1: all). progress(done, total) is
-        called after every chunk.
+        called after every chunk. A recording in pieces (a file streamed chunk by chunk) is
+        one ``run`` per piece with ``final=False`` but for the last: the events, trace rows
+        and final state are those of one ``run`` over the whole (a run of bad samples
+        across pieces stays one event; without ``seq``, the time step from the previous
+        piece's last sample tells a gap).
         """
         cols = rec.columns
         n = len(cols["t"])
@@ -300,11 +309,14 @@ class Monitor:
         needs_position = self.pipeline.needs_position
         position = self.position_column(rec) if needs_position else np.full(min(n, _CHUNK), np.nan)
         seq = np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols else None
-        last = None  # the number of the sample before the chunk (no seq column)
+        last: int | None = None  # the number of the sample before the chunk (no seq column)
         events: list[dict[str, Any]] = []
         parts: dict[str, list[np.ndarray]] = {k: [] for k in TRACE_NAMES}
         start = 0
         limit = math.inf if self.accel_limit_mps2 is None else float(self.accel_limit_mps2)
+        # a piece that continues an earlier one, without seq: its first sample's number
+        # comes from the time step after the previous piece's last sample (general path)
+        resumed = seq is None and self._last_seq is not None and math.isfinite(self._last_t)
         while start < n:
             stop = min(n, start + _CHUNK)
             chunk = (
@@ -317,11 +329,13 @@ class Monitor:
             if seq is not None:
                 first = int(seq[start])
             elif start > 0:
+                assert last is not None  # set by the previous chunk
                 first = last + 1
             else:
                 first = 0 if self._last_seq is None else self._last_seq + 1
             if (
                 not self._bad_run
+                and not (resumed and start == 0)
                 and (self._last_seq is None or first == self._last_seq + 1)
                 and _clean_chunk(
                     t,
@@ -343,6 +357,10 @@ class Monitor:
             else:
                 if seq is not None:
                     numbers = seq[start:stop]
+                elif resumed and start == 0:
+                    with_last = np.concatenate(([self._last_t], t[:stop]))
+                    numbers = self.sample_numbers(with_last, self._last_seq)[1:]
+                    last = int(numbers[-1])
                 else:
                     lo = max(start - 1, 0)
                     numbers = self.sample_numbers(t[lo:stop], last)[start - lo :]
@@ -351,7 +369,8 @@ class Monitor:
             start = stop
             if progress is not None:
                 progress(stop, n)
-        events.extend(self.finish())
+        if final:
+            events.extend(self.finish())
         trace = MonitorTrace(
             every=trace_every,
             **{k: (np.concatenate(v) if v else np.empty(0)) for k, v in parts.items()},
@@ -365,15 +384,16 @@ class Monitor:
             return None
         return finite_or_none(self.baseline_levels(self.pipeline.v_rms))
 
-    def baseline_levels(self, v_rms_mps):
+    def baseline_levels(self, v_rms_mps: np.ndarray | float) -> Any:
         """`baseline_level` at each velocity RMS (m/s; array or scalar); NaN without one."""
         if self.baseline is None:
             return np.full(np.shape(v_rms_mps), np.nan)
         return self.baseline.level_median[self.baseline.bin_index(v_rms_mps)]
 
-    def over_baseline(self, theta1, v_rms):
+    def over_baseline(self, theta1: np.ndarray | float, v_rms: np.ndarray | float) -> Any:
         """(θ1 − baseline median)/margin of the bin of the window's velocity RMS; margin =
         max(friction_min_level/2, band_k·σ). Above 1: friction beyond the fault-free level."""
+        assert self.baseline is not None  # called only with a baseline
         idx = self.baseline.bin_index(v_rms)
         return (theta1 - self.baseline.coulomb_median[idx]) / self._margin[idx]
 
@@ -406,7 +426,16 @@ class Monitor:
         steps = np.where(np.isfinite(steps), steps, 1).astype(np.int64)
         return base + np.concatenate([[0], np.cumsum(steps)])
 
-    def _run_chunk(self, t, v_in, accel, position, seq, parts, trace_every) -> list[dict[str, Any]]:
+    def _run_chunk(
+        self,
+        t: np.ndarray,
+        v_in: np.ndarray,
+        accel: np.ndarray,
+        position: np.ndarray,
+        seq: np.ndarray,
+        parts: dict[str, list[np.ndarray]],
+        trace_every: int,
+    ) -> list[dict[str, Any]]:
         events: list[dict[str, Any]] = []
         # split where seq does not advance by exactly one: gaps and dropped samples
         step = np.empty_like(seq)
@@ -451,7 +480,15 @@ class Monitor:
             self._last_seq = int(seq[b - 1])
         return events
 
-    def _run_contiguous(self, t, v_in, accel, position, parts, trace_every) -> list[dict[str, Any]]:
+    def _run_contiguous(
+        self,
+        t: np.ndarray,
+        v_in: np.ndarray,
+        accel: np.ndarray,
+        position: np.ndarray,
+        parts: dict[str, list[np.ndarray]],
+        trace_every: int,
+    ) -> list[dict[str, Any]]:
         """Samples with consecutive seq: good runs batched, bad samples through ``step``."""
         events: list[dict[str, Any]] = []
         good = np.isfinite(v_in)
@@ -494,7 +531,15 @@ class Monitor:
                 )
         return events
 
-    def _run_good(self, t, v_in, accel, position, parts, trace_every) -> list[dict[str, Any]]:
+    def _run_good(
+        self,
+        t: np.ndarray,
+        v_in: np.ndarray,
+        accel: np.ndarray,
+        position: np.ndarray,
+        parts: dict[str, list[np.ndarray]],
+        trace_every: int,
+    ) -> list[dict[str, Any]]:
         """Good samples with consecutive seq: `monitor_run` over the arrays, handing the
         ticks that need Python (events, episodes) to `Detector.decide` as ``step`` does."""
         pl = self.pipeline
@@ -562,13 +607,13 @@ class Monitor:
             self._scratch = (*(np.empty(_CHUNK) for _ in range(6)), np.empty(_CHUNK, dtype=np.int8))
         return tuple(a[:n] for a in self._scratch)
 
-    def _trace_one(self, parts, trace_every) -> None:
+    def _trace_one(self, parts: dict[str, list[np.ndarray]], trace_every: int) -> None:
         if (self._samples - 1) % trace_every:
             return
         for name, value in zip(TRACE_NAMES, self.trace_row(self._last_t)):
             parts[name].append(np.array([value], dtype=np.int8 if name == "state" else float))
 
-    def trace_row(self, t: float) -> tuple:
+    def trace_row(self, t: float) -> tuple[float, ...]:
         """The newest tick's values in the order of TRACE_NAMES, its time given as ``t``."""
         pl, det = self.pipeline, self.detector
         return (
@@ -628,8 +673,18 @@ _NO_SEQ = np.zeros(0, dtype=np.int64)
 
 @jit
 def _clean_chunk(
-    t, v_in, accel, position, needs_position, start, stop, accel_limit, fs_hz, seq, after_previous
-):  # pragma: no cover - jit
+    t: np.ndarray,
+    v_in: np.ndarray,
+    accel: np.ndarray,
+    position: np.ndarray,
+    needs_position: bool,
+    start: int,
+    stop: int,
+    accel_limit: float,
+    fs_hz: float,
+    seq: np.ndarray,
+    after_previous: bool,
+) -> bool:  # pragma: no cover - jit
     """Whether samples [start, stop) need none of `Monitor.run`'s checks: every value
     finite (position only when the velocity uses it), |accel| below the limit, and numbered
     on without a gap: ``seq`` advancing by one, or without ``seq`` (empty) time steps that

@@ -31,12 +31,18 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter
 
 from fdi_daemon.core.compiled import Arena
+from fdi_daemon.core.filter_design import butter
 from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.core.kernels import sums_floats
-from fdi_daemon.core.velocity_observer import trusted_from_hz, velocity_from_settings
+from fdi_daemon.core.velocity import VelocityEstimator
+from fdi_daemon.core.velocity_observer import (
+    ModelVelocityObserver,
+    trusted_from_hz,
+    velocity_from_settings,
+)
+from fdi_daemon.core.velocity_position import PositionVelocityObserver
 from fdi_daemon.core.window_ls import MIN_RCOND, solve_sums
 from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.settings import DetectorSettings, velocity_settings
@@ -158,16 +164,21 @@ class Pipeline:
         self.window_samples = n = int(window_samples)
         self.wls = WindowView(self, n, float(min_rcond))
         vel = self.velocity
+        vel_a: IIRFilter | VelocityEstimator
+        vel_b: IIRFilter | VelocityEstimator | None
         if self.model_velocity:
+            assert isinstance(vel, ModelVelocityObserver)  # the one that needs_model
             vel_a, vel_b, method = vel.model_path, vel.residual_path, 1
         elif self.needs_position:
+            assert isinstance(vel, PositionVelocityObserver)  # the one that needs_position
             vel_a, vel_b, method = vel.position_path, vel.accel_path, 2
         else:
+            assert isinstance(vel, VelocityEstimator)  # neither needs_model nor needs_position
             vel_a, vel_b, method = vel, None, 0
-        plant = None if self.external_plant else self.plant
+        plant = self.plant if isinstance(self.plant, IIRFilter) else None  # not external_plant
         self.trusted_from_hz = trusted_from_hz(vel, trust_phase_deg)
         low = (
-            IIRFilter(*butter(2, self.trusted_from_hz, fs=model.fs))
+            IIRFilter(*(c.tolist() for c in butter(2, self.trusted_from_hz, model.fs)))
             if self.trusted_from_hz > 0
             else None
         )  # None: v̂ is trusted everywhere
@@ -325,7 +336,7 @@ class Pipeline:
         position = (
             np.full(n, np.nan) if position is None else np.ascontiguousarray(position, dtype=float)
         )
-        out = [np.empty(n) for _ in range(5)]
+        xhat, r, v, g1, g2 = (np.empty(n) for _ in range(5))
         sums = np.empty((n, 6))
         counts = np.empty(n, dtype=np.int64)
         moving = np.empty(n, dtype=np.bool_)
@@ -338,13 +349,16 @@ class Pipeline:
             accel,
             position,
             self.external_xhat(v_in),
-            *out,
+            xhat,
+            r,
+            v,
+            g1,
+            g2,
             sums,
             counts,
             moving,
             v_rms,
         )
-        xhat, r, v, g1, g2 = out
         return PipelineBatch(
             xhat=xhat,
             residual=r,

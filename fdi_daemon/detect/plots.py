@@ -88,7 +88,7 @@ def replay_figure(
     threshold: float,
     fault_onset_t: float | None = None,
     title: str = "",
-):
+) -> Any:
     """The figure (matplotlib Figure, not yet saved)."""
     plt = pyplot()
     sl = _thin(trace.t.size)
@@ -222,7 +222,7 @@ def replay_figure(
         *(label for _, _, label in marks),
     }
     for ax in axes:  # the marks every row shares: in the top row's legend only
-        keep = {}
+        keep: dict[str, Any] = {}
         for handle, label in zip(*ax.get_legend_handles_labels()):
             if ax is ax_a or label not in shared:
                 keep.setdefault(label, handle)

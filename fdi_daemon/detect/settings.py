@@ -71,6 +71,16 @@ class DetectorSettings:
     """Level path: the Coulomb coefficient θ1 above its fault-free value (the commissioning
     baseline, else the calibration's median) by more than its margin for this long is a fault
     (friction that creeps in, starts while the guard holds, or is there from the start)."""
+    drift_shift_level: float = 0.3
+    """Growing-fault path (CUSUM): the shift of the innovations along the signature's
+    regressor g1 + γ_f g2 that the test is matched to, in calibrated faults; 0 turns the path
+    off."""
+    drift_false_alarm_years: float = 10.0
+    """... its threshold h = ln(ARL₀), ARL₀ this long in ticks: the mean time between false
+    alarms of a CUSUM on white Gaussian innovations is at least e^h ticks (Lorden)."""
+    drift_correlation_samples: int = 8
+    """... and the innovations counted as independent once per this many ticks (their
+    correlation time along the signature): h = this × ln(ARL₀ in ticks)."""
     track_tolerance: float = 0.15
     """band method: |θ - (1, γ_f)| within this fraction of the signature counts as tracking."""
     track_samples: int = 8
@@ -138,6 +148,7 @@ class DetectorSettings:
             "band_k",
             "guard_threshold",
             "level_median_s",
+            "drift_false_alarm_years",
         ):
             if getattr(settings, name) <= 0:
                 raise ConfigError(f"{source}.{name} must be > 0")

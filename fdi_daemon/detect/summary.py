@@ -39,7 +39,7 @@ def replay_summary(
         decided = [e for e in events if e["kind"] in ("friction_isolated", "other_fault")]
         if decided:
             classification = "friction" if decided[0]["kind"] == "friction_isolated" else "other"
-    theta_final = [finite_or_none(v) for v in theta_final]
+    theta_safe = [finite_or_none(v) for v in theta_final]
     counts = {kind: kinds.count(kind) for kind in dict.fromkeys(kinds)}
     return {
         "samples": int(samples),
@@ -47,7 +47,7 @@ def replay_summary(
         "first_detection_t": first_detection,
         "isolated_t": isolated,
         "classification": classification,
-        "theta_final": theta_final,
+        "theta_final": theta_safe,
         "alarm_episodes": kinds.count("fault_detected"),
         "alarms": kinds.count("alarm_raised"),
         "alarm_peak_priority": max(

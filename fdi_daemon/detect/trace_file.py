@@ -13,18 +13,22 @@ NaN where a quantity is not estimated (the rig at rest, windows not full).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fdi_daemon.detect.detector import STATES
 from fdi_daemon.errors import UserError
 
+if TYPE_CHECKING:
+    from fdi_daemon.detect.monitor import MonitorTrace
+
 __all__ = ["TRACE_COLUMNS", "trace_columns", "write_trace"]
 
 TRACE_COLUMNS = ("t", "theta1", "theta2", "friction_level", "statistic", "state")
 
 
-def trace_columns(trace, every: int = 1) -> dict[str, np.ndarray]:
+def trace_columns(trace: MonitorTrace, every: int = 1) -> dict[str, np.ndarray]:
     """The columns of a `MonitorTrace`, every ``every``-th of its rows."""
     rows = slice(None, None, int(every))
     names = np.asarray(STATES)
@@ -38,13 +42,13 @@ def trace_columns(trace, every: int = 1) -> dict[str, np.ndarray]:
     }
 
 
-def write_trace(path: str | Path, trace, every: int = 1) -> Path:
+def write_trace(path: str | Path, trace: MonitorTrace, every: int = 1) -> Path:
     """Write the trace to ``path`` (.npz or CSV); a file that cannot be written: UserError."""
     path = Path(path)
     columns = trace_columns(trace, every)
     try:
         if path.suffix.lower() == ".npz":
-            np.savez(path, **columns)
+            np.savez(path, **columns)  # type: ignore[arg-type]  # numpy's stub types **kwds as allow_pickle
         else:
             text = [np.char.mod("%.10g", columns[name]) for name in TRACE_COLUMNS[:-1]]
             table = np.column_stack([*text, columns["state"]])

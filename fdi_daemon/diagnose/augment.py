@@ -31,6 +31,7 @@ from fdi_daemon.diagnose import signals
 from fdi_daemon.diagnose.effects import SPECS, FittedEffect, regressor_param, stored_param
 from fdi_daemon.diagnose.force import LOOPED, ForceLoop, kinds
 from fdi_daemon.errors import ConfigError
+from fdi_daemon.io.model_file import FdiModel
 
 
 class AugmentedPlant:
@@ -81,6 +82,7 @@ class AugmentedPlant:
 
     def _block(self, eff: FittedEffect):
         spec = SPECS[eff.name]
+        outs: list[IIRFilter] | list[float]
         if spec.dynamic:
             outs = [IIRFilter(b, self.a_dom) for b in eff.coefficients]
         else:
@@ -274,7 +276,7 @@ def _parse_items(raw: Any, fs_hz: float, where: str) -> list[FittedEffect]:
     return effects
 
 
-def nominal_plant(model):
+def nominal_plant(model: FdiModel) -> IIRFilter | AugmentedPlant:
     """The monitor's nominal model x̂̈ = plant.step(v_in): Ĝ, or Ĝ plus the model's effects.
 
     Effects fitted on a velocity or position output predict that quantity, not the

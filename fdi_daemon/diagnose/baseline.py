@@ -11,6 +11,7 @@ measured output ARX is biased and the bias would show up as a spurious "missing 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from scipy import signal
@@ -137,7 +138,7 @@ def prepare(
     hp = signals.highpass_from_input(u, fs_hz)
     y_dom = measured_in_domain(y, n_kind, hp, fs_hz)
     provisional = signals.make_split(len(u), 0)
-    info = {"highpass_hz": hp}
+    info: dict[str, Any] = {"highpass_hz": hp}
     domain = None
     if plant_b is None:
         chosen = order if order is not None else choose_order(u, y_dom, n_kind, provisional)
@@ -149,6 +150,7 @@ def prepare(
         )
     else:
         info["baseline"] = "model file"
+    assert plant_a is not None  # given with plant_b, or fitted above
     if len(plant_a) > 1 and np.max(np.abs(np.roots(plant_a))) >= 1.0:
         raise UserError(
             "the model's plant is unstable (a root of plant.a on or outside the "

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 from scipy import signal
@@ -97,8 +97,9 @@ class EffectSpec:
     dynamic: bool  # through B_e/Â (True) or a static gain (False)
     param: str | None  # name of the nonlinear parameter (searched), None if none
     unit: str  # of the searched parameter
-    #: (parameter, centre, Â of the domain) -> regressor
-    build: Callable[[float | None, float, np.ndarray], Regressor]
+    #: (parameter, centre, Â of the domain) -> regressor; the parameter is a float when
+    #: ``param`` names one, else None
+    build: Callable[[Any, float, np.ndarray], Regressor]
     grid: Callable[[Context], np.ndarray] | None = None
     integer_coarse: bool = False
     #: the value reported is searched again with the regressor's coefficient held at 1 (a
@@ -250,7 +251,14 @@ SPECS: dict[str, EffectSpec] = {
     ),
     # not a candidate: corrections of the inverse-dynamics form's mass, damping [, stiffness]
     # refitted with every candidate (columns from `Context.base_columns`)
-    "force_balance": EffectSpec("force_balance", "state", False, None, "", lambda p, c, a: None),
+    "force_balance": EffectSpec(
+        "force_balance",
+        "state",
+        False,
+        None,
+        "",
+        lambda p, c, a: None,  # type: ignore[arg-type,return-value]  # never built: not a candidate
+    ),
     # not a candidate: in the force loop with any force effect (`force.in_the_loop`)
     "loop_stiffness": EffectSpec(
         "loop_stiffness", "state", True, None, "", lambda p, c, a: Static(lambda u, v, x, y0: [x])
@@ -380,6 +388,12 @@ class FittedEffect:
         return free + (0 if self.param is None else 1)
 
 
+@overload
+def stored_param(spec: EffectSpec, param: float, fs_hz: float) -> float: ...
+@overload
+def stored_param(spec: EffectSpec, param: None, fs_hz: float) -> None: ...
+@overload
+def stored_param(spec: EffectSpec, param: float | None, fs_hz: float) -> float | None: ...
 def stored_param(spec: EffectSpec, param: float | None, fs_hz: float) -> float | None:
     """The searched value in the unit of the report (dead time in s, the rest as searched)."""
     if param is None:
@@ -486,6 +500,7 @@ def search_param(
     target alone (``base`` is not used)."""
     if spec.param is None:
         return None
+    assert spec.grid is not None  # a searched parameter has its grid
     grid = np.asarray(spec.grid(ctx), float)
     grid = grid[np.isfinite(grid) & (grid > 0)]
     if grid.size == 0:
@@ -634,13 +649,17 @@ def physical_report(eff: FittedEffect, ctx: Context) -> dict[str, Any]:
         plausible = SHARE_RANGE[0] <= out["shift_share"] <= SHARE_RANGE[1]
         # the delay itself is the pure shift's (c held at 1), read against the nominal
         # model: beside the free c it trades with c (c·τ is the first-order shift)
+        assert spec.param is not None  # dead_time_s
         out["fitted_shift_s"] = out[spec.param]
         out[spec.param] = stored_param(
             spec, search_param(spec, _search_part(ctx)[0], unit_weight=True), ctx.fs_hz
         )
     elif eff.name in MODE_LINES:  # y = ŷ₀ + c (ŷ_r − ŷ₀); a pure change has c = 1
         line = MODE_LINES[eff.name]
-        out.update(mode_report(nominal_pole(ctx.a_dom), line, eff.param, ctx.fs_hz))
+        pole = nominal_pole(ctx.a_dom)
+        # fitted only with a mode (`_ratios`), at a searched ratio
+        assert pole is not None and eff.param is not None
+        out.update(mode_report(pole, line, eff.param, ctx.fs_hz))
         out["mode_change"] = line  # as `force.mode_shift` reads the loop's spring
         out["line_share"] = float(eff.coefficients[0][0])
         out["named_as"] = LINES[line]

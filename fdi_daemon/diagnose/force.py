@@ -76,6 +76,7 @@ def kinds(name: str, param: float | None) -> list[tuple[int, float]]:
     if name == "viscous_friction":
         return [(_VEL, 0.0)]
     if name == "stribeck_friction":
+        assert param is not None  # its velocity is searched
         return [(_SIGN, 0.0), (_STRIBECK, float(param))]
     if name == "cubic_stiffness":
         return [(_CUBE, 0.0)]
@@ -778,7 +779,7 @@ def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:
     }  # a mass is positive
     moved_hz = abs(s1 - s0) / (2 * math.pi)
     resolution_hz = fs / max(ctx.split.train_end - ctx.split.warmup, 1)
-    best, second = sorted(off, key=off.get)[:2]
+    best, second = sorted(off, key=lambda k: off[k])[:2]
     if moved_hz < resolution_hz:
         change = "none"
     elif off[second] - off[best] >= 2 * math.pi * resolution_hz:

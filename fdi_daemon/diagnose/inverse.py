@@ -146,6 +146,7 @@ def physical(name: str, theta: np.ndarray, param: float | None, ctx=None) -> dic
         out.update(zip(ctx.inverse_base, values))
         out["plausible"] = bool(values[0] > 0 and values[1] >= 0)
     elif name == "stribeck_friction":
+        assert param is not None  # its velocity is searched
         out["stribeck_velocity"] = float(param)
         out["stribeck_velocity_unit"] = "velocity units"
         out["coulomb_level"], out["stribeck_excess"] = float(theta[0]), float(theta[1])

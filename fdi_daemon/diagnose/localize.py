@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from scipy import signal, stats
@@ -63,7 +64,7 @@ def state_bins(e: np.ndarray, values: np.ndarray, name: str, signed: bool = Fals
     idx = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, edges.size - 2)
     total = float(np.sum((e - e.mean()) ** 2)) or 1.0
     between = 0.0
-    bins = []
+    bins: list[dict[str, Any]] = []
     for k in range(edges.size - 1):
         sel = idx == k
         if not sel.any():
@@ -99,7 +100,7 @@ def frequency_bands(e: np.ndarray, y: np.ndarray, fs_hz: float, top: int = 3) ->
         edges.append(edges[-1] * 2 ** (1 / 3))
     edges.append(fs_hz / 2)
     total = float(np.sum(p_e[1:])) or 1.0
-    bands = []
+    bands: list[dict[str, Any]] = []
     for f0, f1 in zip(edges[:-1], edges[1:]):
         sel = (f >= f0) & (f < f1)
         if not sel.any():

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -122,7 +123,7 @@ class Candidate:
     score: float
     p_value: float
     accepted: bool
-    prediction: np.ndarray = field(repr=False, default=None)  # contribution of all effects
+    prediction: np.ndarray = field(repr=False, default=None)  # type: ignore[arg-type]  # always given
     k: int = 0  # parameters it adds to the round's reference (its own and new base terms)
     k_total: int = 0  # parameters of the whole fit
     #: held-out SSE of the base refitted from the candidate's own fit, without it (a later
@@ -290,6 +291,7 @@ def _search_in_the_loop(ctx: Context, effects: list[FittedEffect]) -> FittedEffe
     new = effects[-1]
     spec = SPECS[new.name]
     best = (math.inf, new)
+    assert spec.grid is not None and new.param is not None  # a searched effect
     grid = np.append(spec.grid(ctx), new.param)
     for value in grid[np.isfinite(grid) & (grid > 0)]:
         trial = replace(new, param=float(value))
@@ -364,7 +366,9 @@ def _choose(ctx: Context, results: list[Candidate], n_eff: float) -> Candidate |
             )
             if down is None and up is None:
                 break
-            best = down or up
+            better = down or up
+            assert better is not None
+            best = better
         if (
             best.name == "stiffness_change"
             and best.effect.physical.get("mode_change") == "damping"
@@ -442,7 +446,7 @@ def linear_round(
     sse0 = float(e0 @ e0)
     n_eff = effective_samples(e0)
     refit = evaluate("linear_refit", ctx, [], None, sse0, n_eff)
-    out = {
+    out: dict[str, Any] = {
         "refit_significant": refit.accepted,
         "refit_p_value": refit.p_value,
         "refit_sse_ratio": refit.sse_test / sse0 if sse0 > 0 else 1.0,
@@ -884,6 +888,7 @@ def _direction(explanation: FittedEffect) -> float:
     if explanation.name == "gain_fault":
         return float(np.sign(explanation.physical["gain_ratio"] - 1.0))
     if explanation.name in MODE_LINES:
+        assert explanation.param is not None  # a mode line's ratio
         return float(np.sign(explanation.param - 1.0))
     return 1.0
 
@@ -986,7 +991,7 @@ def spring_check(
     if n_eff - k_total <= 1:
         return chosen, prediction, {"named": False, "pays": False}
     score, p, pays = _judged(sse0, sse1, spring.n_params, k_total, n_eff)
-    check = {
+    check: dict[str, Any] = {
         "p_value": p,
         "score": score,
         "sse_ratio": sse1 / sse0,

@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from fdi_daemon.errors import UserError
-from fdi_daemon.fleet.replay_one import replay_row, summary_row
+from fdi_daemon.fleet.replay_one import replay_row, summary_row, warm_worker
 
 INSTALL_HINT = "pip install 'fdi[fleet]'"
 
@@ -89,6 +89,13 @@ def _sigint_ignored():
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def warm_workers(client) -> None:
+    """Every worker imports the monitor and loads the compiled kernels once, before the
+    files (`warm_worker`); a worker that cannot is left to fail its files with a row."""
+    with contextlib.suppress(Exception):
+        client.run(warm_worker)
 
 
 def replay_fleet(

@@ -5,8 +5,9 @@
 refused), checks that both have the same rate, runs the monitor, runs the alarm lifecycle
 over its events and level readings as the daemon would (`fdi_daemon.alarms.replay`) and
 summarizes (`fdi_daemon.detect.summary.replay_summary`). How the monitor runs is the caller's choice:
-by default the batch path `Monitor.run` (the whole file at once); `fdi replay` passes its
-own runner for the progress bar, the real-time pacing or the dashboard.
+by default the batch path `Monitor.run` (the whole file at once); ``stream=True`` reads a
+Parquet file piece by piece (`run_pieces`, flat memory on a day-long file); `fdi replay`
+passes its own runner for the progress bar, the real-time pacing or the dashboard.
 `summary_row` turns the summary into one row of the fleet table.
 """
 
@@ -60,6 +61,42 @@ def run_batch(monitor, rec, stride: int):
     return monitor.run(rec, trace_every=stride)
 
 
+def run_pieces(monitor, stream, stride: int, progress=None):
+    """`Monitor.run` over a `RecordingStream` piece by piece (the streaming contract of
+    `Monitor.run`: the events and trace of one run over the whole); (events, trace)."""
+    import numpy as np
+
+    from fdi_daemon.detect.monitor import TRACE_NAMES, MonitorTrace
+
+    events: list[dict[str, Any]] = []
+    # the trace's rows go into arrays made once for the whole file (at most one row per
+    # `stride` samples kept), not into a list of small pieces: small arrays that live on
+    # between each piece's large temporary ones fragmented the heap (RSS grew by some
+    # 10 bytes per sample over a day)
+    size = -(-stream.rows // stride) + 1
+    arrays = {
+        name: np.empty(size, dtype=np.int8 if name == "state" else float) for name in TRACE_NAMES
+    }
+    done = rows = 0
+    for piece in stream.pieces():
+        done += len(piece)
+        new, trace = monitor.run(piece, trace_every=stride, final=done >= stream.rows)
+        events.extend(new)
+        n = len(trace.t)
+        if rows + n > size:  # more rows than samples/stride: duplicates traced one by one
+            size = 2 * (rows + n)
+            arrays = {k: np.resize(v, size) for k, v in arrays.items()}
+        for name in TRACE_NAMES:
+            arrays[name][rows : rows + n] = getattr(trace, name)
+        rows += n
+        del trace, piece
+        if progress is not None:
+            progress(done, stream.rows)
+    if done < stream.rows:  # cannot happen with a file that does not change under us
+        events.extend(monitor.finish())
+    return events, MonitorTrace(every=stride, **{k: v[:rows] for k, v in arrays.items()})
+
+
 def replay_recording(
     recording: str | Path,
     model_path: str | Path,
@@ -67,12 +104,19 @@ def replay_recording(
     columns: Mapping[str, str] | None = None,
     alarm_settings=None,
     status_period_s: float | None = None,
+    stream: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    model=None,
 ) -> Replay:
     """Replay ``recording`` with the model file ``model_path``; UserError on bad input.
 
     columns: fdi name -> the file's column name (``--columns``), as `read_recording` takes.
     alarm_settings (`AlarmSettings`, default its defaults) and status_period_s (default
     the daemon's) set the alarm lifecycle as the daemon's config would.
+    stream: a Parquet recording that names its rate is read and replayed piece by piece
+    (`open_stream`; memory stays flat on a day-long file) through the batch path, not
+    ``runner``; `Replay.recording` is then None. progress(samples done, total) after each
+    piece. model: the loaded model file (`FdiModel`) when the caller has it already.
     """
     import numpy as np
 
@@ -81,23 +125,30 @@ def replay_recording(
     from fdi_daemon.detect.summary import replay_summary
     from fdi_daemon.errors import UserError
     from fdi_daemon.io.model_file import load_model
-    from fdi_daemon.io.recordings import read_recording, same_rate
+    from fdi_daemon.io.recordings import open_stream, read_recording, same_rate
 
-    model = load_model(model_path)
-    rec = read_recording(recording, strict=False, columns=columns)
-    if not same_rate(rec.fs, model.fs):
-        raise UserError(
-            f"{recording}: sampled at {rec.fs:g} Hz but the model is for {model.fs:g} Hz"
-        )
+    if model is None:
+        model = load_model(model_path)
+    pieces = open_stream(recording, columns) if stream else None
+    if pieces is None:
+        rec = read_recording(recording, strict=False, columns=columns)
+        fs, samples = rec.fs, len(rec)
+    else:
+        rec, fs, samples = None, pieces.fs, pieces.rows
+    if not same_rate(fs, model.fs):
+        raise UserError(f"{recording}: sampled at {fs:g} Hz but the model is for {model.fs:g} Hz")
     monitor = Monitor(model)
     stride = status_stride(model.fs, status_period_s or STATUS_PERIOD_S)
-    events, trace = runner(monitor, rec, stride)
+    if rec is None:
+        events, trace = run_pieces(monitor, pieces, stride, progress)
+    else:
+        events, trace = runner(monitor, rec, stride)
     events = merge_events(events, alarm_events(monitor, events, trace, stride, alarm_settings))
     snap = monitor.snapshot()
     levels = trace.friction_level[np.isfinite(trace.friction_level)]
     summary = replay_summary(
         events,
-        len(rec),
+        samples,
         model.fs,
         monitor.settings.method,
         (snap["theta1"], snap["theta2"]),
@@ -151,7 +202,9 @@ def replay_row(file: str, model: str | None) -> dict[str, Any]:
     except OSError as exc:
         return summary_row(file, model, error=f"{model}: cannot read the model: {exc.strerror}")
     try:
-        return summary_row(file, model, replay_recording(file, model).summary, None, digest)
+        loaded = cached_model(model)
+        replay = replay_recording(file, model, stream=True, model=loaded)
+        return summary_row(file, model, replay.summary, None, digest)
     except UserError as exc:
         return summary_row(file, model, error=str(exc), model_sha256=digest)
     except Exception as exc:  # a bug in fdi on one file must not stop the fleet
@@ -161,6 +214,35 @@ def replay_row(file: str, model: str | None) -> dict[str, Any]:
             error=f"internal error: {type(exc).__name__}: {exc}",
             model_sha256=digest,
         )
+
+
+def cached_model(path: str):
+    """The model file loaded once per worker process for each version of the file (its
+    size and modification time): a fleet's files share a few models."""
+    stat = Path(path).stat()
+    return _model_of_version(str(Path(path).resolve()), stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _model_of_version(path: str, size: int, mtime_ns: int):
+    from fdi_daemon.io.model_file import load_model
+
+    return load_model(path)
+
+
+def warm_worker() -> bool:
+    """Import the monitor and load its compiled kernels from numba's cache (or compile
+    them) in this process, once: `fdi fleet-replay` runs it on every worker before the
+    files, so no file pays for it."""
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.io.model_file import load_model
+
+    Monitor(load_model(DEFAULT_MODEL)).warm_up()
+    return True
+
+
+#: the simulated rig's model, shipped with fdi (any model loads the same kernels)
+DEFAULT_MODEL = str(Path(__file__).resolve().parents[1] / "data" / "model_sim_rig.yaml")
 
 
 def model_sha256(path: str) -> str:

@@ -89,6 +89,7 @@ def arx_start(
             best = (sse, b.copy(), f.copy())
         if change <= tolerance * (np.linalg.norm(f) + np.linalg.norm(b)):
             break
+    assert best is not None  # the first iteration sets it
     return best[1], best[2]
 
 

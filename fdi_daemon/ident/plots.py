@@ -120,6 +120,7 @@ def identification_figure(
         ax_all.plot(t, y - y_sim, color="C3", lw=0.5, label="measured − simulated")
         ax_all.axvspan(t[zoom][0], t[zoom][-1], color="C1", alpha=0.35, lw=0, label="zoom")
         _legend_above(ax_all, ncol=4)
+        _legend_above(ax_zoom)
         ax_all.set_title(validation.get("label", "validation"), loc="left", fontsize=9)
         ax_zoom.set_title(
             f"zoom: the {zoom_s:g} s where the simulation misses most", loc="left", fontsize=9
@@ -189,14 +190,15 @@ def signature_figure(
     for ax in (ax_t, ax_z):
         ax.set_xlabel("t (s)")
         ax.grid(True, alpha=0.3)
-    ax_t.legend(loc="upper left", bbox_to_anchor=(0.0, -0.2), ncol=2, fontsize=8, frameon=False)
+    _legend_above(ax_t)  # above its axes: below, it sat under the t axis's label
     _legend_above(ax_z)
-    ax_t.set_title(
+    fig.suptitle(  # the figure's title, so that the first panel's legend has the row above it
         title
         or f"Residual and filtered friction signal (paper Fig. 8): "
         f"{result.info.get('fit_percent', float('nan')):.1f} % explained"
         + (f", velocity {velocity}" if velocity else ""),
-        loc="left",
+        x=0.01,
+        ha="left",
         fontsize=10,
     )
     ax_z.set_title(f"last {zoom_s:g} s of the window", loc="left", fontsize=9)

@@ -158,6 +158,7 @@ def fit_rational(
         b_fit, a_fit, cost, nfev = _refine(b0, a0, G, weight, zb, za, max_pole_radius)
         if best is None or cost < best[2]:
             best = (b_fit, a_fit, cost, name, reflected, nfev)
+    assert best is not None  # starts holds the Levy and SK starts
     b_fit, a_fit, cost, name, reflected, nfev = best
     model = (zb @ b_fit) / (1.0 + za @ a_fit[1:])
     rel = np.abs(model - G) / np.maximum(np.abs(G), np.finfo(float).tiny)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from scipy import signal
@@ -291,8 +292,9 @@ def estimate_signature(
         on_step,
         max_pole_radius,
     )
+    done = cast("list[OEFit]", fits)  # the two sweeps fit every point (the same list)
     # carry the best basin found outwards (a sweep can sit in a poorer local minimum)
-    best = int(np.argmin([f.sse for f in fits]))
+    best = int(np.argmin([f.sse for f in done]))
     for side in (range(best - 1, -1, -1), range(best + 1, len(grid))):
         _sweep(
             residual,
@@ -303,12 +305,12 @@ def estimate_signature(
             fits,
             on_step,
             max_pole_radius,
-            start=(fits[best].b, fits[best].f),
+            start=(done[best].b, done[best].f),
         )
-    sse = np.array([f.sse for f in fits])
-    evaluations = sum(f.evaluations for f in fits)
+    sse = np.array([f.sse for f in done])
+    evaluations = sum(f.evaluations for f in done)
     best = int(np.argmin(sse))
-    gamma_f, best_fit = float(grid[best]), fits[best]
+    gamma_f, best_fit = float(grid[best]), done[best]
     at_edge = len(grid) > 1 and (best == len(grid) - 1 or (best == 0 and grid[0] > 0))
 
     if refine and len(grid) > 1:
@@ -369,7 +371,7 @@ def estimate_signature(
         flat=bool(flat),
         wide=bool(wide),
         recommendation=recommendation,
-        orders=tuple(orders),
+        orders=(orders[0], orders[1], orders[2]),
         evaluations=evaluations,
         info={
             "fit_percent": float(fit_pct),

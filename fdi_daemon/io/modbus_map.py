@@ -103,7 +103,9 @@ def encode_u32(value: int, word_order: WordOrder) -> list[int]:
 def decode_u32(words: Sequence[int], word_order: WordOrder) -> int:
     _check_order(word_order)
     _check_pair(words)
-    return _from_registers(list(words), _DATATYPE.UINT32, word_order)
+    value = _from_registers(list(words), _DATATYPE.UINT32, word_order)
+    assert isinstance(value, int)  # one UINT32: an int
+    return value
 
 
 def encode_f32(value: float, word_order: WordOrder) -> list[int]:
@@ -115,7 +117,9 @@ def encode_f32(value: float, word_order: WordOrder) -> list[int]:
 def decode_f32(words: Sequence[int], word_order: WordOrder) -> float:
     _check_order(word_order)
     _check_pair(words)
-    return _from_registers(list(words), _DATATYPE.FLOAT32, word_order)
+    value = _from_registers(list(words), _DATATYPE.FLOAT32, word_order)
+    assert isinstance(value, float)  # one FLOAT32: a float
+    return value
 
 
 @dataclass(frozen=True)
@@ -191,7 +195,9 @@ def decode_slots(
     _check_order(word_order)
     for i in range(0, len(regs), WORDS_PER_SAMPLE):
         r = list(regs[i : i + WORDS_PER_SAMPLE])
-        v_in, accel, position = _from_registers(r[2:8], _DATATYPE.FLOAT32, word_order)
+        floats = _from_registers(r[2:8], _DATATYPE.FLOAT32, word_order)
+        assert isinstance(floats, list)  # three FLOAT32: a list
+        v_in, accel, position = floats
         out.append(
             SlotSample(
                 decode_u32(r[0:2], word_order),

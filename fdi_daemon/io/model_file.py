@@ -151,7 +151,7 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
     )
 
 
-def _require(data: dict, keys: tuple[str, ...], where: str) -> None:
+def _require(data: dict[str, Any], keys: tuple[str, ...], where: str) -> None:
     missing = [key for key in keys if key not in data]
     if missing:
         raise ConfigError(
@@ -160,8 +160,8 @@ def _require(data: dict, keys: tuple[str, ...], where: str) -> None:
 
 
 def _section(
-    data: dict, key: str, known: tuple[str, ...], required: tuple[str, ...], source: str
-) -> dict:
+    data: dict[str, Any], key: str, known: tuple[str, ...], required: tuple[str, ...], source: str
+) -> dict[str, Any]:
     """A mapping whose keys are checked: typos refused, other unknown keys ignored with a
     warning, required ones present."""
     section, _ = split_known(
@@ -171,7 +171,7 @@ def _section(
     return section
 
 
-def _positive(data: dict, key: str, source: str) -> float:
+def _positive(data: dict[str, Any], key: str, source: str) -> float:
     value = data.get(key)
     if (
         isinstance(value, bool)
@@ -182,7 +182,7 @@ def _positive(data: dict, key: str, source: str) -> float:
     return float(value)
 
 
-def _mapping(data: dict, key: str, source: str, required: bool) -> dict:
+def _mapping(data: dict[str, Any], key: str, source: str, required: bool) -> dict[str, Any]:
     value = data.get(key)
     if value is None and not required:
         return {}
@@ -191,7 +191,7 @@ def _mapping(data: dict, key: str, source: str, required: bool) -> dict:
     return value
 
 
-def _coefficients(section: dict, key: str, where: str, monic: bool = False) -> np.ndarray:
+def _coefficients(section: dict[str, Any], key: str, where: str, monic: bool = False) -> np.ndarray:
     value = section.get(key)
     if (
         not isinstance(value, list)

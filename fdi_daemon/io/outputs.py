@@ -18,7 +18,7 @@ from typing import Any
 from fdi_daemon.errors import UserError
 
 
-def pyplot():
+def pyplot() -> Any:
     """matplotlib.pyplot on the Agg backend (files only, no screen needed)."""
     import matplotlib
 
@@ -118,7 +118,7 @@ def replaced_atomically(path: str | Path) -> Iterator[Path]:
             tmp.unlink()
 
 
-def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
+def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
     """Write ``fig`` as PNG and close it; an unwritable path is a UserError."""
     path = Path(path)
     try:

@@ -43,7 +43,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 from pydantic import ValidationError
 
@@ -94,6 +94,10 @@ class RigConfig:
             return Path(configured).expanduser()
         return default_state_dir()
 
+    @overload
+    def output_path(self, value: str) -> Path: ...
+    @overload
+    def output_path(self, value: None) -> None: ...
     def output_path(self, value: str | None) -> Path | None:
         """An output path from the config, relative ones under ``state_dir``."""
         if value is None:

@@ -24,7 +24,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fdi_daemon.errors import ConfigError, UserError
 from fdi_daemon.io.model_file import FdiModel, load_model
@@ -48,6 +48,10 @@ from fdi_daemon.service.sinks import (
 from fdi_daemon.service.state_file import model_identity, read_state, write_state
 from fdi_daemon.service.state_lock import StateDirLock
 from fdi_daemon.service.trend import open_trend_store
+
+if TYPE_CHECKING:
+    from fdi_daemon.io.links.base import Link
+    from hil_sim.devices import SimulatedDevice
 
 log = logging.getLogger("fdi.daemon")
 
@@ -161,6 +165,7 @@ class Sinks:
 
     # --- Outputs protocol of the loop
     def event(self, event: dict) -> None:
+        assert self.worker is not None  # made at the end of __init__
         self.worker.put(("event", event), critical=True)
 
     def samples(self, samples: list[Sample]) -> None:
@@ -168,16 +173,19 @@ class Sinks:
             self.recorder_worker.put(samples)
 
     def status(self, snapshot: dict) -> None:
+        assert self.worker is not None  # made at the end of __init__
         self.worker.put(("status", snapshot))
         if self.recorder_worker is not None:
             self.recorder_worker.put(None)  # an idle recorder still fsyncs on time
 
     def alarm_state(self, state: dict) -> None:
         if self.state_path is not None:
+            assert self.worker is not None  # made at the end of __init__
             self.worker.put(("state", state), critical=True)
 
     def trend(self, row: dict) -> None:
         if self.trend_store is not None:
+            assert self.worker is not None  # made at the end of __init__
             self.worker.put(("trend", row), critical=True)
 
     def dropped(self) -> int:
@@ -198,6 +206,7 @@ class Sinks:
                 if kind == "state":
                     write_state(self.state_path, payload)
                 else:
+                    assert self.trend_store is not None  # trend rows are queued only then
                     self.trend_store.append(payload)
             except (OSError, sqlite3.Error) as exc:  # the disk failed: say so, go on
                 log.error(
@@ -215,6 +224,7 @@ class Sinks:
                 self.stdout.write(payload)
 
     def _record(self, samples: list[Sample] | None) -> None:
+        assert self.recorder is not None  # the recorder worker runs only with a recorder
         if samples is None:
             self.recorder.sync_if_due()
         else:
@@ -270,7 +280,7 @@ def model_with_overrides(config: RigConfig) -> FdiModel:
     return model
 
 
-def start_simulated_device(settings: dict[str, Any]):
+def start_simulated_device(settings: dict[str, Any]) -> SimulatedDevice:
     """The built-in simulated rig served in-process over a real transport (hil_sim)."""
     from hil_sim.devices import ScheduledFault, SimulatedDevice, realtime_rig
 
@@ -305,11 +315,13 @@ class Daemon:
         self.echo = echo
         self.notifier = Notifier()
         self.board = StatusBoard()
-        self.device = None  # the in-process simulated device, if the config asks for one
+        self.device: SimulatedDevice | None = (
+            None  # the in-process simulated device, if the config asks for one
+        )
         self.config: RigConfig | None = None
         self.loop: ServiceLoop | None = None
         self.sinks: Sinks | None = None
-        self.link = None
+        self.link: Link | None = None
         self.keeper: AlarmKeeper | None = None
         self.lock: StateDirLock | None = None  # one daemon per state folder
         self.inherited_counts: dict[str, int] = {}  # the event counts the state file held
@@ -346,7 +358,7 @@ class Daemon:
 
     def assemble(
         self, config: RigConfig, model: FdiModel, monitor: Any, link_config: dict[str, Any]
-    ) -> tuple[ServiceLoop, Sinks, Any]:
+    ) -> tuple[ServiceLoop, Sinks, Link]:
         """Open the sinks and make the link and the loop of a prepared config."""
         from fdi_daemon.io.links.base import make_reconnecting_link
 
@@ -480,7 +492,7 @@ class Daemon:
         return 0
 
     def announce(self) -> None:
-        assert self.config is not None and self.sinks is not None
+        assert self.config is not None and self.sinks is not None and self.link is not None
         sinks = self.sinks
         lines = [
             f"fdi run: config {self.config.source}",
@@ -520,6 +532,7 @@ class Daemon:
         """
         self.notifier.reloading()
         log.info("SIGHUP: reloading %s", self.config_path or "the default config")
+        assert self.lock is not None  # reload runs inside run(), which holds the lock
         lock = self.lock
         try:
             config = self.load_config()
@@ -536,6 +549,7 @@ class Daemon:
             log.error("reload failed, keeping the previous config: %s", exc)
             self.notifier.ready("reload failed; previous config kept")
             return
+        assert self.config is not None and self.link is not None and self.sinks is not None
         self.link.close()
         self.echo(self.summary() + " (before the reload)")
         self.sinks.close()  # the new sinks bind the same socket paths and ports

@@ -184,7 +184,7 @@ class StatusCollector:
         counts = list(hist.counts)  # one copy: the loop thread keeps counting
         buckets, seen = [], 0
         edges = iter(BUCKET_BIN_INDICES)
-        edge = next(edges)
+        edge: int | None = next(edges)
         for index, count in enumerate(counts):
             seen += count
             if index == edge:

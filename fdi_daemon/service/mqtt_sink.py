@@ -40,7 +40,7 @@ import os
 import socket
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from fdi_daemon.alarms.lifecycle import LIFECYCLE_KINDS
 from fdi_daemon.detect.events import EVENT_SCHEMA
@@ -75,7 +75,7 @@ def read_password(settings: dict[str, Any], source: str = "config") -> str | Non
             raise ConfigError(
                 f"{source}: mqtt.password_file: cannot read {path}: {exc.strerror or exc}"
             ) from None
-        password = lines[0] if lines else ""
+        password: str | None = lines[0] if lines else ""
     elif settings["password_env"] is not None:
         password = os.environ.get(settings["password_env"])
         if password is None:
@@ -114,7 +114,7 @@ class AlarmOutbox:
         self._lines = 0
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._load()
-        self._fh = None
+        self._fh: TextIO | None = None
         self._rewrite()
 
     def __len__(self) -> int:
@@ -210,6 +210,7 @@ class AlarmOutbox:
         self._lines = len(records)
 
     def _append(self, record: dict, sync: bool = False) -> None:
+        assert self._fh is not None  # opened by _rewrite in __init__
         self._fh.write(json_line(record))
         self._fh.flush()
         if sync:
@@ -299,7 +300,7 @@ class MqttSink:
             except (OSError, ValueError) as exc:
                 raise ConfigError(f"{source}: mqtt.tls: {exc}") from None
         client.will_set(self.availability_topic, json.dumps(LAST_WILL), qos=1, retain=True)
-        client.reconnect_delay_set(RECONNECT_MIN_S, RECONNECT_MAX_S)
+        client.reconnect_delay_set(RECONNECT_MIN_S, RECONNECT_MAX_S)  # type: ignore[arg-type]  # paho annotates int; floats work
         client.on_connect = self._on_connect
         client.on_disconnect = self._on_disconnect
         client.on_connect_fail = self._on_connect_fail

@@ -153,7 +153,10 @@ class Recorder:
         self._write_bytes(csv_header_lines(list(COLUMNS), meta).encode())
         self.files_written.append(path)
         log.info("recording to %s", path)
-        self._prune()
+        if self._converter is not None:  # after the conversions queued before it
+            self._converter.submit(self._prune)
+        else:
+            self._prune()
 
     def _write(self, samples: list[Sample]) -> None:
         if not samples:
@@ -187,17 +190,26 @@ class Recorder:
             self._convert_later(self._path)
 
     def _prune(self) -> None:
+        """Delete all but the newest ``keep_files`` recordings; a recording is its name
+        without the suffix, so a file being archived (.csv and .parquet at once) counts once."""
         if self.keep_files <= 0:
             return
-        files = sorted(
-            p for p in self.directory.glob(f"{PREFIX}*") if p.name.endswith((".csv", ".parquet"))
+        names = sorted(
+            {
+                p.name.rsplit(".", 1)[0]  # the time stamp in the name has a dot too
+                for p in self.directory.glob(f"{PREFIX}*")
+                if p.name.endswith((".csv", ".parquet"))
+            }
         )
-        for old in files[: -self.keep_files]:
-            try:
-                old.unlink()
-                log.info("deleted old recording %s (keep_files=%d)", old, self.keep_files)
-            except OSError as exc:
-                log.error("cannot delete old recording %s: %s", old, exc)
+        for old in names[: -self.keep_files]:
+            for path in (self.directory / f"{old}.csv", self.directory / f"{old}.parquet"):
+                try:
+                    path.unlink()
+                    log.info("deleted old recording %s (keep_files=%d)", path, self.keep_files)
+                except FileNotFoundError:
+                    pass
+                except OSError as exc:
+                    log.error("cannot delete old recording %s: %s", path, exc)
 
 
 def archive_csv(path: Path) -> Path | None:

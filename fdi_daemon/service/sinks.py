@@ -38,7 +38,7 @@ import time
 from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from pymodbus.client.mixin import ModbusClientMixin
 from pymodbus.constants import ExcCodes
@@ -48,6 +48,9 @@ from fdi_daemon.alarms.lifecycle import LIFECYCLE_KINDS
 from fdi_daemon.detect.events import ALARM_KINDS as EVENT_ALARM_KINDS
 from fdi_daemon.detect.events import EVENT_SCHEMA
 from fdi_daemon.io.outputs import json_safe
+
+if TYPE_CHECKING:
+    from pymodbus.server import ModbusTcpServer
 
 log = logging.getLogger("fdi.sinks")
 
@@ -276,7 +279,7 @@ class StdoutLog:
         self.priorities = journald_attached() if priorities is None else priorities
 
     def write(self, event: dict) -> None:
-        prefix = f"<{PRIORITY.get(event.get('kind'), 6)}>" if self.priorities else ""
+        prefix = f"<{PRIORITY.get(str(event.get('kind')), 6)}>" if self.priorities else ""
         try:
             self.stream.write(prefix + format_event(event) + "\n")
             self.stream.flush()
@@ -609,7 +612,9 @@ def decode_status(regs: list[int]) -> dict[str, float | int]:
     out: dict[str, float | int] = {}
     for name, address, kind, _ in STATUS_REGISTERS:
         words = list(regs[address : address + _SIZES[kind]])
-        out[name] = ModbusClientMixin.convert_from_registers(words, _DATATYPES[kind], "big")
+        value = ModbusClientMixin.convert_from_registers(words, _DATATYPES[kind], "big")
+        assert isinstance(value, (int, float))  # one value of a numeric type
+        out[name] = value
     return out
 
 
@@ -664,7 +669,7 @@ class ModbusStatusServer:
         self.port = port
         self.reads = 0
         self._loop = asyncio.new_event_loop()
-        self._server = None
+        self._server: ModbusTcpServer | None = None
         self._started = threading.Event()
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="fdi-modbus-status", daemon=True)
@@ -745,7 +750,7 @@ class ModbusStatusServer:
         await server.serve_forever(background=True)
         if server.transport is None:
             raise OSError("cannot listen (address in use?)")
-        self.port = server.transport.sockets[0].getsockname()[1]
+        self.port = server.transport.sockets[0].getsockname()[1]  # type: ignore[attr-defined]  # an asyncio.Server
         self._server = server
 
     def close(self) -> None:

@@ -83,9 +83,11 @@ def read_state(path: str | Path, model: str) -> dict[str, Any] | None:
         if data.get("version") != STATE_VERSION:
             raise ValueError(f"version {data.get('version')!r}, expected {STATE_VERSION}")
     except ValueError as exc:  # json.JSONDecodeError is a ValueError
-        return _refuse(path, f"corrupt ({exc})")
+        _refuse(path, f"corrupt ({exc})")
+        return None
     if data.get("model") != model:
-        return _refuse(path, "written for another model (fs, plant or fault filter differ)")
+        _refuse(path, "written for another model (fs, plant or fault filter differ)")
+        return None
     return data
 
 

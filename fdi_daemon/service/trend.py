@@ -151,6 +151,7 @@ class MinuteAggregator:
         row = self._roll(now)
         if level is not None and math.isfinite(level):
             cur = self._current
+            assert cur is not None  # _roll started the minute
             cur.count += 1
             cur.total += level
             cur.low = min(cur.low, level)
@@ -160,6 +161,7 @@ class MinuteAggregator:
     def samples(self, now: float, v_in: list[float]) -> dict[str, Any] | None:
         row = self._roll(now)
         cur = self._current
+        assert cur is not None  # _roll started the minute
         cur.samples += len(v_in)
         cur.command_sq += sum(v * v for v in v_in if math.isfinite(v))
         return row

@@ -90,7 +90,7 @@ def plot_trend(
     rises = np.flatnonzero(np.diff(priority) > 0) + 1
     if priority.size and priority[0] > 0:
         rises = np.concatenate([[0], rises])
-    for k, i in enumerate(rises):
+    for k, i in enumerate(rises.tolist()):
         ax.axvline(
             t[i],
             color=STEP_COLOURS[(int(priority[i]) - 1) % len(STEP_COLOURS)],
@@ -110,8 +110,15 @@ def plot_trend(
     ax_p.set_yticks(range(0, len(steps) + 1))
     ax_p.set_ylim(-0.2, len(steps) + 0.3)
     ax_c = ax_p.twinx()
+    command = np.asarray(data["command_rms_v"], dtype=float)
+    recorded = bool(np.isfinite(command).any())
     ax_c.plot(
-        t, data["command_rms_v"], color="tab:gray", lw=0.5, alpha=0.7, label="valve command RMS"
+        t,
+        command,
+        color="tab:gray",
+        lw=0.5,
+        alpha=0.7,
+        label="valve command RMS" if recorded else "valve command RMS (none recorded)",
     )
     ax_c.set_ylabel("command RMS (V)")
     lines = ax_p.get_legend_handles_labels()

@@ -303,7 +303,7 @@ RECONNECT_KEYS: dict[str, tuple[type | tuple[type, ...], Any]] = {
 }
 
 
-def _validated(config: Mapping[str, Any], keys: dict, where: str) -> dict[str, Any]:
+def _validated(config: Mapping[str, Any], keys: dict[str, Any], where: str) -> dict[str, Any]:
     out = {}
     for key in config:
         if key not in keys:
@@ -327,7 +327,9 @@ def _validated(config: Mapping[str, Any], keys: dict, where: str) -> dict[str, A
     return out
 
 
-def link_settings(config: Mapping[str, Any], where: str = "link") -> tuple[str, dict, dict]:
+def link_settings(
+    config: Mapping[str, Any], where: str = "link"
+) -> tuple[str, dict[str, Any], dict[str, Any]]:
     """Validate a link config mapping: (kind, link settings, reconnect settings)."""
     if not isinstance(config, Mapping):
         raise ConfigError(f"{where}: expected a mapping")

@@ -8,9 +8,13 @@ events are the fault schedule; ``set_fault`` changes faults while running.
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 from fdi_daemon.io.links.base import Link
 from fdi_daemon.io.sample import Sample
+
+if TYPE_CHECKING:
+    from hil_sim.devices.realtime import RealtimeRig
 
 
 class SimLink(Link):
@@ -27,7 +31,7 @@ class SimLink(Link):
         self.seed = int(seed)
         self.realtime = realtime
         self.chunk_samples = int(chunk_samples)
-        self.rt = None
+        self.rt: RealtimeRig | None = None
         self._samples = 0
 
     def describe(self) -> str:

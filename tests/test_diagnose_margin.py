@@ -1,6 +1,7 @@
-"""The two principles of issue 42 in isolation: a friction's force path constrained inside
-the fit (`force.bounded_least_squares`, `force.friction_bounds`), and selection by a margin
-over held-out time blocks (`select.margin`)."""
+"""The principles of issue 42 in isolation: a friction's force path constrained inside the
+fit (`force.bounded_least_squares`, `force.friction_bounds`), a friction at that bound no
+force (`force.at_bound`), and selection by a margin over held-out time blocks
+(`select.margin`)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,15 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
-from fdi_daemon.diagnose.force import _SIGN, _VEL, _X, bounded_least_squares, friction_bounds
+from fdi_daemon.diagnose.force import (
+    _SIGN,
+    _STRIBECK,
+    _VEL,
+    _X,
+    at_bound,
+    bounded_least_squares,
+    friction_bounds,
+)
 from fdi_daemon.diagnose.select import margin
 from fdi_daemon.diagnose.signals import Split
 
@@ -59,3 +68,26 @@ def test_a_gain_held_by_one_block_is_not_a_margin():
     assert gain > 0 and not beats and spread > gain
     # and a fit is never beaten by itself
     assert not margin(ctx, better, better)[0]
+
+
+def test_a_stribeck_excess_is_bounded_like_the_friction_it_adds_to():
+    # static friction above the Coulomb level, F_s ≥ F_c: the excess column's high-frequency
+    # gain has the Coulomb column's sign (≤ 0)
+    cols = [(_SIGN, 0.0), (_STRIBECK, 0.01)]
+    upper = friction_bounds(cols, n_ff=0, width=3, per_column=3)
+    assert list(upper) == [0.0, np.inf, np.inf, 0.0, np.inf, np.inf]
+
+
+@pytest.mark.parametrize(
+    "b, bound",
+    [
+        ([0.0, 0.0543, -0.152, 0.148, -0.050], True),  # held at 0 by bounded least squares
+        # the trust region's last iterate strictly inside the bound (the rig's payload
+        # record: a Stribeck excess beside lagged terms of 4e-3)
+        ([-2.4e-7, -0.0015, 0.0043, -0.0042, 0.0014], True),
+        ([-0.027, 0.0985, -0.135, 0.0825, -0.019], False),  # a friction that acts
+        ([0.0, 0.0, 0.0], True),  # nothing at all
+    ],
+)
+def test_a_friction_column_at_its_bound_is_no_force(b, bound):
+    assert at_bound(np.array(b)) is bound

@@ -320,8 +320,9 @@ def _shifts(w: np.ndarray, width: int) -> np.ndarray:
     return np.column_stack([np.concatenate([np.zeros(i), w[: len(w) - i]]) for i in range(width)])
 
 
-#: regressor kinds whose force dissipates (a friction: it opposes the motion)
-DISSIPATIVE = (_SIGN, _VEL)
+#: regressor kinds whose force dissipates (a friction: it opposes the motion); a Stribeck
+#: excess is friction too, static above the Coulomb level (F_s ≥ F_c)
+DISSIPATIVE = (_SIGN, _VEL, _STRIBECK)
 
 
 def friction_bounds(cols: list, n_ff: int, width: int, per_column: int) -> np.ndarray:
@@ -331,14 +332,36 @@ def friction_bounds(cols: list, n_ff: int, width: int, per_column: int) -> np.nd
 
     The leading coefficient b_j0 of B_F/Â (Â monic) is the force path's high-frequency
     gain: a force on the mass accelerates it at once in the force's direction (+1/m), so
-    a friction F = −F_c sign v (or −c v) with F_c, c ≥ 0 has b_j0 ≤ 0. An amplitude on the
-    input's path B̂ is minus the friction's input equivalent (the reported level), ≤ 0 too.
+    a friction F = −F_c sign v (or −c v) with F_c, c ≥ 0 has b_j0 ≤ 0, and so has a
+    Stribeck excess −(F_s − F_c) e^{−(v/v_s)²} sign v with F_s ≥ F_c (static friction above
+    the Coulomb level). An amplitude on the input's path B̂ is minus the friction's input
+    equivalent (the reported level), ≤ 0 too. A column whose b_j0 ends at its bound 0 is
+    that friction at size zero (`at_bound`).
     """
     upper = np.full(n_ff + len(cols) * per_column, np.inf)
     for j, (kind, _) in enumerate(cols):
         if kind in DISSIPATIVE:
             upper[n_ff + j * per_column] = 0.0
     return upper
+
+
+#: a friction column is at its bound (b_j0 = 0) when −b_j0 is within this share of its
+#: numerator's largest coefficient: bounded least squares stops at 0, the joint fit's
+#: trust region (a few iterations, strictly inside the bound) near it — on the rig's
+#: payload record a Stribeck excess ended at −2·10⁻⁷ beside lagged terms of 4·10⁻³. A
+#: friction that acts has b_j0 of the size of its numerator's other terms (0.2 of the
+#: largest on that record's Coulomb column)
+AT_BOUND = 1e-3
+
+
+def at_bound(b: np.ndarray) -> bool:
+    """Whether a friction column's force path B_F (b_j0 ≤ 0 by `friction_bounds`) sits at
+    its bound: no high-frequency gain, so no force on the mass — a force accelerates the
+    mass at once. What the rest of B_F fits (lagged terms of sign v or v) is then a filter
+    on the velocity's sign, not a friction: the effect contributes nothing and is never
+    named (`force_report`: ``*_at_bound``, not ``plausible``)."""
+    b = np.asarray(b, float)
+    return bool(-b[0] <= AT_BOUND * (float(np.max(np.abs(b))) if b.size else 0.0))
 
 
 def bounded_least_squares(x: np.ndarray, y: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -598,9 +621,13 @@ def in_the_loop(
                 # numerators is not determined by the data
                 added = linear.physical.get("damping_change_per_s")
                 e.physical["damping_change_per_s"] = added
+                # and a damper at its bound, one that does not move the mode by the
+                # record's resolution ("none"), adds no damping: it contributes nothing
+                # (what its free numerator fits is not a damper) and is never named
                 e.physical["plausible"] = bool(
                     e.physical["plausible"]
                     and e.physical["mode_change"] not in MECHANICS
+                    and e.physical["mode_change"] != "none"
                     and (added is None or added >= 0.0)
                 )
         return out
@@ -699,7 +726,9 @@ def force_report(
         gg = float(g @ g)
         out[f"{label}_input_equivalent"] = -float(g @ c[fit]) / gg if gg > 0 else 0.0
         if eff.name in _FRICTION:
-            if n == 0:
+            if n == 0:  # the fit holds b_j0 ≤ 0 (`friction_bounds`): at 0 no force at all
+                out[f"{label}_at_bound"] = at_bound(b)
+                plausible = plausible and not out[f"{label}_at_bound"]
                 w = signal.lfilter(vb, va, c)
             elif n == 1:
                 w = c

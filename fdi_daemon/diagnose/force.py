@@ -320,6 +320,70 @@ def _shifts(w: np.ndarray, width: int) -> np.ndarray:
     return np.column_stack([np.concatenate([np.zeros(i), w[: len(w) - i]]) for i in range(width)])
 
 
+#: regressor kinds whose force dissipates (a friction: it opposes the motion); a Stribeck
+#: excess is friction too, static above the Coulomb level (F_s ≥ F_c)
+DISSIPATIVE = (_SIGN, _VEL, _STRIBECK)
+
+
+def friction_bounds(cols: list, n_ff: int, width: int, per_column: int) -> np.ndarray:
+    """Upper bounds of a force-loop parameter vector [fed-forward, per column] (``width``
+    numbers per column when ``per_column`` is ``width``, an amplitude when 1): a friction
+    column's leading coefficient ≤ 0, every other number free (+inf).
+
+    The leading coefficient b_j0 of B_F/Â (Â monic) is the force path's high-frequency
+    gain: a force on the mass accelerates it at once in the force's direction (+1/m), so
+    a friction F = −F_c sign v (or −c v) with F_c, c ≥ 0 has b_j0 ≤ 0, and so has a
+    Stribeck excess −(F_s − F_c) e^{−(v/v_s)²} sign v with F_s ≥ F_c (static friction above
+    the Coulomb level). An amplitude on the input's path B̂ is minus the friction's input
+    equivalent (the reported level), ≤ 0 too. A column whose b_j0 ends at its bound 0 is
+    that friction at size zero (`at_bound`).
+    """
+    upper = np.full(n_ff + len(cols) * per_column, np.inf)
+    for j, (kind, _) in enumerate(cols):
+        if kind in DISSIPATIVE:
+            upper[n_ff + j * per_column] = 0.0
+    return upper
+
+
+#: a friction column is at its bound (b_j0 = 0) when −b_j0 is within this share of its
+#: numerator's largest coefficient: bounded least squares stops at 0, the joint fit's
+#: trust region (a few iterations, strictly inside the bound) near it — on the rig's
+#: payload record a Stribeck excess ended at −2·10⁻⁷ beside lagged terms of 4·10⁻³. A
+#: friction that acts has b_j0 of the size of its numerator's other terms (0.2 of the
+#: largest on that record's Coulomb column)
+AT_BOUND = 1e-3
+
+
+def at_bound(b: np.ndarray) -> bool:
+    """Whether a friction column's force path B_F (b_j0 ≤ 0 by `friction_bounds`) sits at
+    its bound: no high-frequency gain, so no force on the mass — a force accelerates the
+    mass at once. What the rest of B_F fits (lagged terms of sign v or v) is then a filter
+    on the velocity's sign, not a friction: the effect contributes nothing and is never
+    named (`force_report`: ``*_at_bound``, not ``plausible``)."""
+    b = np.asarray(b, float)
+    return bool(-b[0] <= AT_BOUND * (float(np.max(np.abs(b))) if b.size else 0.0))
+
+
+def bounded_least_squares(x: np.ndarray, y: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """min ‖y − xθ‖ subject to θ ≤ ``upper`` (0 or +inf per number): an active set, each
+    violating number held at its bound in turn (the worst first) and the rest refitted
+    (`effects.least_squares` on the Gram matrix), until every number is within bounds."""
+    from fdi_daemon.diagnose.effects import solve_gram
+
+    gram, xty = x.T @ x, x.T @ y
+    held = np.zeros(len(upper), dtype=bool)
+    theta = np.zeros(len(upper))
+    for _ in range(int(np.sum(np.isfinite(upper))) + 1):
+        free = ~held
+        theta[:] = 0.0
+        theta[free] = solve_gram(gram[np.ix_(free, free)], xty[free])
+        over = np.where(free & (theta > upper), theta - upper, 0.0)
+        if not np.any(over > 0):
+            break
+        held[int(np.argmax(over))] = True
+    return np.minimum(theta, upper)
+
+
 def in_the_loop(
     ctx, effects: list, previous: list | None = None, spring: bool = True, joint: bool = True
 ) -> tuple[list, np.ndarray]:
@@ -352,7 +416,6 @@ def in_the_loop(
         SPECS,
         FittedEffect,
         columns,
-        least_squares,
         physical_report,
     )
 
@@ -378,6 +441,14 @@ def in_the_loop(
     )
     n_ff = x_ff.shape[1]
     cols = [c for e in fb for c in kinds(e.name, e.param)]
+    # a friction's force path: its high-frequency gain b_j0 ≤ 0 (`friction_bounds`); on an
+    # acceleration output b_j0 is the direct term, elsewhere the path's leading terms are
+    # the state chain's and are left free
+    upper = (
+        friction_bounds(cols, n_ff, width, width)
+        if ctx.chain[0] == 0
+        else np.full(n_ff + len(cols) * width, np.inf)
+    )
 
     def run(theta_ff, nums):
         with np.errstate(all="ignore"):
@@ -401,7 +472,10 @@ def in_the_loop(
         x_fb = np.column_stack(
             [signal.lfilter(b_path, ctx.a_dom, _phi(k, p, ctx.v, ctx.x)) for k, p in cols]
         )
-        theta = least_squares(np.column_stack([x_ff, x_fb])[fit], ctx.target[fit])
+        amp_upper = friction_bounds(cols, n_ff, width, 1)
+        theta = bounded_least_squares(
+            np.column_stack([x_ff, x_fb])[fit], ctx.target[fit], amp_upper
+        )
         for _ in range(SHRINKS):  # a start whose loop diverges: towards the linear model
             if np.isfinite(run(theta[:n_ff], np.outer(theta[n_ff:], b_path))[1]):
                 break
@@ -413,7 +487,12 @@ def in_the_loop(
         r0 = residual(theta)
         with np.errstate(all="ignore"):
             sol = least_squares_nl(
-                residual, theta, method="trf", x_scale="jac", max_nfev=30 * theta.size
+                residual,
+                theta,
+                bounds=(-np.inf, amp_upper),
+                method="trf",
+                x_scale="jac",
+                max_nfev=30 * theta.size,
             )
         if float(sol.fun @ sol.fun) < float(r0 @ r0):
             theta = sol.x
@@ -429,7 +508,7 @@ def in_the_loop(
                 _shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), width)
                 for j in range(len(cols))
             ]
-            target = least_squares(np.column_stack(xs)[fit], ctx.target[fit])
+            target = bounded_least_squares(np.column_stack(xs)[fit], ctx.target[fit], upper)
             start = np.concatenate([best_ff, best_nums.ravel()])
             before = best
             for frac in (1.0, 0.5, 0.25, 0.125):
@@ -447,14 +526,19 @@ def in_the_loop(
         """4. every coefficient at once by output-error least squares with the motion in
         the loop (finite-difference Jacobian): the passes of step 3 regress on the states
         of the previous run and stop short of the optimum."""
-        x0 = np.concatenate([best_ff, best_nums.ravel()])
+        x0 = np.minimum(np.concatenate([best_ff, best_nums.ravel()]), upper)
 
         def residual(th):
             return training_error(th[:n_ff], th[n_ff:].reshape(len(cols), width))
 
         with np.errstate(all="ignore"):
             sol = least_squares_nl(
-                residual, x0, method="trf", x_scale="jac", max_nfev=JOINT_ITERATIONS
+                residual,
+                x0,
+                bounds=(-np.inf, upper),
+                method="trf",
+                x_scale="jac",
+                max_nfev=JOINT_ITERATIONS,
             )
         theta_ff, nums = sol.x[:n_ff], sol.x[n_ff:].reshape(len(cols), width)
         traced, sse = run(theta_ff, nums)
@@ -537,9 +621,13 @@ def in_the_loop(
                 # numerators is not determined by the data
                 added = linear.physical.get("damping_change_per_s")
                 e.physical["damping_change_per_s"] = added
+                # and a damper at its bound, one that does not move the mode by the
+                # record's resolution ("none"), adds no damping: it contributes nothing
+                # (what its free numerator fits is not a damper) and is never named
                 e.physical["plausible"] = bool(
                     e.physical["plausible"]
                     and e.physical["mode_change"] not in MECHANICS
+                    and e.physical["mode_change"] != "none"
                     and (added is None or added >= 0.0)
                 )
         return out
@@ -638,7 +726,9 @@ def force_report(
         gg = float(g @ g)
         out[f"{label}_input_equivalent"] = -float(g @ c[fit]) / gg if gg > 0 else 0.0
         if eff.name in _FRICTION:
-            if n == 0:
+            if n == 0:  # the fit holds b_j0 ≤ 0 (`friction_bounds`): at 0 no force at all
+                out[f"{label}_at_bound"] = at_bound(b)
+                plausible = plausible and not out[f"{label}_at_bound"]
                 w = signal.lfilter(vb, va, c)
             elif n == 1:
                 w = c

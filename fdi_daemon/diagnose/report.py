@@ -81,6 +81,8 @@ def build_report(result, source: str = "") -> dict[str, Any]:
         "linear_check": result.selection.linear,
         "spring_check": result.selection.spring,
         "held_by_later": result.selection.held_by_later,
+        # rounds whose best candidate did not beat another by the margin (`select.margin`)
+        "ambiguous": result.selection.ambiguous,
     }
     spring = [e.physical for e in result.selection.chosen if e.name == "loop_stiffness"]
     if spring:  # the force loop's spring in the base: what it does to the mode (§4.3)
@@ -155,6 +157,13 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
             )
             form = f"fitted as {e['form']}: " if e["form"] != e["effect"] else ""
             lines.append(f"missing effect: {e['effect']}  ({form}{params})")
+    for tie in report.get("ambiguous", []):
+        (a, b), (gap_a, gap_b) = tie["effects"], tie["gaps"]
+        lines.append(
+            f"ambiguous: {a} or {b} (held-out gap {gap_a:.4g} against {gap_b:.4g}; "
+            f"{a} gains {tie['block_gain']:.3g} of the held-out error per block over {b}, "
+            f"less than the blocks' spread {tie['block_spread']:.3g})"
+        )
     for held in report["held_by_later"]:
         lines.append(
             f"{held['effect']} was named first and is not kept: "

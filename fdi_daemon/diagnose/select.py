@@ -69,6 +69,7 @@ from fdi_daemon.diagnose.force import (
     possible,
 )
 from fdi_daemon.diagnose.mode_lines import LINES
+from fdi_daemon.diagnose.signals import nrmse
 
 #: significance level per test; 10 candidates × 2 rounds keeps the chance of naming an
 #: effect in pure noise near 2 %
@@ -83,6 +84,32 @@ NESTS = {
 }
 #: how many effects are added at most (the first, then one more)
 MAX_EFFECTS = 2
+#: time blocks of the held-out part for the margin (`margin`)
+BLOCKS = 5
+
+
+def margin(ctx: Context, worse: np.ndarray, better: np.ndarray) -> tuple[bool, float, float]:
+    """Does the fit whose contribution is ``better`` beat ``worse`` by more than the spread
+    of held-out error across time blocks? The held-out part is cut into BLOCKS contiguous
+    blocks; d_b = SSE_worse,b − SSE_better,b per block. It beats it when the mean gain is
+    above the blocks' standard deviation of the gain, d̄ > s_d (every block has to agree:
+    a t statistic above √BLOCKS ≈ 2.2). Returns (beats, d̄, s_d) as shares of the worse
+    fit's held-out SSE."""
+    idx = ctx.split.test
+    with np.errstate(all="ignore"):
+        e_worse = (ctx.target - worse)[idx] ** 2
+        e_better = (ctx.target - better)[idx] ** 2
+    if not (np.all(np.isfinite(e_worse)) and np.all(np.isfinite(e_better))):
+        return bool(np.all(np.isfinite(e_better))), math.nan, math.nan
+    total = float(np.sum(e_worse)) or 1.0
+    d = np.array(
+        [
+            np.sum(w) - np.sum(b)
+            for w, b in zip(np.array_split(e_worse, BLOCKS), np.array_split(e_better, BLOCKS))
+        ]
+    ) / (total / BLOCKS)
+    mean, spread = float(np.mean(d)), float(np.std(d, ddof=1))
+    return bool(mean > spread), mean, spread
 
 
 @dataclass
@@ -102,6 +129,8 @@ class Candidate:
     #: held-out SSE of the base refitted from the candidate's own fit, without it (a later
     #: round's check, `_beyond_its_start`; None where not made)
     sse_from_its_start: float | None = None
+    #: held-out gain over the round's reference per time block, mean and spread (`margin`)
+    block_gain: tuple[float, float] | None = None
 
     def ranking_entry(self, gap_after: float) -> dict:
         """The candidate as the report ranks it (a linear change of the mechanics by the
@@ -117,6 +146,8 @@ class Candidate:
             "accepted": self.accepted,
             "params": dict(self.effect.physical),
         }
+        if self.block_gain is not None:
+            entry["block_gain"], entry["block_spread"] = self.block_gain
         if self.sse_from_its_start is not None:
             entry["base_from_its_fit_sse_ratio"] = self.sse_from_its_start / self.sse_reference
         return entry
@@ -289,7 +320,16 @@ def nested_in(name: str) -> tuple[str, ...]:
     )
 
 
-def _choose(results: list[Candidate], n_eff: float) -> Candidate | None:
+def _beats_nested(ctx: Context, larger: Candidate, smaller: Candidate, n_eff: float) -> bool:
+    """The larger of a nested pair is better: its extra numbers pay (nested F-test at ALPHA)
+    and it beats the smaller by the margin of the held-out blocks (`margin`)."""
+    return (
+        nested_p_value(larger, smaller, n_eff) < ALPHA
+        and margin(ctx, smaller.prediction, larger.prediction)[0]
+    )
+
+
+def _choose(ctx: Context, results: list[Candidate], n_eff: float) -> Candidate | None:
     """The candidate named in a round (``results`` sorted by score), or None.
 
     From the best accepted, nested pairs are walked: down to a contained candidate that
@@ -308,7 +348,7 @@ def _choose(results: list[Candidate], n_eff: float) -> Candidate | None:
                 (
                     by_name[s]
                     for s in nested_in(best.name)
-                    if s in by_name and nested_p_value(best, by_name[s], n_eff) >= ALPHA
+                    if s in by_name and not _beats_nested(ctx, best, by_name[s], n_eff)
                 ),
                 None,
             )
@@ -319,7 +359,7 @@ def _choose(results: list[Candidate], n_eff: float) -> Candidate | None:
                     (
                         c
                         for c in pool
-                        if best.name in nested_in(c.name) and nested_p_value(c, best, n_eff) < ALPHA
+                        if best.name in nested_in(c.name) and _beats_nested(ctx, c, best, n_eff)
                     ),
                     None,
                 )
@@ -350,6 +390,8 @@ class Selection:
     spring: dict = field(default_factory=dict)  # the base spring's check (`spring_check`)
     #: effects named in a round that the later ones hold (`_each_pays_on_top`)
     held_by_later: list[dict] = field(default_factory=list)
+    #: rounds whose best candidate did not beat another by the margin (`_runner_up`)
+    ambiguous: list[dict] = field(default_factory=list)
 
     @property
     def named(self) -> list[FittedEffect]:
@@ -500,6 +542,7 @@ def select_effects(
         )
         prediction = base_cols @ np.concatenate([np.ravel(c) for c in chosen[0].coefficients])
     rounds: list[list[Candidate]] = []
+    ambiguous: list[dict] = []
     spring: dict = {}
     test = ctx.split.test
     skip = set(LINEAR_EXPLANATIONS) if refit_linear else set()
@@ -537,10 +580,12 @@ def select_effects(
             if progress is not None:
                 progress(name)
         for c in results:
-            c.accepted = c.accepted and c.effect.named_as not in named_so_far
+            beats, gain, spread = margin(ctx, reference[1], c.prediction)
+            c.block_gain = (gain, spread)
+            c.accepted = c.accepted and beats and c.effect.named_as not in named_so_far
         results.sort(key=lambda c: c.score)
         rounds.append(results)
-        best = _choose(results, n_eff)
+        best = _choose(ctx, results, n_eff)
         while best is not None and refit_base:
             pays, there = _beyond_its_start(ctx, best)
             if pays:
@@ -553,10 +598,13 @@ def select_effects(
                 key=lambda fit: _sse(ctx, fit[1], ctx.split.fit),
             )
             best.accepted = False
-            best = _choose(results, n_eff)
+            best = _choose(ctx, results, n_eff)
         if best is None:
             chosen, prediction = reference
             break
+        tie = _runner_up(ctx, results, best)
+        if tie is not None:
+            ambiguous.append(tie)
         by_mode = [mechanics_name(e) for e in best.base + [best.effect]]
         named = [e.name for e in by_mode if e.name not in BASE_TERMS]
         if linear.get("matching") and explain is None and len(rounds) == 1:
@@ -613,7 +661,38 @@ def select_effects(
     if not any(e.name not in BASE_TERMS for e in chosen):
         # nothing named: the model stays as it was (a refit alone is not a missing effect)
         chosen, prediction = [], np.zeros_like(ctx.target)
-    return Selection(chosen, rounds, prediction, linear, spring, held_by_later)
+    # a round's tie is reported while its named effect is kept (`_each_pays_on_top`)
+    kept = {mechanics_name(e).named_as for e in chosen}
+    ambiguous = [tie for tie in ambiguous if tie["effects"][0] in kept]
+    return Selection(chosen, rounds, prediction, linear, spring, held_by_later, ambiguous)
+
+
+def _runner_up(ctx: Context, results: list[Candidate], best: Candidate) -> dict | None:
+    """The round is ambiguous when the best accepted candidate with another name (neither
+    containing the other, `nested_in`) is not beaten by ``best`` by the margin (`margin`):
+    both are reported, with their held-out gaps; the best is added (the gap shown shrinks),
+    its name is not a decision the data made."""
+    name = mechanics_name(best.effect).named_as
+    for c in results:
+        other = mechanics_name(c.effect).named_as
+        if (
+            c is best
+            or not c.accepted
+            or other == name
+            or c.name in nested_in(best.name)
+            or best.name in nested_in(c.name)
+        ):
+            continue
+        beats, gain, spread = margin(ctx, c.prediction, best.prediction)
+        if beats:
+            return None
+        y = ctx.target + ctx.y0
+        gaps = [
+            float(nrmse(y[ctx.split.test], (ctx.y0 + k.prediction)[ctx.split.test]))
+            for k in (best, c)
+        ]
+        return {"effects": [name, other], "gaps": gaps, "block_gain": gain, "block_spread": spread}
+    return None
 
 
 def _each_pays_on_top(
@@ -687,7 +766,9 @@ def _beyond_its_start(
     there = in_the_loop(ctx, cand.base, cand.base)
     cand.sse_from_its_start = _sse(ctx, there[1], ctx.split.test)
     reference = min(cand.sse_reference, cand.sse_from_its_start)
-    return _judged(reference, cand.sse_test, cand.k, cand.k_total, cand.n_eff)[2], there
+    pays = _judged(reference, cand.sse_test, cand.k, cand.k_total, cand.n_eff)[2]
+    # and by the margin of the held-out blocks over that refit too (`margin`)
+    return pays and margin(ctx, there[1], cand.prediction)[0], there
 
 
 def _fit_set(

@@ -39,6 +39,12 @@ class DiagnoseResult:
     def named(self) -> list[str]:
         return [e.named_as for e in self.selection.chosen if e.name not in BASE_TERMS]
 
+    @property
+    def ambiguous(self) -> list[dict]:
+        """Rounds whose named effect did not beat another by the margin: ``effects`` [A, B],
+        their held-out ``gaps``, the per-block gain and its spread (`select.margin`)."""
+        return self.selection.ambiguous
+
 
 def run_diagnose(
     u: np.ndarray,

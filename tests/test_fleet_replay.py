@@ -8,6 +8,7 @@ file on its own (or the error line it prints), whatever worker ran it.
 
 import csv
 import json
+import os
 import socket
 from pathlib import Path
 
@@ -404,14 +405,14 @@ def test_a_worker_that_dies_on_a_file_is_that_files_row(fleet, tmp_path):
     assert error.startswith("worker failed: KilledWorker") and "\n" not in error
 
 
-def test_ctrl_c_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_path):
+def test_ctrl_c_stops_the_fleet_with_one_line_and_no_worker_left(long_fleet, tmp_path):
     """Ctrl-C reaches the whole foreground process group: each Dask worker process printed
     a KeyboardInterrupt traceback while `fdi fleet-replay` itself stopped cleanly."""
     import os
     import signal
     import time
 
-    proc = _start_fleet(fleet, tmp_path)
+    proc = _start_fleet(long_fleet, tmp_path)
     parent = psutil.Process(proc.pid)
     seen: set[psutil.Process] = set()
     deadline = time.monotonic() + 60
@@ -428,11 +429,11 @@ def test_ctrl_c_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_path
     assert survivors(seen) == []
 
 
-def test_sigterm_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_path):
+def test_sigterm_stops_the_fleet_with_one_line_and_no_worker_left(long_fleet, tmp_path):
     """`kill` of `fdi fleet-replay` (its own pid, not the group) stops its workers too."""
     import signal
 
-    proc = _start_fleet(fleet, tmp_path)
+    proc = _start_fleet(long_fleet, tmp_path)
     seen = wait_for_children(proc, 2, timeout_s=60.0)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=60)
@@ -441,13 +442,30 @@ def test_sigterm_stops_the_fleet_with_one_line_and_no_worker_left(fleet, tmp_pat
     assert survivors(seen) == []
 
 
-def _start_fleet(fleet, tmp_path):
-    root, _, model_map = fleet
+@pytest.fixture(scope="module")
+def long_fleet(tmp_path_factory):
+    """40 links to one 2 h Parquet recording: seconds of replay on 2 workers, so a signal
+    sent once the workers run lands while they work (the 50 short files were done within
+    one poll of the test once the fleet had become fast, and the run exited 0)."""
+    pytest.importorskip("pyarrow")
+    root = tmp_path_factory.mktemp("long_fleet")
+    rec = scenario_recording("test_case_2", seed=0)
+    n = 2 * 3600 * 256
+    reps = -(-n // len(rec))
+    cols = {k: np.tile(np.asarray(rec[k]), reps)[:n] for k in ("v_in", "accel")}
+    cols.update(seq=np.arange(n), t=np.arange(n) / 256.0)
+    first = write_recording(root / "rig-000.parquet", Recording(cols, {"fs": "256"}))
+    for k in range(1, 40):
+        os.link(first, root / f"rig-{k:03d}.parquet")
+    return root
+
+
+def _start_fleet(root, tmp_path):
     return start_fdi(
         "fleet-replay",
-        str(root / "recs"),
-        "--model-map",
-        str(model_map),
+        str(root),
+        "--model",
+        str(MODEL),
         "--workers",
         "2",
         "--out",

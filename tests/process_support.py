@@ -48,6 +48,26 @@ def wait_for_children(
     return seen
 
 
+def wait_for_child_reading(
+    proc: subprocess.Popen, suffix: str, timeout_s: float = 300.0
+) -> set[psutil.Process]:
+    """The processes under ``proc`` once one of them has a file ending in ``suffix`` open
+    (a fleet's worker replays a recording: the command is past its start-up)."""
+    parent = psutil.Process(proc.pid)
+    seen: set[psutil.Process] = set()
+    deadline = time.monotonic() + timeout_s
+    while proc.poll() is None and time.monotonic() < deadline:
+        for child in parent.children(recursive=True):
+            seen.add(child)
+            try:
+                if any(f.path.endswith(suffix) for f in child.open_files()):
+                    return seen
+            except (psutil.NoSuchProcess, psutil.AccessDenied):
+                pass
+        time.sleep(0.05)
+    raise AssertionError(f"no process under {proc.pid} opened a {suffix} file")
+
+
 def survivors(processes) -> list[int]:
     """The pids of ``processes`` still running a second from now (zombies are gone)."""
     time.sleep(1)

@@ -16,6 +16,7 @@ from fdi_daemon.service.config import load_config
 DEFAULT = load_config()
 
 pytestmark = [
+    pytest.mark.usefixtures("compiled_kernel_cache"),
     pytest.mark.slow,
     pytest.mark.skipif(TMUX is None, reason="tmux is not installed"),
     pytest.mark.skipif(

@@ -16,7 +16,10 @@ from pathlib import Path
 import pytest
 from conftest_dashboard import TMUX, ScriptedStatusServer, TmuxScreen, make_snapshot
 
-pytestmark = pytest.mark.skipif(TMUX is None, reason="tmux is not installed")
+pytestmark = [
+    pytest.mark.usefixtures("compiled_kernel_cache"),
+    pytest.mark.skipif(TMUX is None, reason="tmux is not installed"),
+]
 
 
 def dashboard_command(socket_path) -> list[str]:

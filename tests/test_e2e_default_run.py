@@ -17,6 +17,7 @@ DEFAULT = load_config()
     not DEFAULT.model_path.exists(),
     reason=f"{DEFAULT.model_path.name} is not in fdi_daemon/data yet",
 )
+@pytest.mark.usefixtures("compiled_kernel_cache")
 def test_default_run_detects_the_scheduled_friction_fault(tmp_path, monkeypatch):
     monkeypatch.delenv("STATE_DIRECTORY", raising=False)
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))

@@ -32,6 +32,7 @@ DEFAULT = load_config()
 ALARMS = ("fault_detected", "friction_isolated", "other_fault")
 
 pytestmark = [
+    pytest.mark.usefixtures("compiled_kernel_cache"),
     pytest.mark.slow,
     needs_mosquitto,
     pytest.mark.skipif(not DEFAULT.model_path.exists(), reason="no packaged model yet"),

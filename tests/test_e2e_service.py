@@ -45,6 +45,7 @@ CALIBRATION_TIMEOUT_S = 180.0
 EVENT_TIMEOUT_S = 90.0
 
 pytestmark = [
+    pytest.mark.usefixtures("compiled_kernel_cache"),
     pytest.mark.slow,
     pytest.mark.skipif(not MODEL.exists(), reason="configs/model_sim_rig.yaml not there yet"),
 ]

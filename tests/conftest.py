@@ -1,11 +1,23 @@
-"""Shared pytest configuration: plots never need a screen; the session fixtures of the
-conftest_<area> modules are registered here (their helpers are imported where used)."""
+"""Shared pytest configuration: one BLAS thread per process, plots never need a screen; the
+session fixtures of the conftest_<area> modules are registered here (their helpers are
+imported where used)."""
 
-import fdi_daemon  # noqa: F401  (first: it pins the BLAS kernel before NumPy loads)
+import os
+
+# One OpenBLAS thread per test process (read when NumPy loads OpenBLAS, so before anything
+# imports NumPy; the xdist workers and the tests' subprocesses inherit it). The diagnose fits
+# are many small matrix products, SVDs and least squares, on which OpenBLAS's threads spin:
+# a gram matrix X'X (6800 x 40) took 25 times the CPU with 2 threads, two diagnoses 58 s of
+# CPU instead of 11 s (and 5 times the wall time beside other work), with the same results
+# bit for bit (`fdi diagnose` on 8 cases of tests/diagnose_cases.py). A value set is kept.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 # isort: split
-import matplotlib
-import pytest
+import fdi_daemon  # noqa: E402, F401  (first: it pins the BLAS kernel before NumPy loads)
+
+# isort: split
+import matplotlib  # noqa: E402
+import pytest  # noqa: E402
 
 matplotlib.use("Agg")
 

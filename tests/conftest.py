@@ -21,7 +21,7 @@ import pytest  # noqa: E402
 
 matplotlib.use("Agg")
 
-pytest_plugins = ["conftest_ident", "conftest_sim", "mqtt_support"]
+pytest_plugins = ["conftest_diagnose", "conftest_ident", "conftest_sim", "mqtt_support"]
 
 
 @pytest.fixture(autouse=True)

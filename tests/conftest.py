@@ -24,6 +24,13 @@ matplotlib.use("Agg")
 pytest_plugins = ["conftest_diagnose", "conftest_ident", "conftest_sim", "mqtt_support"]
 
 
+def pytest_collection_modifyitems(items):
+    """The `slow` tests first (in their order; the rest after them in theirs): the long
+    diagnoses start first and the xdist workers end on short tests, not one of them on a
+    long test while the other has nothing left."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture(autouse=True)
 def private_state_home(tmp_path_factory, monkeypatch):
     """`fdi run` without a state dir writes under $XDG_STATE_HOME/fdi: a test's daemon (and

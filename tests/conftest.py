@@ -1,16 +1,17 @@
-"""Shared pytest configuration: one BLAS thread per process, plots never need a screen; the
-session fixtures of the conftest_<area> modules are registered here (their helpers are
-imported where used)."""
+"""Shared pytest configuration: OpenBLAS threads that do not spin, plots never need a
+screen; the session fixtures of the conftest_<area> modules are registered here (their
+helpers are imported where used)."""
 
 import os
 
-# One OpenBLAS thread per test process (read when NumPy loads OpenBLAS, so before anything
-# imports NumPy; the xdist workers and the tests' subprocesses inherit it). The diagnose fits
-# are many small matrix products, SVDs and least squares, on which OpenBLAS's threads spin:
-# a gram matrix X'X (6800 x 40) took 25 times the CPU with 2 threads, two diagnoses 58 s of
-# CPU instead of 11 s (and 5 times the wall time beside other work), with the same results
-# bit for bit (`fdi diagnose` on 8 cases of tests/diagnose_cases.py). A value set is kept.
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# OpenBLAS's idle threads sleep at once instead of spinning for about 2^28 cycles after
+# each call (read when NumPy loads OpenBLAS, so before anything imports NumPy; the xdist
+# workers and the tests' subprocesses inherit it). The diagnose fits are many small matrix
+# products, SVDs and least squares: two diagnoses took 58 s of CPU with the spinning threads
+# and 20 s without, with the same results bit for bit (the thread count, which splits some
+# sums, is OpenBLAS's choice as before: one thread named another effect on one rig record).
+# A value set is kept.
+os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
 
 # isort: split
 import fdi_daemon  # noqa: E402, F401  (first: it pins the BLAS kernel before NumPy loads)

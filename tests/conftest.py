@@ -26,10 +26,12 @@ pytest_plugins = ["conftest_diagnose", "conftest_ident", "conftest_sim", "mqtt_s
 
 
 def pytest_collection_modifyitems(items):
-    """The `slow` tests first (in their order; the rest after them in theirs): the long
-    diagnoses start first and the xdist workers end on short tests, not one of them on a
-    long test while the other has nothing left."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    """The modules that hold `slow` tests first, whole (a module's fixtures are built once
+    per worker as before; the modules' order and their tests' kept): the long diagnoses
+    start first and the xdist workers end on short tests, not one of them on a long test
+    while the other has nothing left."""
+    slow = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow)
 
 
 @pytest.fixture(autouse=True)

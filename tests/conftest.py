@@ -1,15 +1,37 @@
-"""Shared pytest configuration: plots never need a screen; the session fixtures of the
-conftest_<area> modules are registered here (their helpers are imported where used)."""
+"""Shared pytest configuration: OpenBLAS threads that do not spin, plots never need a
+screen; the session fixtures of the conftest_<area> modules are registered here (their
+helpers are imported where used)."""
 
-import fdi_daemon  # noqa: F401  (first: it pins the BLAS kernel before NumPy loads)
+import os
+
+# OpenBLAS's idle threads sleep at once instead of spinning for about 2^28 cycles after
+# each call (read when NumPy loads OpenBLAS, so before anything imports NumPy; the xdist
+# workers and the tests' subprocesses inherit it). The diagnose fits are many small matrix
+# products, SVDs and least squares: two diagnoses took 58 s of CPU with the spinning threads
+# and 20 s without, with the same results bit for bit (the thread count, which splits some
+# sums, is OpenBLAS's choice as before: one thread named another effect on one rig record).
+# A value set is kept.
+os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
 
 # isort: split
-import matplotlib
-import pytest
+import fdi_daemon  # noqa: E402, F401  (first: it pins the BLAS kernel before NumPy loads)
+
+# isort: split
+import matplotlib  # noqa: E402
+import pytest  # noqa: E402
 
 matplotlib.use("Agg")
 
-pytest_plugins = ["conftest_ident", "conftest_sim", "mqtt_support"]
+pytest_plugins = ["conftest_diagnose", "conftest_ident", "conftest_sim", "mqtt_support"]
+
+
+def pytest_collection_modifyitems(items):
+    """The modules that hold `slow` tests first, whole (a module's fixtures are built once
+    per worker as before; the modules' order and their tests' kept): the long diagnoses
+    start first and the xdist workers end on short tests, not one of them on a long test
+    while the other has nothing left."""
+    slow = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow)
 
 
 @pytest.fixture(autouse=True)

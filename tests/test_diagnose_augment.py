@@ -2,15 +2,12 @@
 
 from __future__ import annotations
 
-from functools import cache
-
 import numpy as np
 import pytest
 from scipy import signal
 
 from fdi_daemon.diagnose.augment import AugmentedPlant
 from fdi_daemon.diagnose.effects import SPECS, FittedEffect
-from fdi_daemon.diagnose.workflow import run_diagnose
 from fdi_daemon.errors import ConfigError
 from fdi_daemon.io.model_file import FdiModel, model_from_dict
 from hil_sim.msd import MsdParams, friction_tf
@@ -124,18 +121,18 @@ HIDDEN = {
 }
 
 
-@cache
-def _diagnosed(hidden: str):
-    """(recording, its diagnosis against the nominal plant), once per process: two tests
-    read the Coulomb friction's (~20 s of CPU) and neither changes it."""
+def _diagnosed(diagnosis, hidden: str):
+    """(recording, its diagnosis against the nominal plant), once per test run (`diagnosis`,
+    conftest_diagnose.py): two tests here and test_diagnose_effects.py read the Coulomb
+    friction's."""
     rec = HIDDEN[hidden]()
     b, a = nominal_model()
-    return rec, run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    return rec, diagnosis(rec.v_in, rec.accel, FS, "acceleration", b, a)
 
 
 @pytest.mark.parametrize("named", list(HIDDEN))
-def test_augmented_plant_reproduces_the_workflow(named):
-    rec, result = _diagnosed(named)
+def test_augmented_plant_reproduces_the_workflow(named, diagnosis):
+    rec, result = _diagnosed(diagnosis, named)
     b, a = nominal_model()
     assert named in [e.name for e in result.selection.named]
     model = FdiModel(fs=FS, plant_b=b, plant_a=a, extra={"effects": result.plant.to_extra()})
@@ -172,13 +169,13 @@ def test_bad_effects_section_is_a_config_error():
         )
 
 
-def test_monitor_pipeline_uses_the_augmented_model_and_its_residual_shrinks(tmp_path):
+def test_monitor_pipeline_uses_the_augmented_model_and_its_residual_shrinks(tmp_path, diagnosis):
     from fdi_daemon.cli import main
     from fdi_daemon.detect.pipeline import Pipeline
     from fdi_daemon.io.model_file import FaultFilter, save_model
     from fdi_daemon.io.recordings import write_recording
 
-    rec, result = _diagnosed("coulomb_friction")
+    rec, result = _diagnosed(diagnosis, "coulomb_friction")
     b, a = nominal_model()
     ff = FaultFilter(b=np.array([0.01, 0.02]), f=np.array([1.0, -0.5]), nk=0, gamma_f=1.0)
     plain = FdiModel(fs=FS, plant_b=b, plant_a=a, fault_filter=ff)

@@ -8,10 +8,22 @@ import numpy as np
 import pytest
 
 from fdi_daemon.cli import main
+from fdi_daemon.diagnose import workflow
 from fdi_daemon.diagnose.augment import AugmentedPlant
 from fdi_daemon.io.model_file import FdiModel, load_model, save_model
 from fdi_daemon.io.recordings import Recording, write_recording
 from tests.diagnose_cases import FS, nominal_model, recording
+
+
+@pytest.fixture(autouse=True)
+def shared_diagnoses(diagnosis, monkeypatch):
+    """`fdi diagnose` diagnoses through the shared `diagnosis` (conftest_diagnose.py): the
+    same recording and model read twice (a rerun against the augmented model, whose plant
+    is the nominal one; a --columns mapping; a recording with and without its time column)
+    are diagnosed once, and the reports compared hold that one diagnosis."""
+    monkeypatch.setattr(
+        workflow, "run_diagnose", lambda *args, progress=None, **kwargs: diagnosis(*args, **kwargs)
+    )
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,6 @@ import pytest
 
 from fdi_daemon.diagnose.effects import EFFECT_NAMES, FittedEffect, friction_form
 from fdi_daemon.diagnose.select import map_share
-from fdi_daemon.diagnose.workflow import run_diagnose
 from hil_sim.msd import MsdParams, simulate_recording
 from tests.diagnose_cases import FS, HIDDEN, changed_recording, nominal_model, recording
 
@@ -27,10 +26,10 @@ def test_every_library_effect_has_a_case():
 
 
 @pytest.mark.parametrize("effect", sorted(HIDDEN))
-def test_hidden_effect_is_named_and_gap_halves(effect):
+def test_hidden_effect_is_named_and_gap_halves(effect, diagnosis):
     rec = recording(effect)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    result = diagnosis(rec.v_in, rec.accel, FS, "acceleration", b, a)
     assert result.named, f"nothing named for hidden {effect}"
     assert result.named[0] == effect
     assert result.gap_after <= 0.5 * result.gap_before
@@ -72,7 +71,7 @@ def test_a_stribeck_form_is_named_by_its_level_at_rest(coulomb, excess, possible
 
 
 @pytest.mark.parametrize("effect", ["cubic_stiffness", "output_saturation"])
-def test_a_hidden_spring_or_clip_is_named_alone(effect):
+def test_a_hidden_spring_or_clip_is_named_alone(effect, diagnosis):
     # before the loop's joint fit (docs/diagnose.md §4.3 step 4) the hidden cubic spring
     # was named with an output clip of gain ≈ 0 second, standing in for the part of the
     # spring the loop had not fitted; a clip must have a clip's gain (`map_share`). Later
@@ -80,7 +79,7 @@ def test_a_hidden_spring_or_clip_is_named_alone(effect):
     # (`select._beyond_its_start`)
     rec = recording(effect)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    result = diagnosis(rec.v_in, rec.accel, FS, "acceleration", b, a)
     assert result.named == [effect]
     physical = result.selection.named[0].physical
     if effect == "output_saturation":
@@ -90,10 +89,10 @@ def test_a_hidden_spring_or_clip_is_named_alone(effect):
         assert physical["cubic_coefficient_input_equivalent"] == pytest.approx(truth, rel=0.1)
 
 
-def test_no_hidden_effect_names_none():
+def test_no_hidden_effect_names_none(diagnosis):
     rec = recording(None)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    result = diagnosis(rec.v_in, rec.accel, FS, "acceleration", b, a)
     assert result.named == []
     assert result.gap_after == result.gap_before
     # the nominal model is exact: its gap is the noise, and the floor says so
@@ -102,10 +101,10 @@ def test_no_hidden_effect_names_none():
     assert 0.8 < result.gap_before / floor["floor"] < 1.25
 
 
-def test_a_gain_fault_is_named_with_its_ratio():
+def test_a_gain_fault_is_named_with_its_ratio(diagnosis):
     rec = changed_recording("gain_n_per_v", 1.2)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    result = diagnosis(rec.v_in, rec.accel, FS, "acceleration", b, a)
     assert result.named == ["gain_fault"]
     assert result.selection.linear["named"] == "gain_fault"
     assert abs(result.selection.named[0].physical["gain_ratio"] - 1.2) < 0.01
@@ -116,14 +115,14 @@ def test_a_gain_fault_is_named_with_its_ratio():
     "kind,ratio",
     [("acceleration", 0.8), ("acceleration", 1.2), ("velocity", 0.8), ("position", 0.8)],
 )
-def test_a_changed_spring_is_named_with_its_ratio(kind, ratio):
+def test_a_changed_spring_is_named_with_its_ratio(kind, ratio, diagnosis):
     # every force effect brings the loop's free spring, so each would close this gap; a
     # linear change of the mechanics is named after the parameter of the mode that moved
     # (read through each output's state chain)
     rec = changed_recording("stiffness_n_per_m", ratio)
     b, a = nominal_model()
     column = {"acceleration": "accel"}.get(kind, kind)
-    result = run_diagnose(rec.v_in, rec[column], FS, kind, b, a)
+    result = diagnosis(rec.v_in, rec[column], FS, kind, b, a)
     assert result.named == ["stiffness_change"]
     params = result.selection.named[0].physical
     assert params["mode_change"] == "stiffness"
@@ -137,13 +136,13 @@ def test_a_changed_spring_is_named_with_its_ratio(kind, ratio):
 @pytest.mark.parametrize(
     "kind,ratio", [("acceleration", 1.25), ("velocity", 0.8), ("position", 0.8)]
 )
-def test_a_changed_mass_is_named_with_its_ratio(kind, ratio):
+def test_a_changed_mass_is_named_with_its_ratio(kind, ratio, diagnosis):
     # a mass moves the mode as a spring does (ω² = k/m), and its damping per unit mass by
     # the same ratio (2ζω = c/m), which a spring leaves alone: the same fit as a changed
     # spring, named after the mode it moves
     rec = changed_recording("mass_kg", ratio)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind, b, a)
+    result = diagnosis(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind, b, a)
     assert result.named[0] == "mass_change"
     params = result.selection.named[0].physical
     assert params["mode_change"] == "mass"
@@ -152,14 +151,14 @@ def test_a_changed_mass_is_named_with_its_ratio(kind, ratio):
 
 
 @pytest.mark.parametrize("kind", ["acceleration", "velocity", "position"])
-def test_added_damping_is_viscous_friction_with_its_coefficient(kind):
+def test_added_damping_is_viscous_friction_with_its_coefficient(kind, diagnosis):
     # the numerator refit takes most of this gap and the mode's damping line accounts for
     # it (`mode_lines`); the loop's spring alone would fit it as well as viscous friction
     # does: the mode says which parameter changed (ζ 0.1 -> 0.1 + Δc/(2 m ω)), read through
     # each output's state chain
     rec = recording("viscous_friction")
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind, b, a)
+    result = diagnosis(rec.v_in, rec[{"acceleration": "accel"}.get(kind, kind)], FS, kind, b, a)
     assert result.named == ["viscous_friction"]
     viscous = result.selection.named[0].physical
     assert viscous["mode_change"] == "damping"
@@ -173,10 +172,10 @@ def test_added_damping_is_viscous_friction_with_its_coefficient(kind):
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_a_dead_time_is_named_with_its_value_not_absorbed_by_the_refit():
+def test_a_dead_time_is_named_with_its_value_not_absorbed_by_the_refit(diagnosis):
     rec = recording("dead_time")
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    result = diagnosis(rec.v_in, rec.accel, FS, "acceleration", b, a)
     assert result.selection.linear["refit_significant"]
     assert result.selection.linear["named"] == "dead_time"
     true_s = HIDDEN["dead_time"]["delay_s"]
@@ -185,10 +184,10 @@ def test_a_dead_time_is_named_with_its_value_not_absorbed_by_the_refit():
 
 
 @pytest.mark.parametrize("effect", ["coulomb_friction", "viscous_friction", "stribeck_friction"])
-def test_named_friction_is_physically_possible(effect):
+def test_named_friction_is_physically_possible(effect, diagnosis):
     rec = recording(effect)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a)
+    result = diagnosis(rec.v_in, rec.accel, FS, "acceleration", b, a)
     named = result.selection.named[0]
     params = named.physical
     assert params["plausible"]
@@ -200,9 +199,9 @@ def test_named_friction_is_physically_possible(effect):
 
 
 @pytest.mark.parametrize("effect", [None, "input_saturation"])
-def test_fit_linear_baseline(effect):
+def test_fit_linear_baseline(effect, diagnosis):
     rec = recording(effect)
-    result = run_diagnose(rec.v_in, rec.accel, FS, "acceleration", None, None)
+    result = diagnosis(rec.v_in, rec.accel, FS, "acceleration", None, None)
     if effect is None:
         assert result.named == []
     else:
@@ -213,10 +212,10 @@ def test_fit_linear_baseline(effect):
 @pytest.mark.parametrize(
     "kind,effect", [("velocity", "coulomb_friction"), ("position", "dead_zone"), ("velocity", None)]
 )
-def test_velocity_and_position_outputs(kind, effect):
+def test_velocity_and_position_outputs(kind, effect, diagnosis):
     rec = recording(effect)
     b, a = nominal_model()
-    result = run_diagnose(rec.v_in, rec[kind], FS, kind, b, a)
+    result = diagnosis(rec.v_in, rec[kind], FS, kind, b, a)
     if effect is None:
         assert result.named == []
     else:
@@ -224,12 +223,12 @@ def test_velocity_and_position_outputs(kind, effect):
         assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_an_input_that_never_leaves_its_median_names_nothing():
+def test_an_input_that_never_leaves_its_median_names_nothing(diagnosis):
     # a step: dead zone and saturation have nothing to search; no crash, nothing named
     u = np.r_[np.zeros(500), np.ones(2000)]
     rec = simulate_recording(MsdParams(accel_noise_width=0.2), u, seed=2)
     b, a = nominal_model()
-    assert run_diagnose(rec.v_in, rec.accel, FS, "acceleration", b, a).named == []
+    assert diagnosis(rec.v_in, rec.accel, FS, "acceleration", b, a).named == []
 
 
 def test_a_constant_force_is_no_candidate_where_the_acceleration_has_no_dc_response():

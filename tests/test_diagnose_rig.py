@@ -10,7 +10,6 @@ from pathlib import Path
 import pytest
 
 from fdi_daemon.diagnose.force import possible
-from fdi_daemon.diagnose.workflow import run_diagnose
 from tests.diagnose_cases import RIG_FS, RIG_INPUT_EFFECTS, rig_model, rig_recording
 
 pytestmark = pytest.mark.slow
@@ -20,10 +19,10 @@ pytestmark = pytest.mark.slow
 SEAL = {"coulomb_friction", "stribeck_friction"}
 
 
-def _diagnose(fault, value, **excitation):
+def _diagnose(diagnosis, fault, value, **excitation):
     u, y = rig_recording(fault, value, **excitation)
     b, a = rig_model()
-    return _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
+    return _possible(diagnosis(u, y, RIG_FS, "acceleration", b, a))
 
 
 def _possible(result):
@@ -53,17 +52,17 @@ STRONG = {"rms_v": 0.8, "duration_s": 40.0}
         ("bearing_supply", 0.65, {"coulomb_friction", "stribeck_friction"}, STRONG),
     ],
 )
-def test_rig_fault_is_named_first_and_gap_halves(fault, value, right, excitation):
-    result = _diagnose(fault, value, **excitation)
+def test_rig_fault_is_named_first_and_gap_halves(fault, value, right, excitation, diagnosis):
+    result = _diagnose(diagnosis, fault, value, **excitation)
     assert right & set(result.named[:1]), f"{fault}: named {result.named}"
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_rig_accelerometer_bias_is_a_sensor_offset_alone_with_its_size():
+def test_rig_accelerometer_bias_is_a_sensor_offset_alone_with_its_size(diagnosis):
     # a spring fitted beside the offset once held a steady acceleration (−1.76 m/s²) that
     # traded with the offset (read 2.27) and was named a mass change (× 1.018) second: a
     # force of the motion holds no steady acceleration (`force.STEADY_SHARE`)
-    result = _diagnose("accel_bias", 0.5, **STRONG)
+    result = _diagnose(diagnosis, "accel_bias", 0.5, **STRONG)
     assert result.named[:1] == ["sensor_offset"]
     assert set(result.named[1:]) <= SEAL, result.named
     assert result.selection.named[0].physical["offset"] == pytest.approx(0.5, rel=0.05)
@@ -79,7 +78,7 @@ _INPUT_SIZE = {
 
 
 @pytest.mark.parametrize("effect", sorted(RIG_INPUT_EFFECTS))
-def test_rig_input_effect_is_named_first_with_its_size(effect):
+def test_rig_input_effect_is_named_first_with_its_size(effect, diagnosis):
     # the drive between the recorded command and the valve: a dead time (two samples), a
     # dead zone, a saturation or a backlash. The dead time is a pure shift: its value was
     # read 1.5 samples while the coefficient fitted beside the shift traded with it (1.46);
@@ -87,7 +86,7 @@ def test_rig_input_effect_is_named_first_with_its_size(effect):
     u, y = rig_recording(input_effect=effect, **STRONG)
     b, a = rig_model()
     _assert_named_first_with_its_size(
-        _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a)), effect
+        _possible(diagnosis(u, y, RIG_FS, "acceleration", b, a)), effect
     )
 
 
@@ -124,7 +123,9 @@ def _assert_named_first_with_its_size(result, effect):
         (135.0, {}),
     ],
 )
-def test_rig_added_viscous_damping_is_named_viscous_friction(damping_n_s_per_m, excitation):
+def test_rig_added_viscous_damping_is_named_viscous_friction(
+    damping_n_s_per_m, excitation, diagnosis
+):
     # the load's linear damping (45 N s/m nominal, a 1.35 kg load) raised; the seal's
     # friction may rightly come with it. The damper is named by the refit's damping line
     # or beside the friction's loop spring when it pays on top of it (`select.spring_check`);
@@ -133,7 +134,7 @@ def test_rig_added_viscous_damping_is_named_viscous_friction(damping_n_s_per_m, 
 
     u, y = rig_recording(variant=(("viscous_damping_n_s_per_m", damping_n_s_per_m),), **excitation)
     b, a = rig_model()
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", b, a))
     assert "viscous_friction" in result.named
     assert set(result.named) <= {"viscous_friction"} | SEAL
     nominal = RigParams()
@@ -157,7 +158,7 @@ def test_rig_added_viscous_damping_is_named_viscous_friction(damping_n_s_per_m, 
         (3.4, {**STRONG, "excitation": "noise 1-15 Hz"}),
     ],
 )
-def test_rig_hidden_coulomb_friction_is_named_coulomb_friction(coulomb_n, excitation):
+def test_rig_hidden_coulomb_friction_is_named_coulomb_friction(coulomb_n, excitation, diagnosis):
     # the rod seal's friction raised to a pure Coulomb friction (no stiction: static =
     # Coulomb). Its loop fits best a Stribeck form whose excess takes friction away near
     # rest (a force that builds up after each reversal), which is named by what it is:
@@ -166,12 +167,12 @@ def test_rig_hidden_coulomb_friction_is_named_coulomb_friction(coulomb_n, excita
         variant=(("seal_coulomb_n", coulomb_n), ("seal_static_n", coulomb_n)), **excitation
     )
     b, a = rig_model()
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", b, a))
     assert result.named == ["coulomb_friction"]
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_rig_heavy_coulomb_friction_under_a_small_excitation_holds_the_map_named_first():
+def test_rig_heavy_coulomb_friction_under_a_small_excitation_holds_the_map_named_first(diagnosis):
     # 3.4 N under the 0.4 V multisine: the mass sticks for most of the record, and the
     # friction's loop alone ended where it pushes the motion. An input saturation was named
     # first, the friction on top of it; refitted without the map, the friction does as
@@ -180,7 +181,7 @@ def test_rig_heavy_coulomb_friction_under_a_small_excitation_holds_the_map_named
 
     u, y = rig_recording(variant=(("seal_coulomb_n", 3.4), ("seal_static_n", 3.4)))
     b, a = rig_model()
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", b, a))
     assert result.named == ["coulomb_friction"]
     assert result.gap_after <= 0.5 * result.gap_before
     report = build_report(result)
@@ -193,31 +194,31 @@ def test_rig_heavy_coulomb_friction_under_a_small_excitation_holds_the_map_named
         )
 
 
-def test_rig_without_fault_names_nothing_or_its_seal_friction():
-    result = _diagnose(None, 0.0, **STRONG)
+def test_rig_without_fault_names_nothing_or_its_seal_friction(diagnosis):
+    result = _diagnose(diagnosis, None, 0.0, **STRONG)
     assert set(result.named) <= SEAL
 
 
 @pytest.mark.parametrize("ratio,excitation", [(0.7, STRONG), (0.85, STRONG), (1.3, {})])
-def test_rig_valve_gain_fault_is_named(ratio, excitation):
+def test_rig_valve_gain_fault_is_named(ratio, excitation, diagnosis):
     # the valve's flapper gain; its flow and the chamber pressures are not linear in the
     # flapper travel, so the gain seen at the load is close to, not exactly, the ratio.
     # At 85 % the seal friction on top of the refit was named first (Stribeck, whose excess
     # on top of the gain pushes the motion); now the gain, the seal's Coulomb friction on top
-    result = _diagnose("valve_gain", ratio, **excitation)
+    result = _diagnose(diagnosis, "valve_gain", ratio, **excitation)
     assert result.named[:1] == ["gain_fault"]
     assert result.selection.named[0].physical["gain_ratio"] == pytest.approx(ratio, abs=0.05)
     assert result.gap_after <= 0.5 * result.gap_before
 
 
 @pytest.mark.parametrize("supply,excitation", [(0.8, STRONG), (0.8, {}), (1.15, STRONG)])
-def test_rig_supply_pressure_is_a_stiffness_change(supply, excitation):
+def test_rig_supply_pressure_is_a_stiffness_change(supply, excitation, diagnosis):
     # the chambers' pressures, and with them the air spring n p A²/V, follow the supply:
     # the load's mode moves (10.2 -> 9.2 Hz at 80 %, an output-error fit of the recording,
     # docs/diagnose.md §8) while the gain below it stays. Every force effect's free spring
     # fits it; what changed is read from the mode. The seal's Coulomb friction may come
     # with it
-    result = _diagnose("supply_pressure", supply, **excitation)
+    result = _diagnose(diagnosis, "supply_pressure", supply, **excitation)
     assert "stiffness_change" in result.named
     assert set(result.named) <= {"stiffness_change"} | SEAL
     spring = next(e for e in result.selection.named if e.named_as == "stiffness_change")
@@ -227,7 +228,7 @@ def test_rig_supply_pressure_is_a_stiffness_change(supply, excitation):
 
 
 @pytest.mark.parametrize("bearing_mass_kg,excitation", [(1.5, STRONG), (1.5, {}), (0.7, STRONG)])
-def test_rig_payload_is_a_mass_change(bearing_mass_kg, excitation):
+def test_rig_payload_is_a_mass_change(bearing_mass_kg, excitation, diagnosis):
     # a payload on the bearing block changes the moving mass (1.35 kg nominal) and nothing
     # the model knows: the mode moves in frequency and in damping per unit mass alike, which
     # a spring does not do. The seal's Coulomb friction may come with it
@@ -235,7 +236,7 @@ def test_rig_payload_is_a_mass_change(bearing_mass_kg, excitation):
 
     u, y = rig_recording(variant=(("bearing_mass_kg", bearing_mass_kg),), **excitation)
     b, a = rig_model()
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", b, a))
     assert "mass_change" in result.named
     assert set(result.named) <= {"mass_change"} | SEAL
     mass = next(e for e in result.selection.named if e.named_as == "mass_change")
@@ -247,7 +248,7 @@ def test_rig_payload_is_a_mass_change(bearing_mass_kg, excitation):
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_rig_payload_under_random_excitation_is_one_mass_change_with_its_size():
+def test_rig_payload_under_random_excitation_is_one_mass_change_with_its_size(diagnosis):
     # band-passed noise: the first round named the loop's spring, reading the mode as a
     # mass, and the refit check's mass line, matching the refit, was named on top of it: two
     # mass changes (× 1.378 and × 0.973). One effect has one name, read on the line
@@ -255,7 +256,7 @@ def test_rig_payload_under_random_excitation_is_one_mass_change_with_its_size():
 
     u, y = rig_recording(variant=(("bearing_mass_kg", 1.5),), excitation="noise 1-15 Hz", **STRONG)
     b, a = rig_model()
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", b, a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", b, a))
     assert result.named[:1] == ["mass_change"] and result.named.count("mass_change") == 1
     nominal = RigParams()
     true = (nominal.piston_rod_mass_kg + 1.5) / nominal.moving_mass_kg
@@ -275,7 +276,9 @@ def _variant_and_its_model(index, tmp_path, monkeypatch):
     return rig, identified_model(rig, tmp_path)
 
 
-def test_a_rig_variant_without_fault_names_no_friction_its_seal_lacks(tmp_path, monkeypatch):
+def test_a_rig_variant_without_fault_names_no_friction_its_seal_lacks(
+    tmp_path, monkeypatch, diagnosis
+):
     # rig variant v1 (`test_detect_other_rig.rig_variant(1)`: another load, valve, seal),
     # with its own `fdi identify` model, 40 s at 0.8 V. Its seal has Coulomb friction with a
     # little stiction and no viscous part; a viscous friction was named second (its loop took
@@ -283,11 +286,11 @@ def test_a_rig_variant_without_fault_names_no_friction_its_seal_lacks(tmp_path, 
     # had to add damping (docs/diagnose.md §4.3)
     rig, model = _variant_and_its_model(1, tmp_path, monkeypatch)
     u, y = rig_recording(variant=tuple(sorted(rig.items())), **STRONG)
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
     assert set(result.named) <= SEAL, result.named
 
 
-def test_a_rig_variant_damper_is_named_viscous_friction(tmp_path, monkeypatch):
+def test_a_rig_variant_damper_is_named_viscous_friction(tmp_path, monkeypatch, diagnosis):
     # rig variant v0 (another load, valve, seal) with its own `fdi identify` model, the
     # load's damping doubled, 40 s at 0.8 V: the seal's friction was named with its loop's
     # spring, read as a mass × 0.828, until the refit's damping line was checked on top of
@@ -298,7 +301,7 @@ def test_a_rig_variant_damper_is_named_viscous_friction(tmp_path, monkeypatch):
     nominal = RigParams(**rig)
     damped = {**rig, "viscous_damping_n_s_per_m": 2.0 * nominal.viscous_damping_n_s_per_m}
     u, y = rig_recording(variant=tuple(sorted(damped.items())), **STRONG)
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
     assert result.named[:1] == ["viscous_friction"]
     assert set(result.named) <= {"viscous_friction"} | SEAL
     added = nominal.viscous_damping_n_s_per_m / nominal.moving_mass_kg
@@ -307,7 +310,9 @@ def test_a_rig_variant_damper_is_named_viscous_friction(tmp_path, monkeypatch):
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_a_rig_variant_heavy_friction_is_named_coulomb_friction_alone(tmp_path, monkeypatch):
+def test_a_rig_variant_heavy_friction_is_named_coulomb_friction_alone(
+    tmp_path, monkeypatch, diagnosis
+):
     # rig variant v1 (a lightly damped mode, ζ 0.17) with its own model, a pure Coulomb seal
     # friction of 1 N under the 0.4 V multisine: the friction's describing function is a
     # damping, and the refit's damping line on top of the friction was named
@@ -316,12 +321,14 @@ def test_a_rig_variant_heavy_friction_is_named_coulomb_friction_alone(tmp_path, 
     rig, model = _variant_and_its_model(1, tmp_path, monkeypatch)
     seal = {**rig, "seal_coulomb_n": 1.0, "seal_static_n": 1.0}
     u, y = rig_recording(variant=tuple(sorted(seal.items())), rms_v=0.4, duration_s=30.0)
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
     assert result.named == ["coulomb_friction"]
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-def test_a_rig_variant_pure_coulomb_friction_is_named_by_a_possible_fit(tmp_path, monkeypatch):
+def test_a_rig_variant_pure_coulomb_friction_is_named_by_a_possible_fit(
+    tmp_path, monkeypatch, diagnosis
+):
     # rig variant v0 with its own model, the seal's friction raised to a pure Coulomb
     # friction of 0.5 N (static = Coulomb), 40 s at 0.8 V. The first round's friction left
     # the noise floor; the base refitted for the next round ended where its Stribeck excess
@@ -330,7 +337,7 @@ def test_a_rig_variant_pure_coulomb_friction_is_named_by_a_possible_fit(tmp_path
     rig, model = _variant_and_its_model(0, tmp_path, monkeypatch)
     seal = {**rig, "seal_coulomb_n": 0.5, "seal_static_n": 0.5}
     u, y = rig_recording(variant=tuple(sorted(seal.items())), **STRONG)
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
     assert result.named == ["coulomb_friction"]
     assert result.gap_after <= 0.5 * result.gap_before
 
@@ -350,11 +357,11 @@ def test_a_rig_variant_pure_coulomb_friction_is_named_by_a_possible_fit(tmp_path
     ],
 )
 def test_a_rig_variant_input_effect_is_named_first_with_its_size(
-    index, effect, tmp_path, monkeypatch
+    index, effect, tmp_path, monkeypatch, diagnosis
 ):
     # a rig variant with its own model, the drive's effect of the default rig's test
     # (a dead time of two samples, a dead zone of ±0.15 V), 40 s at 0.8 V
     rig, model = _variant_and_its_model(index, tmp_path, monkeypatch)
     u, y = rig_recording(variant=tuple(sorted(rig.items())), input_effect=effect, **STRONG)
-    result = _possible(run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
+    result = _possible(diagnosis(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a))
     _assert_named_first_with_its_size(result, effect)

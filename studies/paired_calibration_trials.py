@@ -162,7 +162,7 @@ def main(hours: bool) -> None:
         plant = root / "plant.yaml"
         _fdi("identify", recs["ident_chirp"], "--validate", recs["ident_chirp_long"], "-o", plant)
         shipped = REPO / "configs" / "model_sim_rig.yaml"
-        print(row("shipped (configs/model_sim_rig.yaml)", shipped, recs, root, hours), flush=True)
+        print(row("shipped (`signature_calibration.yaml`)", shipped, recs, root, hours), flush=True)
         for index, trial in enumerate(TRIALS):
             model = trial_model(trial, plant, root, index)
             print(row(trial[0], model, recs, root, hours), flush=True)

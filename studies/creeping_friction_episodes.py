@@ -101,26 +101,15 @@ def models(root: Path, names) -> dict:
     shipped = default_config_path().with_name("model_sim_rig.yaml")
     paths = {"highpass": shipped}
     if "observer" in names:
+        # after fdi_daemon, which pins OpenBLAS's kernel before NumPy loads (blas_kernel)
+        from friction_level_variants import paired_signature
+
         paired = write_recording(
             root / "paired.npz",
             simulate(load_scenario(SCENARIOS / "signature_calibration_paired.yaml")),
         )
-        paths["observer"] = root / "observer.yaml"
-        _fdi(
-            "signature",
-            paired,
-            "--model",
-            shipped,
-            "--fault-window",
-            "22:42",
-            "--reference-window",
-            "1:21",
-            "--lowpass-hz",
-            "10",
-            "--velocity-method",
-            "model_observer",
-            "-o",
-            paths["observer"],
+        paths["observer"] = paired_signature(
+            paired, shipped, root / "observer.yaml", "model_observer"
         )
     ff = write_recording(
         root / "ff10.npz",

@@ -69,6 +69,29 @@ def _fdi(*argv):
         raise SystemExit(f"fdi {' '.join(map(str, argv))} failed:\n{quiet.getvalue()}")
 
 
+def paired_signature(record, model, out, method: str):
+    """`fdi signature` on the paired calibration run ``record`` as README step 2 makes it
+    (reference pass 1-21 s, fault window 22-42 s, low-pass 10 Hz) with ``--velocity-method
+    method``: ``model``'s plant with that signature, written to ``out`` (returned)."""
+    _fdi(
+        "signature",
+        record,
+        "--model",
+        model,
+        "--fault-window",
+        "22:42",
+        "--reference-window",
+        "1:21",
+        "--lowpass-hz",
+        "10",
+        "--velocity-method",
+        method,
+        "-o",
+        out,
+    )
+    return out
+
+
 def measure(name: str, rig: dict, root: Path) -> list[str]:
     from fdi_daemon.io.model_file import load_model
 
@@ -97,37 +120,17 @@ def measure(name: str, rig: dict, root: Path) -> list[str]:
         "-o",
         root / "highpass.yaml",
     )
-    _fdi(
-        "signature",
+    paired_signature(
         root / "signature_calibration_paired.npz",
-        "--model",
         root / "plant.yaml",
-        "--fault-window",
-        "22:42",
-        "--reference-window",
-        "1:21",
-        "--lowpass-hz",
-        "10",
-        "--velocity-method",
-        "model_observer",
-        "-o",
         root / "observer.yaml",
+        "model_observer",
     )
-    _fdi(
-        "signature",
+    paired_signature(
         root / "signature_calibration_paired.npz",
-        "--model",
         root / "plant.yaml",
-        "--fault-window",
-        "22:42",
-        "--reference-window",
-        "1:21",
-        "--lowpass-hz",
-        "10",
-        "--velocity-method",
-        "position_observer",
-        "-o",
         root / "position.yaml",
+        "position_observer",
     )
     cal = recs["signature_calibration_paired"]
     calibrated = np.mean(cal.columns["contact_force"][cal.t >= 22.0])

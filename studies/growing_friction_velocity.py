@@ -44,7 +44,7 @@ BEFORE_S, AFTER_S = (4.0, 8.0), (9.5, 14.0)
 def paired_models(rig: dict, root: Path, methods: tuple[str, ...]) -> dict:
     """velocity method -> model: the rig's plant from `fdi identify` with a signature `fdi
     signature --velocity-method <method>` made on the rig's paired calibration run."""
-    from friction_level_variants import _fdi, _record
+    from friction_level_variants import _fdi, _record, paired_signature
 
     from fdi_daemon.io.model_file import load_model
 
@@ -60,23 +60,14 @@ def paired_models(rig: dict, root: Path, methods: tuple[str, ...]) -> dict:
     )
     models = {}
     for method in methods:
-        _fdi(
-            "signature",
-            root / "signature_calibration_paired.npz",
-            "--model",
-            root / "plant.yaml",
-            "--fault-window",
-            "22:42",
-            "--reference-window",
-            "1:21",
-            "--lowpass-hz",
-            "10",
-            "--velocity-method",
-            method,
-            "-o",
-            root / f"{method}.yaml",
+        models[method] = load_model(
+            paired_signature(
+                root / "signature_calibration_paired.npz",
+                root / "plant.yaml",
+                root / f"{method}.yaml",
+                method,
+            )
         )
-        models[method] = load_model(root / f"{method}.yaml")
     return models
 
 

@@ -235,7 +235,7 @@ def test_friction_creeping_in_over_ten_minutes_is_one_episode_never_cleared():
     """Issue 43 item 2: the bearing supply falls 100 -> 62 % over 10 min under changing
     operation (1-9 Hz); an episode the fast path raises holds while the friction level is
     at least half its margin above normal, until the level path confirms it."""
-    from creeping_friction_episodes import _creep
+    from studies.creeping_friction_episodes import _creep
 
     spec, _ = _creep(600.0, 1800.0)
     kinds = _kinds(_scenario(spec, seed=3))

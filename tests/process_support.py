@@ -13,11 +13,24 @@ import psutil
 REPO = Path(__file__).resolve().parents[1]
 
 
+#: ``python -m fdi_daemon ARGV`` with SIGINT and SIGQUIT at their defaults, as a terminal
+#: starts a foreground job: a test run started in the background (``cmd &`` in a script,
+#: as CI may) ignores both, every process it starts inherits that, and Python then leaves
+#: Ctrl-C ignored (the fleet's Ctrl-C test ran to the end with exit 0)
+_AS_FOREGROUND_JOB = (
+    "import os, signal, sys\n"
+    "signal.signal(signal.SIGINT, signal.SIG_DFL)\n"
+    "signal.signal(signal.SIGQUIT, signal.SIG_DFL)\n"
+    "os.execv(sys.executable, [sys.executable, '-m', 'fdi_daemon', *sys.argv[1:]])"
+)
+
+
 def start_fdi(*args: str, cwd: Path | None = None) -> subprocess.Popen:
     """``python -m fdi_daemon ARGS`` of this checkout in a session of its own (a signal
-    reaches what it is sent to, not the test), stdout and stderr piped as text."""
+    reaches what it is sent to, not the test), as a terminal's foreground job (Ctrl-C not
+    ignored, whatever the test run ignores), stdout and stderr piped as text."""
     return subprocess.Popen(
-        [sys.executable, "-m", "fdi_daemon", *args],
+        [sys.executable, "-c", _AS_FOREGROUND_JOB, *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

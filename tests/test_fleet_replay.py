@@ -409,22 +409,29 @@ def test_ctrl_c_stops_the_fleet_with_one_line_and_no_worker_left(long_fleet, tmp
     """Ctrl-C reaches the whole foreground process group: each Dask worker process printed
     a KeyboardInterrupt traceback while `fdi fleet-replay` itself stopped cleanly.
 
-    Ctrl-C is pressed once, when a worker has a recording open. While the cluster starts,
-    the fleet ignores SIGINT (its workers inherit that); pressing every 0.5 s from the
-    first child process for a minute missed the work in 2 full-suite runs (exit 0), and
-    pressing until the exit could land after Python had restored SIGINT's default (-2).
+    Ctrl-C is pressed once, when a worker has a recording open (while the cluster starts,
+    the fleet ignores SIGINT so that its workers inherit that). The fleet runs as a
+    terminal's foreground job (`start_fdi`): a test run started in the background ignores
+    SIGINT, and the fleet inherited that and replayed every file (exit 0).
     """
     import os
     import signal
 
     proc = _start_fleet(long_fleet, tmp_path)
     seen = wait_for_child_reading(proc, ".parquet")
+    ignored = _ignored_signals(proc.pid)
     os.killpg(proc.pid, signal.SIGINT)
     out, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, (proc.returncode, err, out)
+    assert proc.returncode == 130, (proc.returncode, err, out, ignored)
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
     assert err.strip().splitlines() == ["fdi fleet-replay: interrupted"]
     assert survivors(seen) == []
+
+
+def _ignored_signals(pid: int) -> str:
+    """The signals process ``pid`` ignores (/proc's SigIgn mask, bit n − 1 for signal n)."""
+    with open(f"/proc/{pid}/status") as status:
+        return next(line.split()[1] for line in status if line.startswith("SigIgn"))
 
 
 def test_sigterm_stops_the_fleet_with_one_line_and_no_worker_left(long_fleet, tmp_path):

@@ -450,8 +450,8 @@ def test_sigterm_stops_the_fleet_with_one_line_and_no_worker_left(long_fleet, tm
 @pytest.fixture(scope="module")
 def long_fleet(tmp_path_factory):
     """40 links to one 2 h Parquet recording: seconds of replay on 2 workers, so a signal
-    sent once the workers run lands while they work (the 50 short files were done within
-    one poll of the test once the fleet had become fast, and the run exited 0)."""
+    sent once a worker reads lands while they work (the fleet's 50 short files can all be
+    done before the test's signal arrives)."""
     pytest.importorskip("pyarrow")
     root = tmp_path_factory.mktemp("long_fleet")
     rec = scenario_recording("test_case_2", seed=0)

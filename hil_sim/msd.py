@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import expm
 
+from fdi_daemon.core.compiled import jit
 from fdi_daemon.io.recordings import Recording
 
 EFFECT_NAMES = (
@@ -193,6 +194,73 @@ def input_effects(u: np.ndarray, effects: dict, rate_hz: float) -> np.ndarray:
     return u
 
 
+@jit(nrt=True)
+def _integrate(
+    ad,
+    bdu,
+    bdf,
+    ca,
+    da,
+    u_sub,
+    substeps,
+    fault_step,
+    mass_kg,
+    coulomb_n,
+    coulomb_fault_n,
+    viscous_n_s_per_m,
+    viscous_fault_n_s_per_m,
+    stribeck,
+    k3_n_per_m3,
+    accel,
+    vel,
+    pos,
+    friction,
+):
+    """The time-stepping integration of the module docstring: ``ad``… hold the ZOH matrices
+    before ([0]) and from ([1]) ``fault_step`` on, ``u_sub`` the held input of every
+    internal step, ``stribeck`` (coulomb_n, static_n, stribeck_velocity_m_s) or a NaN
+    velocity for none; fills ``accel, vel, pos, friction`` at the samples (the states the
+    step starts from, and the friction force F_f of eq. 5 held over it)."""
+    ns = ad.shape[1]
+    ix, iv = ns - 2, ns - 1
+    s = np.zeros(ns)
+    free = np.zeros(ns)
+    j = 0
+    for i in range(accel.size):
+        faulty = 1 if i >= fault_step else 0
+        c_friction = viscous_n_s_per_m + (viscous_fault_n_s_per_m if faulty else 0.0)
+        fc_fault = coulomb_fault_n if faulty else 0.0
+        for sub in range(substeps):
+            u = u_sub[j]
+            j += 1
+            x, v = s[ix], s[iv]
+            f_ext = -k3_n_per_m3 * x * x * x
+            fmax = coulomb_n + fc_fault
+            if not math.isnan(stribeck[2]):
+                fmax += stribeck[0] + (stribeck[1] - stribeck[0]) * math.exp(
+                    -((v / stribeck[2]) ** 2)
+                )
+            for r in range(ns):
+                acc = 0.0
+                for q in range(ns):
+                    acc += ad[faulty, r, q] * s[q]
+                free[r] = acc + bdu[faulty, r] * u + bdf[faulty, r] * f_ext
+            f = 0.0
+            if fmax > 0.0:
+                f_stop = -free[iv] / bdf[faulty, iv]
+                f = f_stop if abs(f_stop) <= fmax else -math.copysign(fmax, free[iv])
+            if sub == 0:
+                acc = 0.0
+                for q in range(ns):
+                    acc += ca[faulty, q] * s[q]
+                accel[i] = acc + da[faulty] * u + (f + f_ext) / mass_kg
+                vel[i] = v
+                pos[i] = x
+                friction[i] = -f + c_friction * v
+            for r in range(ns):
+                s[r] = free[r] + bdf[faulty, r] * f
+
+
 class MsdSimulator:
     """Simulates the §V model; ``run(v_in)`` returns every signal sampled at ``fs_hz``."""
 
@@ -207,57 +275,41 @@ class MsdSimulator:
         n = v_in.size
         h = 1.0 / (p.fs_hz * p.substeps)
         viscous_effect = eff.get("viscous_friction", {}).get("coefficient_n_s_per_m", 0.0)
-        mats = []
+        # [0]: before the fault, [1]: from the fault on (its viscous part in the damping)
+        ad, bdu, bdf, ca, da = [], [], [], [], []
         for extra in (viscous_effect, viscous_effect + p.viscous_n_s_per_m):
-            a, bu, bf, ca, da = state_space(p, extra)
-            ad, bd = _zoh(a, np.column_stack([bu, bf]), h)
-            mats.append((ad.tolist(), bd[:, 0].tolist(), bd[:, 1].tolist(), ca.tolist(), da))
-        ns = len(mats[0][0])
-        ix, iv = ns - 2, ns - 1
-        m = p.mass_kg
-        coul = eff.get("coulomb_friction", {}).get("force_n", 0.0)
+            a, bu, bf, c_a, d_a = state_space(p, extra)
+            a_d, b_d = _zoh(a, np.column_stack([bu, bf]), h)
+            ad.append(a_d), bdu.append(b_d[:, 0]), bdf.append(b_d[:, 1]), ca.append(c_a)
+            da.append(d_a)
         strib = eff.get("stribeck_friction")
-        k3 = eff.get("cubic_stiffness", {}).get("k3_n_per_m3", 0.0)
-        u_sub = _input_chain(v_in, p).tolist()
         fault_step = math.ceil(p.fault_time_s * p.fs_hz) if math.isfinite(p.fault_time_s) else n + 1
-
-        s = [0.0] * ns
-        accel = np.empty(n)
-        vel = np.empty(n)
-        pos = np.empty(n)
-        friction = np.empty(n)
-        j = 0
-        for i in range(n):
-            faulty = i >= fault_step
-            ad, bdu, bdf, ca, da = mats[1 if faulty else 0]
-            c_friction = viscous_effect + (p.viscous_n_s_per_m if faulty else 0.0)
-            fc_fault = p.coulomb_n if faulty else 0.0
-            for sub in range(p.substeps):
-                u = u_sub[j]
-                j += 1
-                x, v = s[ix], s[iv]
-                f_ext = -k3 * x * x * x
-                fmax = coul + fc_fault
-                if strib is not None:
-                    fc_s, fs_s = strib["coulomb_n"], strib["static_n"]
-                    fmax += fc_s + (fs_s - fc_s) * math.exp(
-                        -((v / strib["stribeck_velocity_m_s"]) ** 2)
-                    )
-                free = [
-                    sum(ad[r][q] * s[q] for q in range(ns)) + bdu[r] * u + bdf[r] * f_ext
-                    for r in range(ns)
-                ]
-                f = 0.0
-                if fmax > 0.0:
-                    f_stop = -free[iv] / bdf[iv]
-                    f = f_stop if abs(f_stop) <= fmax else -math.copysign(fmax, free[iv])
-                if sub == 0:
-                    # the sample instant t_i: state, input and the friction of the step it starts
-                    accel[i] = sum(ca[q] * s[q] for q in range(ns)) + da * u + (f + f_ext) / m
-                    vel[i] = v
-                    pos[i] = x
-                    friction[i] = -f + c_friction * v  # F_f of eq. (5), Coulomb + viscous
-                s = [free[r] + bdf[r] * f for r in range(ns)]
+        accel, vel, pos, friction = (np.empty(n) for _ in range(4))
+        _integrate(
+            np.array(ad),
+            np.array(bdu),
+            np.array(bdf),
+            np.array(ca),
+            np.array(da, dtype=float),
+            _input_chain(v_in, p),
+            p.substeps,
+            fault_step,
+            p.mass_kg,
+            eff.get("coulomb_friction", {}).get("force_n", 0.0),
+            p.coulomb_n,
+            viscous_effect,
+            p.viscous_n_s_per_m,
+            np.array(
+                [strib["coulomb_n"], strib["static_n"], strib["stribeck_velocity_m_s"]]
+                if strib is not None
+                else [0.0, 0.0, math.nan]
+            ),
+            eff.get("cubic_stiffness", {}).get("k3_n_per_m3", 0.0),
+            accel,
+            vel,
+            pos,
+            friction,
+        )
         rng = np.random.default_rng(self.seed)
         accel_meas = accel + _uniform(rng, p.accel_noise_width, n)
         vel_meas = vel + _uniform(rng, p.velocity_noise_width, n)

@@ -2,6 +2,7 @@
 screen; the session fixtures of the conftest_<area> modules are registered here (their
 helpers are imported where used)."""
 
+import inspect
 import os
 
 # OpenBLAS's idle threads sleep at once instead of spinning for about 2^28 cycles after
@@ -23,6 +24,16 @@ import pytest  # noqa: E402
 matplotlib.use("Agg")
 
 pytest_plugins = ["conftest_diagnose", "conftest_ident", "conftest_sim", "mqtt_support"]
+
+
+def pytest_itemcollected(item):
+    """A test that asks for a diagnosis (the `diagnosis` fixture among its arguments) is
+    `slow`: each diagnosis takes seconds to minutes, so the inner loop (``-m "not slow"``)
+    leaves it out. (test_diagnose_cli's autouse fixture holds it for every test, and marks
+    its diagnosing tests itself.)"""
+    function = getattr(item, "function", None)
+    if function is not None and "diagnosis" in inspect.signature(function).parameters:
+        item.add_marker(pytest.mark.slow)
 
 
 def pytest_collection_modifyitems(items):

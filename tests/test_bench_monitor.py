@@ -38,6 +38,7 @@ def test_the_incident_recording_holds_an_alarm_and_the_quiet_one_none():
     assert out["incident"]["alarm_episodes"] >= 1
 
 
+@pytest.mark.slow  # a whole `fdi bench` run
 def test_bench_command_writes_json(tmp_path, monkeypatch, capsys):
     import fdi_daemon.bench.fleet as bf
     import fdi_daemon.bench.ident as bi

@@ -11,6 +11,7 @@ from process_support import start_fdi, survivors, wait_for_children
 from fdi_daemon.cli import main
 
 
+@pytest.mark.slow  # starts the device and the daemon
 @pytest.mark.parametrize(
     "started", [1, 2], ids=["while the device starts", "with device and daemon running"]
 )

@@ -13,6 +13,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -70,6 +72,7 @@ def test_an_index_is_taken_as_given_and_bounds_checks_catch_a_negative_one(tmp_p
     assert checked.stdout.split() == ["8.0", "IndexError"]
 
 
+@pytest.mark.slow  # compiles every kernel afresh, bounds-checked (numba caches none)
 def test_the_kernels_index_inside_their_arrays_under_bounds_checks(tmp_path):
     code = f"""
         import math, sys

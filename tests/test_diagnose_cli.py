@@ -38,6 +38,7 @@ def files(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow  # diagnoses
 def test_report_model_and_plot(files, capsys):
     out = files / "out"
     out.mkdir(exist_ok=True)
@@ -81,6 +82,7 @@ def test_report_model_and_plot(files, capsys):
     assert "holds effects (coulomb_friction) from an earlier diagnosis" in err
 
 
+@pytest.mark.slow  # diagnoses
 def test_fit_linear_velocity_output_and_no_effect(files, capsys):
     rc = main(
         [
@@ -174,6 +176,7 @@ def test_bad_input_is_one_line_and_exit_2(files, tmp_path, capsys):
     )
 
 
+@pytest.mark.slow  # diagnoses
 def test_any_column_names(tmp_path, capsys):
     # a closed-loop stage recorded by another tool: no v_in, no accel
     from tests.diagnose_cases import stage_recording
@@ -253,6 +256,7 @@ def test_any_column_names(tmp_path, capsys):
     assert "--columns" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # diagnoses
 def test_a_recording_without_a_time_column_takes_its_rate_from_fs(tmp_path, capsys):
     # benchmark data (the Silverbox's V1, V2) have no time column: --fs gives the rate
     from tests.diagnose_cases import duffing_recording

@@ -288,6 +288,7 @@ def test_user_mistakes_exit_2_with_one_line(fleet, capsys, extra, message):
     assert code == 2 and message in err and err.count("\n") == 1, err
 
 
+@pytest.mark.slow  # waits out the client's 10 s connect timeout
 def test_an_unreachable_scheduler_is_one_line(fleet, capsys):
     root, _, _ = fleet
     with socket.socket() as s:  # a port where nothing listens

@@ -57,6 +57,7 @@ def test_correlated_errors_widen_the_interval_and_it_is_seeded():
     assert bootstrap_interval(grid, slow, best_s) == s  # same data, same interval
 
 
+@pytest.mark.slow  # 80 bootstraps of 1000 draws
 def test_coverage_of_the_bootstrap_on_correlated_errors():
     """99 % intervals over 40 seeded periodic misfits (AR(0.9) envelope): with the chosen
     blocks at least 38 hold the true slope (measured 40; 38 of 40 at AR(0.97), 36 at 0.99),

@@ -54,7 +54,10 @@ def _has_avx512() -> bool:
 
 def _diagnose_under(case: str, kernel: str | None) -> dict:
     """The case in a fresh process under OpenBLAS kernel ``kernel`` (None: its choice)."""
-    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    # the kernel is the only difference: both with OpenBLAS's own thread count, whatever
+    # this worker inherited (a diagnosis still depends on it, issue 42)
+    dropped = ("OPENBLAS_CORETYPE", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+    env = {k: v for k, v in os.environ.items() if k not in dropped}
     env["PYTHONPATH"] = str(REPO)
     if kernel is not None:
         env["OPENBLAS_CORETYPE"] = kernel

@@ -213,6 +213,22 @@ def test_local_cluster_listens_on_loopback_only_and_parquet_holds_the_rows(fleet
     assert pa.read_table(tmp_path / "r.parquet").to_pylist() == rows
 
 
+@pytest.mark.slow
+def test_a_local_cluster_leaves_this_processs_environment_as_it_was(monkeypatch):
+    """The nannies set OPENBLAS_NUM_THREADS=1 (and more) for their workers in this process;
+    left there, every later subprocess of a test worker ran its BLAS on one thread."""
+    from fdi_daemon.fleet.cluster import dask_client
+
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_"):
+        monkeypatch.delenv(name, raising=False)
+    before = dict(os.environ)
+    with dask_client(None, 1) as client:
+        in_worker = client.run(lambda: os.environ.get("OPENBLAS_NUM_THREADS"))
+        assert list(in_worker.values()) == ["1"]  # the workers keep their one BLAS thread
+        assert dict(os.environ) == before
+    assert dict(os.environ) == before
+
+
 def test_a_bad_file_is_a_row_never_an_exception(tmp_path):
     bad = tmp_path / "x.csv"
     bad.write_text("not a recording at all\n\x00\x01")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -39,6 +40,7 @@ def dask_client(scheduler: str | None, workers: int):
         with client:
             yield client
         return
+    environ = dict(os.environ)  # as it was before the nannies set theirs (`_restore_environ`)
     with _sigint_ignored():  # the worker processes inherit it: Ctrl-C is the parent's job
         cluster = dd.LocalCluster(
             n_workers=workers,
@@ -53,6 +55,7 @@ def dask_client(scheduler: str | None, workers: int):
             # log "Failed to communicate with scheduler during heartbeat" with a traceback
             silence_logs=logging.CRITICAL,
         )
+    _restore_environ(environ)
     interrupted = False
     try:
         with dd.Client(cluster) as client:
@@ -67,8 +70,23 @@ def dask_client(scheduler: str | None, workers: int):
     finally:
         with _sigint_ignored():  # a second Ctrl-C must not cut the workers' shutdown short
             cluster.close()
+        _restore_environ(environ)  # again: a nanny that restarted its worker set them again
         if interrupted:
             logging.disable(logging.NOTSET)
+
+
+def _restore_environ(saved: dict[str, str]) -> None:
+    """This process's environment back to ``saved``.
+
+    Each nanny of a `LocalCluster` sets its ``pre-spawn-environ`` (``OPENBLAS_NUM_THREADS=1``,
+    ``OMP_NUM_THREADS=1``, ``MALLOC_TRIM_THRESHOLD_``) in its own process, which is this one,
+    so that the worker it spawns inherits them (distributed.yaml: "this leaks variables into
+    the nanny process"). Left there, every program this process started afterwards ran its
+    BLAS on one thread: a test worker that had run a fleet replay started diagnoses that
+    named other effects (issue 42: a diagnosis still depends on the BLAS thread count)."""
+    for name in set(os.environ) - set(saved):
+        del os.environ[name]
+    os.environ.update(saved)
 
 
 @contextlib.contextmanager

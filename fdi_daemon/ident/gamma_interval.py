@@ -113,7 +113,10 @@ def bootstrap_interval(
     gammas = []
     for chunk in np.array_split(np.arange(draws), max(1, draws * blocks // 200_000)):
         starts = rng.integers(0, block_sse.shape[0], size=(len(chunk), blocks))
-        gammas.append(_minimisers(grid, block_sse[starts].sum(axis=1)))
+        profiles = np.zeros((len(chunk), len(grid)))
+        for column in starts.T:  # block by block: one profile per draw held, never all blocks
+            profiles += block_sse[column]
+        gammas.append(_minimisers(grid, profiles))
     gamma = np.concatenate(gammas)
     tail = 100.0 * (1.0 - level) / 2.0
     low, high = np.percentile(gamma, [tail, 100.0 - tail])

@@ -22,6 +22,8 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "configs" / "scenarios"
+if str(REPO / "tests") not in sys.path:  # the rig variants and README step 2's windows
+    sys.path.insert(0, str(REPO / "tests"))
 CASES = (
     ("test_case_1", 3.05, 1.5),
     ("test_case_2", 2.9, 1.5),
@@ -30,7 +32,6 @@ CASES = (
 
 
 def variants() -> dict[str, dict]:
-    sys.path.insert(0, str(REPO / "tests"))
     from test_detect_other_rig import rig_variant
 
     return {
@@ -73,17 +74,14 @@ def paired_signature(record, model, out, method: str):
     """`fdi signature` on the paired calibration run ``record`` as README step 2 makes it
     (reference pass 1-21 s, fault window 22-42 s, low-pass 10 Hz) with ``--velocity-method
     method``: ``model``'s plant with that signature, written to ``out`` (returned)."""
+    from conftest_detect import PAIRED_SIGNATURE_WINDOWS
+
     _fdi(
         "signature",
         record,
         "--model",
         model,
-        "--fault-window",
-        "22:42",
-        "--reference-window",
-        "1:21",
-        "--lowpass-hz",
-        "10",
+        *PAIRED_SIGNATURE_WINDOWS,
         "--velocity-method",
         method,
         "-o",

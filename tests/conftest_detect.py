@@ -15,6 +15,15 @@ REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "configs" / "scenarios"
 MODEL = REPO / "configs" / "model_sim_rig.yaml"
 FS_HZ = 256.0
+#: `fdi signature`'s windows for the paired calibration run, as README step 2 gives them
+PAIRED_SIGNATURE_WINDOWS = (
+    "--fault-window",
+    "22:42",
+    "--reference-window",
+    "1:21",
+    "--lowpass-hz",
+    "10",
+)
 
 
 @functools.cache

@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import psutil
@@ -46,17 +47,12 @@ def wait_for_children(
     """The processes started under ``proc`` (at any depth) once ``count`` have been seen;
     with ``command``, only those whose command line contains it (a short-lived helper such
     as the ``uname -p`` behind `platform.processor` is then not counted)."""
-    parent = psutil.Process(proc.pid)
-    seen: set[psutil.Process] = set()
-    deadline = time.monotonic() + timeout_s
-    while proc.poll() is None and time.monotonic() < deadline and len(seen) < count:
-        for child in parent.children(recursive=True):
-            try:
-                if command in " ".join(child.cmdline()):
-                    seen.add(child)
-            except psutil.NoSuchProcess:
-                pass
-        time.sleep(0.05)
+    seen = _children_until(
+        proc,
+        timeout_s,
+        lambda child: command in " ".join(child.cmdline()),
+        lambda s: len(s) >= count,
+    )
     assert len(seen) >= count, f"only {len(seen)} of {count} processes started"
     return seen
 
@@ -66,19 +62,40 @@ def wait_for_child_reading(
 ) -> set[psutil.Process]:
     """The processes under ``proc`` once one of them has a file ending in ``suffix`` open
     (a fleet's worker replays a recording: the command is past its start-up)."""
+
+    def reading(child: psutil.Process) -> bool:
+        try:
+            return any(f.path.endswith(suffix) for f in child.open_files())
+        except (psutil.NoSuchProcess, psutil.AccessDenied):
+            return False
+
+    seen = _children_until(proc, timeout_s, lambda child: True, lambda s: any(map(reading, s)))
+    if not any(map(reading, seen)):
+        raise AssertionError(f"no process under {proc.pid} opened a {suffix} file")
+    return seen
+
+
+def _children_until(
+    proc: subprocess.Popen,
+    timeout_s: float,
+    keep: Callable[[psutil.Process], bool],
+    done: Callable[[set[psutil.Process]], bool],
+) -> set[psutil.Process]:
+    """The processes under ``proc`` (at any depth) for which ``keep`` holds, gathered in
+    whole passes every 50 ms until ``done`` holds for them, ``proc`` ends or ``timeout_s``
+    passes; a process that is gone (or not ours to read) meanwhile is left out."""
     parent = psutil.Process(proc.pid)
     seen: set[psutil.Process] = set()
     deadline = time.monotonic() + timeout_s
-    while proc.poll() is None and time.monotonic() < deadline:
+    while proc.poll() is None and time.monotonic() < deadline and not done(seen):
         for child in parent.children(recursive=True):
-            seen.add(child)
             try:
-                if any(f.path.endswith(suffix) for f in child.open_files()):
-                    return seen
+                if keep(child):
+                    seen.add(child)
             except (psutil.NoSuchProcess, psutil.AccessDenied):
                 pass
         time.sleep(0.05)
-    raise AssertionError(f"no process under {proc.pid} opened a {suffix} file")
+    return seen
 
 
 def survivors(processes) -> list[int]:

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 import yaml
-from conftest_detect import MODEL, SCENARIOS, first_event
+from conftest_detect import MODEL, PAIRED_SIGNATURE_WINDOWS, SCENARIOS, first_event
 
 from fdi_daemon.cli import main
 from fdi_daemon.detect.baseline import Baseline, fit_baseline
@@ -52,12 +52,7 @@ def position_baseline_model(tmp_path_factory, fault_free):
                 str(paired),
                 "--model",
                 str(MODEL),
-                "--fault-window",
-                "22:42",
-                "--reference-window",
-                "1:21",
-                "--lowpass-hz",
-                "10",
+                *PAIRED_SIGNATURE_WINDOWS,
                 "--velocity-method",
                 "position_observer",
                 "-o",

@@ -14,7 +14,13 @@ Truths come from the simulator, never from the code under test:
 
 import numpy as np
 import pytest
-from conftest_detect import MODEL, model_copy, scenario_recording, sim_rig_model
+from conftest_detect import (
+    MODEL,
+    PAIRED_SIGNATURE_WINDOWS,
+    model_copy,
+    scenario_recording,
+    sim_rig_model,
+)
 
 from fdi_daemon.cli import main
 from fdi_daemon.detect.monitor import Monitor
@@ -36,12 +42,7 @@ def _signature(tmp_path_factory, method):
                 str(rec),
                 "--model",
                 str(MODEL),
-                "--fault-window",
-                "22:42",
-                "--reference-window",
-                "1:21",
-                "--lowpass-hz",
-                "10",
+                *PAIRED_SIGNATURE_WINDOWS,
                 "--velocity-method",
                 method,
                 "-o",

@@ -71,8 +71,19 @@ def test_a_change_to_a_called_module_compiles_its_callers_afresh(tmp_path):
     _package(tmp_path, factor=3.0, offset=0.25)  # only callee.py changes
     assert _run(tmp_path) == (3.25, 0)
     assert _run(tmp_path) == (3.25, 1)
-    # the cache of the earlier sources is gone
-    assert len(list((package / "__pycache__").glob("numba-*"))) == 1
+    # the caches of the earlier sources are gone: one folder per kernel module's imports
+    # is left (the caller's reach the callee, the callee's only itself)
+    assert len(list((package / "__pycache__").glob("numba-*"))) == 2
+
+
+def test_a_change_outside_a_kernels_imports_keeps_it_cached(tmp_path):
+    package = _package(tmp_path, factor=2.0, offset=0.5)
+    (package / "workflow.py").write_text("STEPS = 1\n")  # imported by no kernel module
+    assert _run(tmp_path) == (2.5, 0)
+    (package / "workflow.py").write_text("STEPS = 2\n")
+    assert _run(tmp_path) == (2.5, 1)  # loaded, not compiled again
+    (package / "callee.py").write_text(CALLEE.format(factor=2.0, offset=0.5) + "# edited\n")
+    assert _run(tmp_path) == (2.5, 0)  # the callee is among the caller's imports
 
 
 def test_numba_cache_dir_is_honoured(tmp_path):

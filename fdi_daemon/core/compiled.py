@@ -9,9 +9,11 @@ a monitor tick). A kernel that allocates asks for it (``jit(nrt=True)``). With
 the same arithmetic in the same order, so results do not depend on the setting.
 
 numba checks only a cached function's own source file, but the kernels call kernels and
-read constants of other modules: so the cache of a package's kernels is a folder named
-after the hash of all the package's ``.py`` files (`_package_cache_dir`), and a change to
-any of them compiles every kernel afresh.
+read constants of other modules: so a kernel's cache is a folder named after the hash of
+the files its module can reach through its imports in the package
+(`source_closure.closure_digest`, `_kernel_cache_dir`). A change to one of them compiles
+the kernel afresh; a change elsewhere in the package (the diagnose workflow, the CLI)
+leaves the monitor's kernels cached.
 
 Every kernel compiles with its integer indices taken as given (`_indices_as_given`): numba
 would otherwise test each signed index for a negative value to wrap it around, and the
@@ -38,6 +40,8 @@ from pathlib import Path
 from typing import Any, TypeVar, overload
 
 import numpy as np
+
+from fdi_daemon.core.source_closure import closure_digest
 
 __all__ = ["jit", "JIT_ENABLED", "Arena"]
 
@@ -74,7 +78,12 @@ def jit(func: Any = None, *, inline: bool = False, nrt: bool = False) -> Any:
         if inline:
             options["inline"] = "always"
         package = _package_of(f)
-        cache_dir = _package_cache_dir(package) if package else None
+        module_file = getattr(sys.modules.get(f.__module__), "__file__", None)
+        cache_dir = (
+            _kernel_cache_dir(package, Path(module_file).resolve())
+            if package and module_file
+            else None
+        )
         if cache_dir is None:
             return _compiling_indices_as_given(_njit(**options)(f))
         with _numba_cache_dir(cache_dir):
@@ -261,27 +270,30 @@ def _package_of(func: Any) -> Path | None:
 
 
 @functools.cache
-def _package_cache_dir(package: Path) -> str | None:
-    """The writable folder for the compiled kernels of ``package``, named after its install
-    and the hash of its sources. When it is new, the folders of the install's earlier
-    sources are removed, and so are the cache files numba wrote beside the sources before
-    this scheme (``__pycache__/*.nbi``, ``*.nbc``; never read again). None (compiled at
-    every start) if no folder is writable."""
+def _kernel_cache_dir(package: Path, module_file: Path) -> str | None:
+    """The writable folder for the compiled kernels of ``module_file`` (in ``package``),
+    named after the package's install and the digest of the module's import closure
+    (`source_closure.closure_digest`). When it is new, the install's folders that no
+    module of the present sources is named after are removed (earlier sources), and so are
+    the cache files numba wrote beside the sources before this scheme
+    (``__pycache__/*.nbi``, ``*.nbc``; never read again). None (compiled at every start)
+    if no folder is writable."""
     prefix = f"numba-{_digest(str(package).encode())}-"
-    name = prefix + _sources_digest(package)
+    name = prefix + closure_digest(module_file, package)
     for root in _cache_roots(package):
         fresh = not (root / name).exists()
         if _writable(root / name):
             if fresh:
-                stale = [p for p in root.glob(prefix + "*") if p.name != name]
-                for folder in stale:
-                    shutil.rmtree(folder, ignore_errors=True)
+                current = {prefix + closure_digest(f, package) for f in package.rglob("*.py")}
+                for folder in root.glob(prefix + "*"):
+                    if folder.name not in current:
+                        shutil.rmtree(folder, ignore_errors=True)
                 for old in package.rglob("__pycache__/*.nb[ic]"):
                     old.unlink(missing_ok=True)
             return str(root / name)
     log.warning(
         "no writable folder to cache the compiled kernels of %s: they are compiled at every start",
-        package,
+        module_file,
     )
     return None
 
@@ -295,19 +307,6 @@ def _cache_roots(package: Path) -> Iterator[Path]:
     if os.environ.get("CACHE_DIRECTORY"):
         yield Path(os.environ["CACHE_DIRECTORY"])
     yield Path(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache")) / "fdi"
-
-
-def _sources_digest(package: Path) -> str:
-    """A hash of the names and contents of every ``.py`` file in ``package``."""
-    files = sorted(package.rglob("*.py"))
-    return _digest(
-        b"".join(
-            f.relative_to(package).as_posix().encode()
-            + b"\0"
-            + hashlib.sha256(f.read_bytes()).digest()
-            for f in files
-        )
-    )
 
 
 def _digest(data: bytes) -> str:

@@ -30,6 +30,11 @@ def test_bench_monitor_reports_both_implementations():
     assert incident["quiet"]["alarm_episodes"] == 0
 
 
+def test_too_few_step_samples_for_the_warm_up_is_a_clear_error():
+    with pytest.raises(ValueError, match="warm-up"):
+        bench_monitor(step_samples=100, batch_samples=2_000, baseline_samples=100, incident_s=0.0)
+
+
 def test_the_incident_recording_holds_an_alarm_and_the_quiet_one_none():
     from fdi_daemon.bench.incident import bench_incident_replay
 

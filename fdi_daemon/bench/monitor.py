@@ -159,12 +159,14 @@ def bench_monitor(
     from fdi_daemon.io.recordings import Recording
     from fdi_daemon.io.sample import Sample
 
+    warmup = 2 * int(FS_HZ)
+    if step_samples <= warmup:
+        raise ValueError(f"step_samples must exceed the {warmup} ticks of the warm-up")
     model, v_block, a_block = _system()
     reps = -(-max(step_samples, batch_samples) // v_block.size)
     v_all = np.tile(v_block, reps)
     a_all = np.tile(a_block, reps)
     t_all = np.arange(v_all.size) / FS_HZ
-    warmup = 2 * int(FS_HZ)
 
     window = Monitor(model).detector.window_samples
     rec = Recording(

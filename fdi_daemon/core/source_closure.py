@@ -24,13 +24,14 @@ __all__ = ["closure", "closure_digest"]
 
 def closure(module_file: Path, package: Path) -> frozenset[Path]:
     """``module_file`` and every file of ``package`` that it imports, directly or not."""
+    root = package.resolve()
     seen: set[Path] = set()
     todo = [module_file.resolve()]
     while todo:
         path = todo.pop()
         if path not in seen:
             seen.add(path)
-            todo.extend(_imported_files(path, package.resolve(), _stamp(path)))
+            todo.extend(_imported_files(path, root, _stamp(path)))
     return frozenset(seen)
 
 
@@ -40,12 +41,19 @@ def closure_digest(module_file: Path, package: Path) -> str:
     h = hashlib.sha256()
     for path in sorted(closure(module_file, root)):
         h.update(path.relative_to(root).as_posix().encode() + b"\0")
-        h.update(hashlib.sha256(path.read_bytes()).digest())
+        h.update(_content_digest(path, _stamp(path)))
     return h.hexdigest()[:16]
 
 
+@functools.cache
+def _content_digest(path: Path, stamp: tuple[int, int]) -> bytes:
+    """sha256 of a file's bytes, read once per version of the file (``stamp``): the
+    closures of a package's kernel modules share most of their files."""
+    return hashlib.sha256(path.read_bytes()).digest()
+
+
 def _stamp(path: Path) -> tuple[int, int]:
-    """(modification time in ns, size): a file edited since it was parsed is parsed again."""
+    """(modification time in ns, size): a file edited since it was read is read again."""
     try:
         stat = path.stat()
     except OSError:

@@ -3,6 +3,7 @@ machines like the real ones, and the simulated pneumatic rig with one fault each
 
 from __future__ import annotations
 
+import os
 from functools import cache
 from pathlib import Path
 
@@ -13,6 +14,27 @@ from hil_sim.msd import MsdParams, multisine, nominal_tf, simulate_recording
 
 FS = 256.0
 DURATION_S = 24.0
+
+
+def has_avx512() -> bool:
+    """Whether this CPU has AVX-512 (OpenBLAS's SkylakeX kernel)."""
+    try:
+        return "avx512f" in Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return False
+
+
+def openblas_environment(kernel: str | None) -> dict[str, str]:
+    """This process's environment for a child whose only difference is OpenBLAS's kernel
+    ``kernel`` (None: OpenBLAS's own choice): with OpenBLAS's own thread count, whatever an
+    xdist worker or a Dask nanny left in the variables (a diagnosis still depends on it,
+    issue 42). OpenBLAS reads the kernel when it loads, so each kernel needs a process."""
+    dropped = ("OPENBLAS_CORETYPE", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+    env = {k: v for k, v in os.environ.items() if k not in dropped}
+    if kernel is not None:
+        env["OPENBLAS_CORETYPE"] = kernel
+    return env
+
 
 #: the hidden effect of each case, sized to matter against the measurement noise
 HIDDEN = {

@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import platform
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from tests.diagnose_cases import has_avx512, openblas_environment
 
 pytestmark = [
     pytest.mark.slow,
@@ -45,22 +46,9 @@ _SHOW = (
 )
 
 
-def _has_avx512() -> bool:
-    try:
-        return "avx512f" in Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return False
-
-
 def _diagnose_under(case: str, kernel: str | None) -> dict:
     """The case in a fresh process under OpenBLAS kernel ``kernel`` (None: its choice)."""
-    # the kernel is the only difference: both with OpenBLAS's own thread count, whatever
-    # this worker inherited (a diagnosis still depends on it, issue 42)
-    dropped = ("OPENBLAS_CORETYPE", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
-    env = {k: v for k, v in os.environ.items() if k not in dropped}
-    env["PYTHONPATH"] = str(REPO)
-    if kernel is not None:
-        env["OPENBLAS_CORETYPE"] = kernel
+    env = {**openblas_environment(kernel), "PYTHONPATH": str(REPO)}
     code = _PRELUDE + CASES[case] + "\n" + _SHOW
     out = subprocess.run(
         [sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, check=True
@@ -69,7 +57,7 @@ def _diagnose_under(case: str, kernel: str | None) -> dict:
 
 
 #: measured on 29 Nov 2026 (AMD EPYC, AVX-512; docs/diagnose.md §5.1): the known differences
-_AVX512 = _has_avx512()
+_AVX512 = has_avx512()
 _NAMES_DIFFER = pytest.mark.xfail(
     _AVX512, strict=True, reason="issue 42: under AVX-512 a backlash is named second"
 )

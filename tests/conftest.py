@@ -1,4 +1,5 @@
-"""Shared pytest configuration: OpenBLAS threads that do not spin, plots never need a
+"""Shared pytest configuration: OpenBLAS threads that do not spin, a share of the cores per
+xdist worker and one worker more than cores (`-n auto`), plots never need a
 screen; the session fixtures of the conftest_<area> modules are registered here (their
 helpers are imported where used)."""
 
@@ -9,10 +10,18 @@ import os
 # each call (read when NumPy loads OpenBLAS, so before anything imports NumPy; the xdist
 # workers and the tests' subprocesses inherit it). The diagnose fits are many small matrix
 # products, SVDs and least squares: two diagnoses took 58 s of CPU with the spinning threads
-# and 20 s without, with the same results bit for bit (the thread count, which splits some
-# sums, is OpenBLAS's choice as before: one thread named another effect on one rig record).
-# A value set is kept.
+# and 20 s without, with the same results bit for bit. A value set is kept.
 os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
+
+# An xdist worker's BLAS gets its share of the cores, as scikit-learn's conftest gives it:
+# two workers on two cores each with OpenBLAS's two threads are four threads on two cores
+# (the diagnose tests: 437 s of CPU on two threads a worker, 347 s on one). Set in the
+# environment before NumPy loads, so the tests' subprocesses inherit it; a value set is kept.
+# (xdist sets the worker count before it loads this file.)
+if "PYTEST_XDIST_WORKER_COUNT" in os.environ:
+    _cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    _share = (_cores or 1) // int(os.environ["PYTEST_XDIST_WORKER_COUNT"])
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", str(max(1, _share)))
 
 # isort: split
 import fdi_daemon  # noqa: E402, F401  (first: it pins the BLAS kernel before NumPy loads)
@@ -24,6 +33,19 @@ import pytest  # noqa: E402
 matplotlib.use("Agg")
 
 pytest_plugins = ["conftest_diagnose", "conftest_ident", "conftest_sim", "mqtt_support"]
+
+
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto``: one worker more than the machine has cores (`PYTEST_XDIST_AUTO_NUM_WORKERS`
+    overrides). About a quarter of the suite's test time is spent waiting on real time (a
+    daemon's 256 Hz loop, a broker restart, a link's reconnect), when a worker uses no core;
+    the extra worker's tests run meanwhile. On the 2-core CI machine, with a BLAS thread a
+    worker (above): 439 s on three workers against 539 s on two."""
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return None  # xdist's own hook reads it
+    from xdist.plugin import pytest_xdist_auto_num_workers as cores  # xdist's core count
+
+    return cores(config) + 1
 
 
 def pytest_itemcollected(item):

@@ -27,8 +27,8 @@ def has_avx512() -> bool:
 def openblas_environment(kernel: str | None) -> dict[str, str]:
     """This process's environment for a child whose only difference is OpenBLAS's kernel
     ``kernel`` (None: OpenBLAS's own choice): with OpenBLAS's own thread count, whatever an
-    xdist worker or a Dask nanny left in the variables (a diagnosis still depends on it,
-    issue 42). OpenBLAS reads the kernel when it loads, so each kernel needs a process."""
+    xdist worker or a Dask nanny left in the variables (`run_diagnose` holds its BLAS to one
+    thread itself). OpenBLAS reads the kernel when it loads, so each kernel needs a process."""
     dropped = ("OPENBLAS_CORETYPE", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
     env = {k: v for k, v in os.environ.items() if k not in dropped}
     if kernel is not None:

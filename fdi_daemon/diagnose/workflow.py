@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from fdi_daemon.diagnose import signals
 from fdi_daemon.diagnose.augment import AugmentedPlant
@@ -46,6 +47,7 @@ class DiagnoseResult:
         return self.selection.ambiguous
 
 
+@threadpool_limits.wrap(limits=1, user_api="blas")
 def run_diagnose(
     u: np.ndarray,
     y: np.ndarray,
@@ -66,7 +68,14 @@ def run_diagnose(
     ``form_reason`` gives both shares): a linear fit of closed-loop data or of a
     nonlinear system can look stable and still leave the effects nothing to explain in a
     free run (a stage under a position loop resting between moves), or bend a slow mode in
-    that argues for the force balance when the simulation explains the data."""
+    that argues for the force balance when the simulation explains the data.
+
+    The BLAS runs on one thread (``threadpool_limits``): OpenBLAS splits some sums by its
+    thread count, which follows the machine's cores, and the loop fits follow those
+    roundings (the rig's 3.4 N Coulomb friction under 0.4 V: an input saturation named
+    first on one and on four threads, the friction alone on two). The products are small,
+    so one thread is also the fastest: that record 8.1 s on one thread, 10.8 s on two (a
+    2-core machine, docs/diagnose.md §9)."""
     y = np.asarray(y, float)
     ctx, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order, form)
     result = _diagnose(*in_form(ctx, info, y, info["form"]), y, progress)

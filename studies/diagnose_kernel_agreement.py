@@ -1,14 +1,14 @@
 """The rig-variant sweep (`diagnose_rig_variants.py`) under two OpenBLAS kernels, compared
 cell by cell (docs/diagnose.md §9, "The diagnosis and the machine's BLAS kernel"). Run:
 ``python studies/diagnose_kernel_agreement.py [VARIANT ...]`` (default 0 1 2 3; the two
-sweeps run side by side, about 8 minutes on two cores).
+sweeps run side by side, about 2 minutes on two cores).
 
 Each kernel runs the sweep in a process of its own (OpenBLAS reads ``OPENBLAS_CORETYPE``
 when it loads): Haswell, and SkylakeX where the CPU has AVX-512 (else OpenBLAS's own
-choice), both with OpenBLAS's own thread count. Prints the cells whose names differ, whose
-held-out gaps after are more than 5 % apart, or whose names are not what the variant's
-physics says (`EXPECTED`), then the counts: issue 42 asks for the same names everywhere
-and gaps within 5 %.
+choice), each on one thread (`run_diagnose` holds its BLAS to one). Prints the cells
+whose names differ, whose held-out gaps after are more than 5 % apart, or whose names are
+not what the variant's physics says (`EXPECTED`), then the counts: issue 42 asks for the
+same names everywhere and gaps within 5 %.
 """
 
 from __future__ import annotations

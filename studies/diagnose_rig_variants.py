@@ -1,6 +1,6 @@
 """`fdi diagnose` on random variants of the simulated rig, each with its own identified model
 (docs/diagnose.md §8, "Rig variants"). Run: ``python studies/diagnose_rig_variants.py
-[VARIANT ...]`` (default 0 1 2 3; about two minutes per variant).
+[VARIANT ...]`` (default 0 1 2 3; about half a minute per variant).
 
 Per variant (`test_detect_other_rig.rig_variant`: another load mass, damping, valve, seal
 and contact friction): `fdi identify` on its identification chirp, then one blind

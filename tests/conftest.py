@@ -1,10 +1,12 @@
 """Shared pytest configuration: OpenBLAS threads that do not spin, a share of the cores per
-xdist worker and one worker more than cores (`-n auto`), plots never need a
-screen; the session fixtures of the conftest_<area> modules are registered here (their
-helpers are imported where used)."""
+xdist worker and one worker more than cores (`-n auto`), the monitor compiled while the
+workers start, plots never need a screen; the session fixtures of the conftest_<area>
+modules are registered here (their helpers are imported where used)."""
 
 import inspect
 import os
+import subprocess
+import sys
 
 # OpenBLAS's idle threads sleep at once instead of spinning for about 2^28 cycles after
 # each call (read when NumPy loads OpenBLAS, so before anything imports NumPy; the xdist
@@ -46,6 +48,36 @@ def pytest_xdist_auto_num_workers(config):
     from xdist.plugin import pytest_xdist_auto_num_workers as cores  # xdist's core count
 
     return cores(config) + 1
+
+
+_MONITOR_COMPILE = pytest.StashKey[subprocess.Popen]()
+
+
+def pytest_configure(config):
+    """An xdist run's controller compiles the monitor's kernels into numba's cache in a
+    process of its own (`fleet.replay_one.warm_worker`) while its workers start and collect:
+    after a change that reaches them the compile takes 30–50 s on one core, and the
+    workers' first tests that start a daemon, a replay or the benchmark would otherwise all
+    wait on one worker's compile (`core.compiled`'s lock) with a core idle. Ended with the
+    run (a compile cut short leaves numba's cache as it was: it writes each file whole)."""
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        config.stash[_MONITOR_COMPILE] = subprocess.Popen(
+            [
+                sys.executable,
+                "-c",
+                "from fdi_daemon.fleet.replay_one import warm_worker; warm_worker()",
+            ],
+            cwd=config.rootpath,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+
+
+def pytest_unconfigure(config):
+    compile_process = config.stash.get(_MONITOR_COMPILE, None)
+    if compile_process is not None:
+        compile_process.terminate()
+        compile_process.wait()
 
 
 def pytest_itemcollected(item):

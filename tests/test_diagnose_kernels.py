@@ -61,14 +61,6 @@ _AVX512 = has_avx512()
 _NAMES_DIFFER = pytest.mark.xfail(
     _AVX512, strict=True, reason="issue 42: under AVX-512 a backlash is named second"
 )
-_RIG_NAMES_DIFFER = pytest.mark.xfail(
-    _AVX512,
-    strict=True,
-    reason="issue 42: Haswell names an input saturation first, SkylakeX the friction alone",
-)
-_GAP_DIFFERS = pytest.mark.xfail(
-    _AVX512, strict=True, reason="issue 42: gap after 0.374 (Haswell) against 0.297 (SkylakeX)"
-)
 
 
 @functools.cache
@@ -79,10 +71,7 @@ def _both(case: str) -> tuple[dict, dict]:
 
 @pytest.mark.parametrize(
     "case",
-    [
-        pytest.param("rig 3.4 N under 0.4 V", marks=_RIG_NAMES_DIFFER),
-        pytest.param("duffing under noise", marks=_NAMES_DIFFER),
-    ],
+    ["rig 3.4 N under 0.4 V", pytest.param("duffing under noise", marks=_NAMES_DIFFER)],
 )
 def test_the_same_names_under_two_blas_kernels(case):
     one, other = _both(case)
@@ -92,7 +81,7 @@ def test_the_same_names_under_two_blas_kernels(case):
 @pytest.mark.parametrize(
     "case",
     [
-        pytest.param("rig 3.4 N under 0.4 V", marks=_GAP_DIFFERS),
+        "rig 3.4 N under 0.4 V",
         pytest.param(
             "duffing under noise", marks=pytest.mark.xfail(_AVX512, reason="names differ")
         ),

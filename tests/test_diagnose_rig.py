@@ -5,7 +5,6 @@ diagnosis sees only the recording and the model; the truth is compared at the en
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -173,19 +172,14 @@ def test_rig_hidden_coulomb_friction_is_named_coulomb_friction(coulomb_n, excita
     assert result.gap_after <= 0.5 * result.gap_before
 
 
-@pytest.mark.xfail(
-    os.environ.get("OPENBLAS_CORETYPE") == "Haswell",  # the kernel fdi_daemon pins
-    strict=True,
-    reason="issue 42: with the BLAS on one thread (`run_diagnose`) the refit without the map "
-    "ends at a held-out SSE of 118.8 against 54.1 with it under the Haswell kernel (on two "
-    "threads 46.2 against 46.1), so `input_saturation, coulomb_friction` (0.3738) is named; "
-    "the loop fit's end follows the rounding (docs/diagnose.md §9)",
-)
 def test_rig_heavy_coulomb_friction_under_a_small_excitation_holds_the_map_named_first(diagnosis):
     # 3.4 N under the 0.4 V multisine: the mass sticks for most of the record, and the
-    # friction's loop alone ended where it pushes the motion. An input saturation was named
-    # first, the friction on top of it; refitted without the map, the friction does as
-    # well, so the map is not kept (`select._each_pays_on_top`) and the report says so
+    # friction's loop alone ended where it pushes the motion. An input map (a saturation or
+    # a dead zone: their gaps tie) was named first, the friction on top of it; refitted
+    # without the map, the friction does as well, so the map is not kept
+    # (`select._each_pays_on_top`) and the report says so. A map beside a base that
+    # reverses the input path is no map (`select.map_share`): without that, one BLAS thread
+    # under Haswell kept an input saturation beside the friction
     from fdi_daemon.diagnose.report import build_report, summary_lines
 
     u, y = rig_recording(variant=(("seal_coulomb_n", 3.4), ("seal_static_n", 3.4)))

@@ -270,11 +270,16 @@ def map_share(effects: list[FittedEffect]) -> None:
     effect being added (the last of ``effects``) is plausible only within SHARE_RANGE, the
     tolerance of a dead time's shift share; a map named in an earlier round keeps its name
     when a later effect takes over part of it (its share is reported, in ``physical``, for
-    every map)."""
+    every map). Where the refit reverses the nominal input path (1 + r ≤ 0) no map has a
+    share, and a set that holds one is not physically possible: the rig's 3.4 N Coulomb
+    friction under 0.4 V kept an input saturation beside the friction on a base whose
+    input gain was −0.05 (r = −1.05), a gain that rises with amplitude."""
     r = next((e.physical.get("input_gain", 0.0) for e in effects if e.name == "linear_refit"), 0.0)
     new = effects[-1]
     for e in effects:
-        if e.name in MAPS and MAPS[e.name] in e.physical and 1.0 + r > 0.0:
+        if e.name in MAPS and 1.0 + r <= 0.0:
+            e.physical["plausible"] = False  # the refit reversed the input: no map's share
+        elif e.name in MAPS and MAPS[e.name] in e.physical:
             share = e.physical[MAPS[e.name]] / (1.0 + r)
             e.physical["map_share"] = share
             if e is new:

@@ -72,8 +72,8 @@ def run_diagnose(
 
     The BLAS runs on one thread (``threadpool_limits``): OpenBLAS splits some sums by its
     thread count, which follows the machine's cores, and the loop fits follow those
-    roundings (the rig's 3.4 N Coulomb friction under 0.4 V: an input saturation named
-    first on one and on four threads, the friction alone on two). The products are small,
+    roundings (the rig's 3.4 N Coulomb friction under 0.4 V was named with an input
+    saturation on one and on four threads, alone on two). The products are small,
     so one thread is also the fastest: that record 8.1 s on one thread, 10.8 s on two (a
     2-core machine, docs/diagnose.md §9)."""
     y = np.asarray(y, float)

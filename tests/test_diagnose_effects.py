@@ -51,6 +51,22 @@ def test_a_map_is_possible_only_with_its_own_gain(gain, refit_gain, plausible):
     assert clip.physical["plausible"] is plausible
 
 
+@pytest.mark.parametrize("refit_gain", [-1.0, -1.05])
+def test_no_map_beside_a_refit_that_reverses_the_input(refit_gain):
+    # the rig's 3.4 N Coulomb friction under 0.4 V on one BLAS thread: r = -1.05 with an
+    # input saturation named before the friction. An input gain 1 + r <= 0 has no map's
+    # share, whichever round named the map; the other effects keep their verdicts
+    refit = FittedEffect("linear_refit", None, [np.zeros(3)], physical={"input_gain": refit_gain})
+    saturation = FittedEffect(
+        "input_saturation", 0.3, [np.array([-0.78])], physical={"input_gain": -0.78}
+    )
+    friction = FittedEffect("coulomb_friction", None, [np.zeros(3)], physical={"plausible": True})
+    map_share([refit, saturation, friction])
+    assert saturation.physical["plausible"] is False
+    assert "map_share" not in saturation.physical
+    assert friction.physical["plausible"] is True
+
+
 @pytest.mark.parametrize(
     "coulomb, excess, possible, named_as",
     [

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
+from fdi_daemon.blas_kernel import cpu_flags
 from hil_sim.msd import MsdParams, multisine, nominal_tf, simulate_recording
 
 FS = 256.0
@@ -18,10 +19,7 @@ DURATION_S = 24.0
 
 def has_avx512() -> bool:
     """Whether this CPU has AVX-512 (OpenBLAS's SkylakeX kernel)."""
-    try:
-        return "avx512f" in Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return False
+    return "avx512f" in cpu_flags()
 
 
 def openblas_environment(kernel: str | None) -> dict[str, str]:

@@ -68,7 +68,7 @@ STATES = (
 )
 _STATE_CODE = {name: i for i, name in enumerate(STATES)}
 #: what showed the friction (`episode_kernel` KIND_*): event field ``friction_evidence``
-_KINDS = (None, "harmonics", "load_stopped", "level")
+_KINDS = (None, "harmonics", "level")
 
 #: regressors of the reference fit: g1, g2, x̂̈, 1
 N_REGRESSORS = 4
@@ -303,11 +303,12 @@ class Detector:
         ii, sc = self.arena.i, int(self.arena.i[self.epi + E.P_O_SCAL])
         change = float(self.arena.f[sc + E.S_LEVEL_CHANGE])
         if code == K.OTHER_FAULT:
-            # a clipping accelerometer is no friction evidence (`episode_tick`): say so
-            clipping = {"accel_clipping": True} if ii[self.epi + E.P_CLIPPED] else {}
-            return [
-                self._event(t, "other_fault", theta1, theta2, coulomb_change=change, **clipping)
-            ]
+            # a clipping accelerometer is no friction evidence (`episode_tick`), and a load
+            # that stopped may be held by friction or have lost its drive: say so
+            why = {"accel_clipping": True} if ii[self.epi + E.P_CLIPPED] else {}
+            if ii[self.epi + E.P_STOPPED]:
+                why["load_stopped"] = True
+            return [self._event(t, "other_fault", theta1, theta2, coulomb_change=change, **why)]
         kind = _KINDS[int(ii[self.epi + E.P_KIND])]
         extra = {"friction_evidence": self.level_path if kind == "level" else kind} if kind else {}
         return [self._event(t, "friction_isolated", theta1, theta2, coulomb_change=change, **extra)]

@@ -9,7 +9,11 @@ From ``fault_detected`` until ``cleared`` the detector keeps, on top of the quie
 - the refit of φ on the post window: the Coulomb coefficient's change since the reference
   (friction evidence when it exceeds ``friction_min_level``), checked by the innovation
   e = r − φᵀθ_ref regressed on (g1, x̂̈(k), x̂̈(k−1), 1) (what g1 explains beyond any linear
-  change of the plant) or by a stopped load (energies of ẍ, Δẍ and x̂̈ over the test window);
+  change of the plant);
+- whether the load has stopped although the model says it moves (energies of ẍ, Δẍ and x̂̈
+  over the test window): said in an ``other_fault`` event, never taken as friction (a weak
+  valve or a lost supply stops the load as friction does, and the accelerometer cannot
+  tell them apart);
 - the frozen-reference test T = mean over M of e²/σ²_ref (persistence, clearing).
 
 ``episode_tick`` returns the transition of the tick (none, isolated, other fault, cleared)
@@ -47,12 +51,11 @@ __all__ = [
     "TO_CLEARED",
     "KIND_NONE",
     "KIND_HARMONICS",
-    "KIND_LOAD_STOPPED",
     "KIND_LEVEL",
 ]
 
 NO_CHANGE, TO_ISOLATED, TO_OTHER, TO_CLEARED = range(4)
-KIND_NONE, KIND_HARMONICS, KIND_LOAD_STOPPED, KIND_LEVEL = range(4)
+KIND_NONE, KIND_HARMONICS, KIND_LEVEL = range(3)
 
 W = 15  # packed width of 4 regressors
 #: the load has stopped: Σẍ² at most this fraction of Σx̂̈² ...
@@ -96,6 +99,7 @@ MIN_RCOND = 1e-6
     P_WARMUP,
     P_CLIPPED,
     P_FAULT_AT,
+    P_STOPPED,
 ) = (
     0,
     1,
@@ -130,8 +134,9 @@ MIN_RCOND = 1e-6
     35,
     36,
     37,
+    38,
 )
-EPISODE_INTS = 38
+EPISODE_INTS = 39
 # floats at P_O_SCAL
 (
     S_THETA_REF,
@@ -247,6 +252,7 @@ def episode_start(
     ii[eo + P_FAULT_AT] = -1 if drift else 0
     ii[eo + P_KIND] = KIND_NONE
     ii[eo + P_CLIPPED] = 0
+    ii[eo + P_STOPPED] = 0
     f[sc + S_LEVEL_CHANGE] = math.nan
     f[sc + S_EVIDENCE] = math.nan
     # the growing-fault test against the frozen reference starts at its threshold: what
@@ -287,28 +293,35 @@ def _window_theta(f: F64, ii: I64, eo: int, ro: int, ip: int) -> bool:  # pragma
 @jit
 def _friction_kind(f: F64, ii: I64, eo: int, fmin: float) -> int:  # pragma: no cover - jit
     """Given a rise of the Coulomb coefficient: harmonics (g1 explains the innovation
-    beyond a linear change of the plant), a stopped load, or nothing."""
+    beyond a linear change of the plant), or nothing."""
     n = ii[eo + P_N]
-    m = ii[eo + P_M]
     if ii[eo + P_BEYOND + 1] >= ii[eo + P_ISO]:
         s = ii[eo + P_O_BEYOND] + (n + 2) * W
         th = ii[eo + P_O_TH]
         _, ok = solve_packed(f, s, 4, 1e-9, ii[eo + P_O_SCR], th)
         if ok and f[th] >= fmin:
             return KIND_HARMONICS
+    return KIND_NONE
+
+
+@jit
+def _load_stopped(f: F64, ii: I64, eo: int) -> bool:  # pragma: no cover - jit
+    """Over the last test window the load has stopped although the model says it moves
+    (Σẍ² ≤ ``STOPPED_ENERGY_FRACTION``·Σx̂̈²) and the accelerometer is alive (Σ(Δẍ)² above
+    ``FLAT_ENERGY_FRACTION``·Σx̂̈²: a dead sensor repeats one value, a held load still shows
+    the sensor's noise)."""
+    m = ii[eo + P_M]
     if ii[eo + P_MOTION + 1] < m:
-        return KIND_NONE
+        return False
     s = ii[eo + P_O_MOTION] + (m + 2) * 3
     s_step = f[s]
     s_accel = f[s + 1]
     s_xhat = f[s + 2]
-    if (
+    return (
         s_xhat > 0.0
         and s_accel <= STOPPED_ENERGY_FRACTION * s_xhat
         and s_step > FLAT_ENERGY_FRACTION * s_xhat
-    ):
-        return KIND_LOAD_STOPPED
-    return KIND_NONE
+    )
 
 
 @jit
@@ -368,8 +381,8 @@ def episode_tick(
         )
         f[sc + S_DRIFT] = cap if d > cap else (d if d > 0.0 else 0.0)
     # isolated, the episode reports θ and waits to clear: the friction evidence (the post
-    # window's refit, the innovation beyond a linear change, the stopped load) is not
-    # looked at again, so its windows are not kept
+    # window's refit, the innovation beyond a linear change) and the stopped load are not
+    # looked at again, so their windows are not kept
     evidence = state != 4
     if ticks > iso:
         sums_push(f, ii, ii[eo + P_O_SETTLED], n, W, eo + P_SETTLED, row)
@@ -403,6 +416,7 @@ def episode_tick(
         f[mo + 1] = accel * accel
         f[mo + 2] = xhat * xhat
         sums_push(f, ii, ii[eo + P_O_MOTION], m, 3, eo + P_MOTION, mo)
+        ii[eo + P_STOPPED] = 1 if _load_stopped(f, ii, eo) else 0
     f[sc + S_ACCEL_PAST] = accel
     # θ as reported: the settled window, else the post window, else the sliding window
     out[0] = theta1

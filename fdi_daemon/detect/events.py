@@ -10,7 +10,8 @@ non-finite numbers are stored as None so that each line is strict JSON. Kinds:
 - ``other_fault``: an alarm whose estimates do not track the signature within
   ``isolation_timeout_s`` of the detection (for the drift path's: of the residual test's
   alarm; with ``accel_clipping: true`` when the accelerometer sat at its rail during the
-  episode);
+  episode, ``load_stopped: true`` when the load had stopped although the model says it
+  moves: held by friction, or its drive lost, which the accelerometer cannot tell apart);
 - ``cleared``: the estimates and the test statistic are back to normal;
 - ``data_gap``: samples missing (``missing_samples``); the estimator restarts;
 - ``link_lost`` / ``link_restored``: emitted by the service's link layer, not the monitor;

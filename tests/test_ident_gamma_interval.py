@@ -124,3 +124,20 @@ def test_plant_resonance():
     a = np.real(np.poly([pole, np.conj(pole), 0.5]))
     assert plant_resonance_hz(a, 256.0) == pytest.approx(10.0)
     assert plant_resonance_hz(np.array([1.0, -0.5]), 256.0) is None
+
+
+def test_the_likelihood_ratio_interval_ends_between_grid_points():
+    """A profile lr(γ) = c (γ − γ0)² tabulated on the 0.2 grid: the ends lie where it crosses
+    the threshold (γ0 ± √(t/c)) within a tenth of a step, not on the grid points inside
+    (which fall short by up to a step, and missed a truth 0.002 below one, issue 43)."""
+    likelihood_ratio_interval, threshold = sig.likelihood_ratio_interval, sig.CHI2_1_99
+    grid = np.arange(0.0, 10.0001, 0.2)
+    gamma0, c = 3.37, 30.0
+    lo, hi = likelihood_ratio_interval(grid, c * (grid - gamma0) ** 2, threshold)
+    half = np.sqrt(threshold / c)
+    assert abs(lo - (gamma0 - half)) < 0.02 and abs(hi - (gamma0 + half)) < 0.02
+    inside = grid[c * (grid - gamma0) ** 2 <= threshold]
+    assert lo < inside.min() and hi > inside.max()
+    # a profile accepted up to the grid's end keeps that end; nothing accepted: None
+    assert likelihood_ratio_interval(grid, c * (grid - 9.9) ** 2, threshold)[1] == 10.0
+    assert likelihood_ratio_interval(grid, np.full(grid.size, 10.0), threshold) is None

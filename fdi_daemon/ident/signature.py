@@ -23,7 +23,8 @@ Identifiability. sign(v) and v share their fundamental, so with a single sine G_
 γ and the cost hardly depends on it. γ_f's 99 % interval is the hull of
 - the likelihood-ratio interval {γ : N_eff·ln(SSE(γ)/SSE_min) <= χ²₁(0.99) = 6.63}, N_eff =
   N/(1 + 2Σρ_k²) the independent samples in the error (a periodic misfit is worth few
-  samples, however long the window), and
+  samples, however long the window), its ends where the tabulated profile crosses 6.63
+  between grid points, and
 - the moving-block bootstrap interval of the profile's minimiser (`gamma_interval`), which
   keeps the error's correlation and its changes across the window;
 the whole grid when the least cost lies at the grid's end. Status: *flat* where the profile is
@@ -195,6 +196,27 @@ def _hull(
     return float(min(e[0] for e in ends)), float(max(e[1] for e in ends))
 
 
+def likelihood_ratio_interval(
+    grid: np.ndarray, lr: np.ndarray, threshold: float
+) -> tuple[float, float] | None:
+    """{γ : lr(γ) <= threshold} from the profile tabulated on the grid: from the outermost
+    accepted grid points, each end moved out to where lr, interpolated linearly, crosses the
+    threshold towards the rejected neighbour (a grid end stays where it is). None when no grid
+    point is accepted. Read on the grid points alone, an end falls up to a step short of the
+    crossing, and the interval could miss a γ just outside it that the data do not reject."""
+    accepted = np.flatnonzero(lr <= threshold)
+    if accepted.size == 0:
+        return None
+    ends = []
+    for inner, outer in ((accepted[0], accepted[0] - 1), (accepted[-1], accepted[-1] + 1)):
+        if outer < 0 or outer >= len(grid):
+            ends.append(float(grid[inner]))
+            continue
+        share = (threshold - lr[inner]) / (lr[outer] - lr[inner])
+        ends.append(float(grid[inner] + share * (grid[outer] - grid[inner])))
+    return ends[0], ends[1]
+
+
 def _effective_samples(error: np.ndarray) -> float:
     """N / (1 + 2 Σ_k ρ_k²), k = 1..N/4: the number of independent samples that give Σe² the
     same variance as the (coloured) error has. A white error gives N; a periodic misfit, whose
@@ -335,10 +357,7 @@ def estimate_signature(
 
     n_eff = _effective_samples(residual - best_fit.y_sim)
     lr = n_eff * np.log(sse / best_fit.sse)
-    inside = grid[lr <= CHI2_1_99]
-    profile_interval = (
-        (float(inside.min()), float(inside.max())) if inside.size else (gamma_f, gamma_f)
-    )
+    profile_interval = likelihood_ratio_interval(grid, lr, CHI2_1_99) or (gamma_f, gamma_f)
     span = float(grid[-1] - grid[0]) if len(grid) > 1 else 0.0
     depth = float(np.max(sse) / best_fit.sse - 1.0)
     boot = None

@@ -137,44 +137,16 @@ def prepare(
     y = np.asarray(y, float)
     hp = signals.highpass_from_input(u, fs_hz)
     y_dom = measured_in_domain(y, n_kind, hp, fs_hz)
-    provisional = signals.make_split(len(u), 0)
     info: dict[str, Any] = {"highpass_hz": hp}
-    domain = None
-    if plant_b is None:
-        chosen = order if order is not None else choose_order(u, y_dom, n_kind, provisional)
-        domain = fit_linear(u, y_dom, n_kind, provisional, chosen)
-        plant_b, plant_a = signals.acceleration_plant(*domain, n_kind, hp, fs_hz)
-        how = "" if order is not None else " (chosen from the data)"
-        info["baseline"] = (
-            f"output-error fit, order {chosen}{how}, on t < {provisional.train_end / fs_hz:.3g} s"
-        )
-    else:
-        info["baseline"] = "model file"
-    assert plant_a is not None  # given with plant_b, or fitted above
-    if len(plant_a) > 1 and np.max(np.abs(np.roots(plant_a))) >= 1.0:
-        raise UserError(
-            "the model's plant is unstable (a root of plant.a on or outside the "
-            "unit circle): it cannot be simulated"
-        )
+    plant_b, plant_a, domain = _nominal_plant(
+        u, y_dom, fs_hz, n_kind, hp, plant_b, plant_a, order, info
+    )
     nominal = AugmentedPlant(fs_hz, plant_b, plant_a, output_kind, hp, domain=domain)
     sig = nominal.run_signals(u)
     hp_settle = int(math.ceil(math.log(100.0) * fs_hz / (2 * math.pi * hp)))
     limit = len(u) // 4
     warmup = max(signals.settle_samples(nominal.a_dom, limit), min(hp_settle, limit))
     split = signals.make_split(len(u), warmup)
-    # a DC block removes an offset; a constant force moves no steady acceleration of a
-    # mechanism that holds its position; a baseline fitted here already holds the linear
-    # effects
-    skip = (
-        ({"sensor_offset"} if n_kind else set())
-        | ({"force_offset"} if not n_kind and zero_at_dc(nominal.b_dom, fs_hz, hp) else set())
-        | (
-            {"viscous_friction", "dead_time", "stiffness_change"}
-            if info["baseline"] != "model file"
-            else set()
-        )
-    )
-    candidates = tuple(e for e in EFFECT_NAMES if e not in skip and e not in NAMED_BY_MODE)
     ref_hz = band_centre_hz(u, fs_hz)
     # a dead time beyond a quarter period at the band centre (> 90° of phase there) is a
     # wrong model, not a dead time
@@ -193,7 +165,7 @@ def prepare(
         ref_hz=ref_hz,
         max_delay_samples=max_delay,
         u_centre=float(np.median(u[split.fit])),
-        candidates=candidates,
+        candidates=_candidates(n_kind, nominal, fs_hz, hp, info["baseline"] == "model file"),
         chain=signals.StateChain(n_kind, fs_hz, hp).coefficients,
         highpass_hz=hp,
     )
@@ -204,13 +176,75 @@ def prepare(
     info["drift"] = drift((y_dom - sig["y0"])[split.test], u[split.test], fs_hz)
     info["drift"]["slowest_time_constant_s"] = slowest_time_constant(nominal.a_dom, fs_hz)
     info["drift"]["dc_block_time_constant_s"] = 1.0 / (2.0 * math.pi * hp)
+    info["form"] = _form(form, n_kind, info)
+    return ctx, info
+
+
+def _nominal_plant(
+    u: np.ndarray,
+    y_dom: np.ndarray,
+    fs_hz: float,
+    n_kind: int,
+    hp: float,
+    plant_b: np.ndarray | None,
+    plant_a: np.ndarray | None,
+    order: int | None,
+    info: dict,
+) -> tuple[np.ndarray, np.ndarray, tuple | None]:
+    """Ĝ (b, a of the acceleration plant) and, for a fitted baseline, its (b, a) in the
+    measured quantity's domain (else None): the model file's plant, or an output-error fit
+    of ``order`` (None: `choose_order`) on the training part of the measured ``y_dom``
+    (``n_kind`` integrators, DC block at ``hp`` Hz). Sets ``info["baseline"]``; a plant
+    that is not stable is a `UserError`."""
+    provisional = signals.make_split(len(u), 0)
+    domain = None
+    if plant_b is None:
+        chosen = order if order is not None else choose_order(u, y_dom, n_kind, provisional)
+        domain = fit_linear(u, y_dom, n_kind, provisional, chosen)
+        plant_b, plant_a = signals.acceleration_plant(*domain, n_kind, hp, fs_hz)
+        how = "" if order is not None else " (chosen from the data)"
+        info["baseline"] = (
+            f"output-error fit, order {chosen}{how}, on t < {provisional.train_end / fs_hz:.3g} s"
+        )
+    else:
+        info["baseline"] = "model file"
+    assert plant_a is not None  # given with plant_b, or fitted above
+    if len(plant_a) > 1 and np.max(np.abs(np.roots(plant_a))) >= 1.0:
+        raise UserError(
+            "the model's plant is unstable (a root of plant.a on or outside the "
+            "unit circle): it cannot be simulated"
+        )
+    return plant_b, plant_a, domain
+
+
+def _candidates(
+    n_kind: int, nominal: AugmentedPlant, fs_hz: float, hp: float, model_file: bool
+) -> tuple[str, ...]:
+    """The candidate effects of the record (`effects.EFFECT_NAMES` in order, those named by
+    the mode they move left out): a DC block (a velocity or position record, ``n_kind`` >
+    0) removes an offset; a constant force moves no steady acceleration of a mechanism
+    that holds its position (`zero_at_dc`); a baseline fitted here (not a ``model_file``)
+    already holds the linear effects."""
+    skip = (
+        ({"sensor_offset"} if n_kind else set())
+        | ({"force_offset"} if not n_kind and zero_at_dc(nominal.b_dom, fs_hz, hp) else set())
+        | ({"viscous_friction", "dead_time", "stiffness_change"} if not model_file else set())
+    )
+    return tuple(e for e in EFFECT_NAMES if e not in skip and e not in NAMED_BY_MODE)
+
+
+def _form(form: str, n_kind: int, info: dict) -> str:
+    """The form of the test, with its reason in ``info["form_reason"]``: the user's, or
+    for "auto" from ``info["drift"]`` (`drift`): inverse dynamics for a velocity or
+    position record (``n_kind`` > 0) whose free-run error lies mostly below the input's
+    band (DRIFT_SHARE) or whose model is marginally stable (MARGINAL); a velocity or
+    position record whose free run does not drift is ``info["form_undecided"]`` (the
+    data decide between the two forms, `workflow`)."""
     if form == "auto":
         d = info["drift"]
         drifting = d["error_share_below"] > DRIFT_SHARE
         marginal = d["slowest_time_constant_s"] > MARGINAL * d["dc_block_time_constant_s"]
         form = "inverse_dynamics" if n_kind and (drifting or marginal) else "simulation"
-        # a velocity or position record whose free run does not drift: the data decide
-        # between the two forms (`workflow`)
         info["form_undecided"] = bool(n_kind) and not drifting
         info["form_reason"] = (
             f"{100 * d['error_share_below']:.0f} % of the free-run error lies below the "
@@ -233,8 +267,7 @@ def prepare(
         info["form_reason"] = "chosen by the user"
     if form == "inverse_dynamics" and not n_kind:
         raise UserError("the inverse-dynamics form needs a velocity or position output")
-    info["form"] = form
-    return ctx, info
+    return form
 
 
 def in_form(ctx: Context, info: dict, y: np.ndarray, form: str) -> tuple[Context, dict]:

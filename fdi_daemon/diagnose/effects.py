@@ -429,6 +429,17 @@ def columns(
     return np.column_stack(cols)
 
 
+def effect_columns(ctx: Context, effects: list[FittedEffect]) -> np.ndarray:
+    """The design matrix of ``effects`` side by side (`columns` of each, φ from the
+    context's cache)."""
+    return np.column_stack(
+        [
+            columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
+            for e in effects
+        ]
+    )
+
+
 #: at most this many training samples are used to search a nonlinear parameter
 SEARCH_SAMPLES = 65536
 

@@ -25,7 +25,7 @@ effects). The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
 m ẍ + c ẋ + k x = F − F_f moves with the plant's poles), and its numerator B_F (one per
 regressor, same order as Â) is identified: first by linear least squares with the nominal
 motion (the feed-forward first approximation, `effects.fit_effect`), then refined by
-output-error least squares with the motion in the loop (`refine`). A valve or an input
+output-error least squares with the motion in the loop (`_LoopFit`). A valve or an input
 filter between the input and the force (poles of Ĝ that are not the mechanics') is
 cancelled by B_F's zeros; a force input makes B_F ∝ B̂.
 
@@ -43,7 +43,14 @@ from scipy import signal
 from scipy.optimize import least_squares as least_squares_nl
 
 from fdi_daemon.core.compiled import jit
-from fdi_daemon.diagnose.effects import friction_form
+from fdi_daemon.diagnose.effects import (
+    SPECS,
+    FittedEffect,
+    effect_columns,
+    friction_form,
+    physical_report,
+    solve_gram,
+)
 from fdi_daemon.diagnose.mode_lines import nominal_pole
 
 #: effects that are forces on the moving mass
@@ -368,8 +375,6 @@ def bounded_least_squares(x: np.ndarray, y: np.ndarray, upper: np.ndarray) -> np
     """min ‖y − xθ‖ subject to θ ≤ ``upper`` (0 or +inf per number): an active set, each
     violating number held at its bound in turn (the worst first) and the rest refitted
     (`effects.least_squares` on the Gram matrix), until every number is within bounds."""
-    from fdi_daemon.diagnose.effects import solve_gram
-
     gram, xty = x.T @ x, x.T @ y
     held = np.zeros(len(upper), dtype=bool)
     theta = np.zeros(len(upper))
@@ -391,7 +396,7 @@ def in_the_loop(
     (``loop_stiffness`` added when no spring is among them, `SPRINGS`) and their
     contribution y − ŷ₀ over the record.
 
-    The force path G_F = B_F/Â is identified on the training part in three steps:
+    The force path G_F = B_F/Â is identified on the training part in four steps:
     1. feed-forward start: B_F = θ B̂ (a force enters where the input does), θ and the
        fed-forward coefficients by least squares with the nominal motion;
     2. the amplitudes θ (and fed-forward coefficients) by output-error least squares with
@@ -412,177 +417,224 @@ def in_the_loop(
     Alone it is the candidate ``stiffness_change`` (`select`: every other force effect must
     do significantly better than it).
     """
-    from fdi_daemon.diagnose.effects import (
-        SPECS,
-        FittedEffect,
-        columns,
-        physical_report,
-    )
-
     width = len(ctx.a_dom)
     if spring and not any(e.name in SPRINGS for e in effects):
         effects = [
             FittedEffect("loop_stiffness", None, [np.zeros(width)], n_linear=width, n_free=width)
         ] + list(effects)
-    ff = [e for e in effects if e.name not in LOOPED]
-    fb = [e for e in effects if e.name in LOOPED]
-    fit = ctx.split.fit
-    end = ctx.split.train_end  # the output-error fits run the loop over the training part
-    y_meas = ctx.target + ctx.y0
-    x_ff = (
-        np.column_stack(
-            [
-                columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
-                for e in ff
-            ]
-        )
-        if ff
-        else np.zeros((len(ctx.u), 0))
-    )
-    n_ff = x_ff.shape[1]
-    cols = [c for e in fb for c in kinds(e.name, e.param)]
-    # a friction's force path: its high-frequency gain b_j0 ≤ 0 (`friction_bounds`); on an
-    # acceleration output b_j0 is the direct term, elsewhere the path's leading terms are
-    # the state chain's and are left free
-    upper = (
-        friction_bounds(cols, n_ff, width, width)
-        if ctx.chain[0] == 0
-        else np.full(n_ff + len(cols) * width, np.inf)
-    )
+    loop = _LoopFit(ctx, effects)
+    fits = [loop.from_start(b) for b in loop.starts()]
+    held = loop.from_previous(previous)
+    if held is not None:
+        fits.append(held)
+    best, best_ff, best_nums, y, phi, v = min(fits, key=lambda f: f[0])
+    out = loop.fitted(best_ff, best_nums, y, phi, v)
+    if joint and np.isfinite(best):
+        joined = loop.joint_fit(best, best_ff, best_nums, y, phi, v)
+        if joined[0] < best:
+            effects_joined = loop.fitted(*joined[1:])
+            # the joint optimum may lie where the effects are not physically possible (a
+            # Stribeck excess that pushes the motion): the best possible fit is kept then
+            if possible(effects_joined) or not possible(out):
+                out, y = effects_joined, joined[3]
+    return out, y - ctx.y0
 
-    def run(theta_ff, nums):
+
+class _LoopFit:
+    """The fit of `in_the_loop` for one set of effects (``loop_stiffness`` already among
+    them), by stage: `from_start` (steps 1-3), `from_previous` (step 3 from the effects
+    named so far), `joint_fit` (step 4), `fitted` (the effects and their reports).
+
+    The parameter vector is [θ_ff, B_F per force column]: θ_ff the fed-forward effects'
+    coefficients (their columns ``x_ff``, ``n_ff`` of them), B_F a numerator of ``width``
+    = len(Â) numbers per column of ``cols`` [(kind, parameter)]. A fit is the tuple
+    (training SSE, θ_ff, B_F (columns × width), y, φ, v), the last three from the loop run
+    over the record (`ForceLoop.trace`)."""
+
+    def __init__(self, ctx, effects: list) -> None:
+        self.ctx = ctx
+        self.effects = effects
+        self.width = width = len(ctx.a_dom)
+        self.ff = [e for e in effects if e.name not in LOOPED]
+        self.fb = [e for e in effects if e.name in LOOPED]
+        self.y_meas = ctx.target + ctx.y0
+        self.x_ff = effect_columns(ctx, self.ff) if self.ff else np.zeros((len(ctx.u), 0))
+        self.n_ff = n_ff = self.x_ff.shape[1]
+        self.cols = cols = [c for e in self.fb for c in kinds(e.name, e.param)]
+        # a friction's force path: its high-frequency gain b_j0 ≤ 0 (`friction_bounds`); on
+        # an acceleration output b_j0 is the direct term, elsewhere the path's leading terms
+        # are the state chain's and are left free
+        self.upper = (
+            friction_bounds(cols, n_ff, width, width)
+            if ctx.chain[0] == 0
+            else np.full(n_ff + len(cols) * width, np.inf)
+        )
+        # the same for [θ_ff, an amplitude per column] (steps 1 and 2)
+        self.amp_upper = friction_bounds(cols, n_ff, width, 1)
+        # the clip of a diverging trial's residual (`training_error`)
+        self.scale = 1e3 * (float(np.std(self.y_meas[ctx.split.fit])) or 1.0)
+
+    def run(self, theta_ff, nums):
+        """The loop over the record: ((y, φ, v), the training SSE; inf where it diverges)."""
+        ctx = self.ctx
         with np.errstate(all="ignore"):
-            y, phi, v = ForceLoop(ctx.a_dom, cols, nums, ctx.chain).trace(ctx.y0 + x_ff @ theta_ff)
-            sse = float(np.sum((y_meas - y)[fit] ** 2))
+            y, phi, v = ForceLoop(ctx.a_dom, self.cols, nums, ctx.chain).trace(
+                ctx.y0 + self.x_ff @ theta_ff
+            )
+            sse = float(np.sum((self.y_meas - y)[ctx.split.fit] ** 2))
         return (y, phi, v), (sse if np.isfinite(sse) else np.inf)
 
-    scale = 1e3 * (float(np.std(y_meas[fit])) or 1.0)
-
-    def training_error(theta_ff, nums):
+    def training_error(self, theta_ff, nums):
         """The loop's output error on the training part (the loop run over it only)."""
+        ctx, end = self.ctx, self.ctx.split.train_end
         with np.errstate(all="ignore"):
-            y_ff = (ctx.y0 + x_ff @ theta_ff)[:end]
-            e = (y_meas[:end] - ForceLoop(ctx.a_dom, cols, nums, ctx.chain).run(y_ff))[fit]
+            y_ff = (ctx.y0 + self.x_ff @ theta_ff)[:end]
+            y = ForceLoop(ctx.a_dom, self.cols, nums, ctx.chain).run(y_ff)
+            e = (self.y_meas[:end] - y)[ctx.split.fit]
         # an unstable trial diverges: a large, finite residual keeps the solver going
-        return np.clip(np.nan_to_num(e, nan=scale), -scale, scale)
+        return np.clip(np.nan_to_num(e, nan=self.scale), -self.scale, self.scale)
 
-    def from_start(b_path):
-        """Steps 1-3 from the force path B_F = θ b_path."""
-        # 1. feed-forward start, 2. amplitudes on b_path in the loop
+    def starts(self) -> list[np.ndarray]:
+        """The start paths of step 1, each fitted and the lower training error kept: the
+        input's path B̂ (a force input) and, on an acceleration output, a force that moves
+        the acceleration at once (B_F = θ Â, G_F = θ: the path of a force on the mass where
+        the input acts through a valve's lag). On a velocity or position output G_F = θ Â
+        is not a force on the mass: only the input's path."""
+        starts = [_padded(self.ctx.b_dom, self.width), _padded(self.ctx.a_dom, self.width)]
+        return starts if self.ctx.chain[0] == 0 else starts[:1]
+
+    def from_start(self, b_path: np.ndarray) -> tuple:
+        """Steps 1-3 from the force path B_F = θ b_path: the fit (class docstring)."""
+        theta = self.feed_forward_start(b_path)
+        theta = self.amplitudes_in_the_loop(theta, b_path)
+        return self.refine(theta[: self.n_ff], np.outer(theta[self.n_ff :], b_path))
+
+    def feed_forward_start(self, b_path: np.ndarray) -> np.ndarray:
+        """Step 1: [θ_ff, amplitudes θ on b_path] by bounded least squares with the nominal
+        motion (a friction's amplitude ≤ 0, `friction_bounds`); a start whose loop diverges
+        has its amplitudes halved, up to SHRINKS times, towards the linear model."""
+        ctx, n_ff = self.ctx, self.n_ff
         x_fb = np.column_stack(
-            [signal.lfilter(b_path, ctx.a_dom, _phi(k, p, ctx.v, ctx.x)) for k, p in cols]
+            [signal.lfilter(b_path, ctx.a_dom, _phi(k, p, ctx.v, ctx.x)) for k, p in self.cols]
         )
-        amp_upper = friction_bounds(cols, n_ff, width, 1)
         theta = bounded_least_squares(
-            np.column_stack([x_ff, x_fb])[fit], ctx.target[fit], amp_upper
+            np.column_stack([self.x_ff, x_fb])[ctx.split.fit],
+            ctx.target[ctx.split.fit],
+            self.amp_upper,
         )
         for _ in range(SHRINKS):  # a start whose loop diverges: towards the linear model
-            if np.isfinite(run(theta[:n_ff], np.outer(theta[n_ff:], b_path))[1]):
+            if np.isfinite(self.run(theta[:n_ff], np.outer(theta[n_ff:], b_path))[1]):
                 break
             theta[n_ff:] *= 0.5
+        return theta
+
+    def amplitudes_in_the_loop(self, theta: np.ndarray, b_path: np.ndarray) -> np.ndarray:
+        """Step 2: θ (fed-forward coefficients, amplitudes on b_path) by output-error least
+        squares with the motion in the loop, from ``theta``; kept where it lowers the
+        training error."""
+        n_ff = self.n_ff
 
         def residual(th):
-            return training_error(th[:n_ff], np.outer(th[n_ff:], b_path))
+            return self.training_error(th[:n_ff], np.outer(th[n_ff:], b_path))
 
         r0 = residual(theta)
         with np.errstate(all="ignore"):
             sol = least_squares_nl(
                 residual,
                 theta,
-                bounds=(-np.inf, amp_upper),
+                bounds=(-np.inf, self.amp_upper),
                 method="trf",
                 x_scale="jac",
                 max_nfev=30 * theta.size,
             )
-        if float(sol.fun @ sol.fun) < float(r0 @ r0):
-            theta = sol.x
-        return refine(theta[:n_ff], np.outer(theta[n_ff:], b_path))
+        return sol.x if float(sol.fun @ sol.fun) < float(r0 @ r0) else theta
 
-    def refine(best_ff, best_nums):
-        """Step 3 from the given fed-forward coefficients and numerators."""
-        (y, phi, v), best = run(best_ff, best_nums)
-        # 3. free numerators, passes on the regressors the loop applied (its own motion;
-        #    the stick value while the mass is held)
+    def refine(self, best_ff: np.ndarray, best_nums: np.ndarray) -> tuple:
+        """Step 3 from the given fed-forward coefficients and numerators: at most PASSES
+        passes of bounded least squares for the free numerators on the regressors the loop
+        applied (its own motion; the stick value while the mass is held), each step halved
+        until the loop's training error falls; stops when a pass gains under 0.1 %."""
+        ctx, fit, n_ff = self.ctx, self.ctx.split.fit, self.n_ff
+        shape = (len(self.cols), self.width)
+        (y, phi, v), best = self.run(best_ff, best_nums)
         for _ in range(PASSES if np.isfinite(best) else 0):
-            xs = [x_ff] + [
-                _shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), width)
-                for j in range(len(cols))
+            xs = [self.x_ff] + [
+                _shifts(signal.lfilter([1.0], ctx.a_dom, phi[:, j]), self.width)
+                for j in range(len(self.cols))
             ]
-            target = bounded_least_squares(np.column_stack(xs)[fit], ctx.target[fit], upper)
+            target = bounded_least_squares(np.column_stack(xs)[fit], ctx.target[fit], self.upper)
             start = np.concatenate([best_ff, best_nums.ravel()])
             before = best
             for frac in (1.0, 0.5, 0.25, 0.125):
                 trial = start + frac * (target - start)
-                traced, sse = run(trial[:n_ff], trial[n_ff:].reshape(len(cols), width))
+                traced, sse = self.run(trial[:n_ff], trial[n_ff:].reshape(shape))
                 if sse < best:
                     (y, phi, v), best = traced, sse
-                    best_ff, best_nums = trial[:n_ff], trial[n_ff:].reshape(len(cols), width)
+                    best_ff, best_nums = trial[:n_ff], trial[n_ff:].reshape(shape)
                     break
             if best > 0.999 * before:
                 break
         return best, best_ff, best_nums, y, phi, v
 
-    def joint_fit(best, best_ff, best_nums):
-        """4. every coefficient at once by output-error least squares with the motion in
-        the loop (finite-difference Jacobian): the passes of step 3 regress on the states
-        of the previous run and stop short of the optimum."""
-        x0 = np.minimum(np.concatenate([best_ff, best_nums.ravel()]), upper)
+    def from_previous(self, previous: list | None) -> tuple | None:
+        """Step 3 from the loop fitted before (``previous``: the effects named so far, as
+        they were fitted), anything new at zero: the fit never starts further from the data
+        than the model it extends. None when ``previous`` holds no loop."""
+        before = {e.name: e for e in previous or []}
+        if not any(e.name in LOOPED for e in before.values()):
+            return None
+        return self.refine(
+            np.concatenate([_held(e, before) for e in self.ff] + [np.zeros(0)]),
+            np.concatenate([_held(e, before) for e in self.fb]).reshape(-1, self.width),
+        )
+
+    def joint_fit(self, best, best_ff, best_nums, y, phi, v) -> tuple:
+        """Step 4: every coefficient at once by output-error least squares with the motion
+        in the loop (finite-difference Jacobian, JOINT_ITERATIONS), from the fit given: the
+        passes of step 3 regress on the states of the previous run and stop short of the
+        optimum. The fit given where the joint one is not better or diverges later."""
+        n_ff, shape = self.n_ff, (len(self.cols), self.width)
+        x0 = np.minimum(np.concatenate([best_ff, best_nums.ravel()]), self.upper)
 
         def residual(th):
-            return training_error(th[:n_ff], th[n_ff:].reshape(len(cols), width))
+            return self.training_error(th[:n_ff], th[n_ff:].reshape(shape))
 
         with np.errstate(all="ignore"):
             sol = least_squares_nl(
                 residual,
                 x0,
-                bounds=(-np.inf, upper),
+                bounds=(-np.inf, self.upper),
                 method="trf",
                 x_scale="jac",
                 max_nfev=JOINT_ITERATIONS,
             )
-        theta_ff, nums = sol.x[:n_ff], sol.x[n_ff:].reshape(len(cols), width)
-        traced, sse = run(theta_ff, nums)
+        theta_ff, nums = sol.x[:n_ff], sol.x[n_ff:].reshape(shape)
+        traced, sse = self.run(theta_ff, nums)
         if sse < best and np.all(np.isfinite(traced[0])):  # not one that diverges later
             return sse, theta_ff, nums, *traced
         return best, best_ff, best_nums, y, phi, v
 
-    # two starts, the lower training error kept: the input's path B̂ (a force input) and
-    # a force that moves the acceleration at once (B_F = θ Â, G_F = θ: the path of a force
-    # on the mass where the input acts through a valve's lag)
-    starts = [_padded(ctx.b_dom, width), _padded(ctx.a_dom, width)]
-    if ctx.chain[0] != 0:  # velocity or position output: in its domain G_F = θ Â is not
-        starts = starts[:1]  # a force on the mass; only the input's path
-    fits = [from_start(b) for b in starts]
-    before = {e.name: e for e in previous or []}
-    if any(e.name in LOOPED for e in before.values()):
-        # the loop fitted before (the effects named so far, as they were fitted), anything
-        # new at zero: the fit never starts further from the data than the model it extends
-        fits.append(
-            refine(
-                np.concatenate([_held(e, before) for e in ff] + [np.zeros(0)]),
-                np.concatenate([_held(e, before) for e in fb]).reshape(-1, width),
-            )
-        )
-
-    def input_path(best_ff) -> np.ndarray:
+    def input_path(self, best_ff: np.ndarray) -> np.ndarray:
         """The loop's input numerator: B̂, plus B_e where the nominal one is refitted
         (``linear_refit``, whose coefficients lie where its columns do in x_ff)."""
         pos = 0
-        for e in ff:
+        for e in self.ff:
             if e.name == "linear_refit":
-                return _padded(ctx.b_dom, width) + best_ff[pos : pos + width]
+                return _padded(self.ctx.b_dom, self.width) + best_ff[pos : pos + self.width]
             pos += e.n_linear
-        return ctx.b_dom
+        return self.ctx.b_dom
 
-    def fitted(best_ff, best_nums, y, phi, v) -> list:
-        """The effects with these coefficients, each with its report (`force_report`)."""
+    def fitted(self, best_ff, best_nums, y, phi, v) -> list:
+        """The effects with these coefficients, each with its report (`force_report`, a
+        fed-forward one `effects.physical_report`), in the order of ``effects``."""
+        ctx, width, cols = self.ctx, self.width, self.cols
         viscous = next((best_nums[j] for j, (kind, _) in enumerate(cols) if kind == _VEL), None)
         spring = next(
             ((best_nums[j], phi[:, j]) for j, (kind, _) in enumerate(cols) if kind == _X), None
         )
-        b_input = input_path(best_ff)
+        b_input = self.input_path(best_ff)
         out, pos, row = [], 0, 0
-        for e in effects:
+        for e in self.effects:
             if e.name in LOOPED:
                 k = len(kinds(e.name, e.param))
                 new = FittedEffect(
@@ -609,40 +661,31 @@ def in_the_loop(
                 new.physical = physical_report(new, ctx)
                 pos += k
             out.append(new)
-        linear = next((e for e in out if e.name in SPRINGS), None)
-        for e in out:
-            if e.name == "viscous_friction" and linear is not None:
-                # a viscous friction is a damper: the loop's linear part must move the mode
-                # by damping (`mode_shift`, with the spring beside it), not by stiffness,
-                # and add damping, not remove it
-                e.physical["mode_change"] = linear.physical.get("mode_change")
-                # its size per unit mass, Δ(c/m), read from the mode like the damping: the
-                # split of the damping between the spring's and the viscous column's free
-                # numerators is not determined by the data
-                added = linear.physical.get("damping_change_per_s")
-                e.physical["damping_change_per_s"] = added
-                # and a damper at its bound, one that does not move the mode by the
-                # record's resolution ("none"), adds no damping: it contributes nothing
-                # (what its free numerator fits is not a damper) and is never named
-                e.physical["plausible"] = bool(
-                    e.physical["plausible"]
-                    and e.physical["mode_change"] not in MECHANICS
-                    and e.physical["mode_change"] != "none"
-                    and (added is None or added >= 0.0)
-                )
+        _damper_by_the_mode(out)
         return out
 
-    best, best_ff, best_nums, y, phi, v = min(fits, key=lambda f: f[0])
-    out = fitted(best_ff, best_nums, y, phi, v)
-    if joint and np.isfinite(best):
-        joined = joint_fit(best, best_ff, best_nums)
-        if joined[0] < best:
-            effects_joined = fitted(*joined[1:])
-            # the joint optimum may lie where the effects are not physically possible (a
-            # Stribeck excess that pushes the motion): the best possible fit is kept then
-            if possible(effects_joined) or not possible(out):
-                out, y = effects_joined, joined[3]
-    return out, y - ctx.y0
+
+def _damper_by_the_mode(effects: list) -> None:
+    """A viscous friction beside the loop's linear force of x (`SPRINGS`) is a damper: the
+    loop's linear part must move the mode by damping (`mode_shift`, with the spring beside
+    it), not by stiffness, and add damping, not remove it. Its size per unit mass, Δ(c/m)
+    (1/s, ``damping_change_per_s``), is read from the mode like the damping: the split of
+    the damping between the spring's and the viscous column's free numerators is not
+    determined by the data. A damper that does not move the mode by the record's
+    resolution ("none") adds no damping: it contributes nothing (what its free numerator
+    fits is not a damper) and is never named. Sets the reports in place."""
+    linear = next((e for e in effects if e.name in SPRINGS), None)
+    for e in effects:
+        if e.name == "viscous_friction" and linear is not None:
+            e.physical["mode_change"] = linear.physical.get("mode_change")
+            added = linear.physical.get("damping_change_per_s")
+            e.physical["damping_change_per_s"] = added
+            e.physical["plausible"] = bool(
+                e.physical["plausible"]
+                and e.physical["mode_change"] not in MECHANICS
+                and e.physical["mode_change"] != "none"
+                and (added is None or added >= 0.0)
+            )
 
 
 def possible(effects: list) -> bool:
@@ -702,58 +745,79 @@ def force_report(
     (`effects.friction_form`: an excess that takes friction away near v = 0 makes the form
     a Coulomb friction, ``named_as``). Otherwise the fit is not ``plausible`` and is never
     named. The power test needs no knowledge of how force enters, unlike the sign of c.
-    On an acceleration output (``steady_share``): a force of the motion holds no steady
-    acceleration (a bounded motion's mean acceleration is zero); an effect whose output is
-    mostly its mean (mean² above half its mean square, `STEADY_SHARE`) is a sensor's offset.
+    On an acceleration output (``steady_share``, `_steady_share`): a force of the motion
+    holds no steady acceleration; an effect whose output is mostly its mean is a sensor's
+    offset.
     """
     if not np.all(np.isfinite(y)):
         return {"diverged": True, "plausible": False}
-    n, vb, va, fs = ctx.chain
     fit = ctx.split.fit
     out: dict = {}
     if eff.param is not None:
         out["stribeck_velocity"] = float(eff.param)
         out["stribeck_velocity_unit"] = "velocity units"
     plausible = True
-    vv = float(v[fit] @ v[fit]) or 1.0
     total = np.zeros(len(y))  # the effect's own output, its columns together
     for j, (label, b) in enumerate(zip(_FORCE_LABELS[eff.name], eff.coefficients)):
         c = signal.lfilter(b, ctx.a_dom, phi[:, j])
         total += c
         if eff.name == "viscous_friction" and spring is not None:
             c = c + signal.lfilter(spring[0], ctx.a_dom, spring[1])
-        g = signal.lfilter(b_input, ctx.a_dom, phi[:, j])[fit]
-        gg = float(g @ g)
-        out[f"{label}_input_equivalent"] = -float(g @ c[fit]) / gg if gg > 0 else 0.0
+        out[f"{label}_input_equivalent"] = _input_equivalent(ctx, b_input, phi[:, j], c)
         if eff.name in _FRICTION:
-            if n == 0:  # the fit holds b_j0 ≤ 0 (`friction_bounds`): at 0 no force at all
+            if ctx.chain[0] == 0:  # the fit holds b_j0 ≤ 0 (`friction_bounds`): at 0 no force
                 out[f"{label}_at_bound"] = at_bound(b)
                 plausible = plausible and not out[f"{label}_at_bound"]
-                w = signal.lfilter(vb, va, c)
-            elif n == 1:
-                w = c
-            else:
-                w = np.diff(c, prepend=0.0) * fs
-            power = float(w[fit] @ v[fit]) / vv
-            out[f"{label}_power_ratio"] = power
+            out[f"{label}_power_ratio"] = power = _power_ratio(ctx, c, v)
             plausible = plausible and power < 0.0
     if eff.name == "stribeck_friction":
         plausible = plausible and friction_form(
             out, out["coulomb_level_input_equivalent"], out["stribeck_excess_input_equivalent"]
         )
-    if n == 0 and eff.name != "force_offset":
-        # a force of the motion holds no steady acceleration: the mean acceleration of a
-        # bounded motion is zero, a constant one is a sensor's offset
-        mean_square = float(np.mean(total[fit] ** 2))
-        out["steady_share"] = (
-            float(np.mean(total[fit])) ** 2 / mean_square if mean_square > 0 else 0.0
-        )
+    if ctx.chain[0] == 0 and eff.name != "force_offset":
+        out["steady_share"] = _steady_share(total[fit])
         plausible = plausible and out["steady_share"] <= STEADY_SHARE
     if eff.name in SPRINGS:  # the base's spring is reported too (`report`: loop_spring)
         out.update(mode_shift(ctx, eff.coefficients[0], b_v))
         plausible = plausible and (eff.name == "loop_stiffness" or out["mode_change"] in MECHANICS)
     out["plausible"] = plausible
     return out
+
+
+def _input_equivalent(ctx, b_input: np.ndarray, phi: np.ndarray, c: np.ndarray) -> float:
+    """The input per unit of φ that a force column takes away, c = −⟨G_uφ, G_Fφ⟩/⟨G_uφ, G_uφ⟩
+    on the training part (`force_report`): ``phi`` the column's regressor, ``c`` its output
+    G_Fφ over the record, G_u = b_input/Â the loop's input path; 0 where G_uφ is 0."""
+    fit = ctx.split.fit
+    g = signal.lfilter(b_input, ctx.a_dom, phi)[fit]
+    gg = float(g @ g)
+    return -float(g @ c[fit]) / gg if gg > 0 else 0.0
+
+
+def _power_ratio(ctx, c: np.ndarray, v: np.ndarray) -> float:
+    """P = ⟨w, v⟩/⟨v, v⟩ on the training part (`force_report`: a friction's < 0, it takes
+    energy out of the motion): w the velocity that an output contribution ``c`` moves
+    (through the state chain: its filter on an acceleration, ``c`` itself on a velocity,
+    its differences on a position), v the loop's velocity."""
+    n, vb, va, fs = ctx.chain
+    if n == 0:
+        w = signal.lfilter(vb, va, c)
+    elif n == 1:
+        w = c
+    else:
+        w = np.diff(c, prepend=0.0) * fs
+    fit = ctx.split.fit
+    vv = float(v[fit] @ v[fit]) or 1.0
+    return float(w[fit] @ v[fit]) / vv
+
+
+def _steady_share(total: np.ndarray) -> float:
+    """The share of an effect's output energy (its acceleration ``total`` on the training
+    part) that is its mean, mean²/mean square (0 for no output). A force of the motion holds
+    no steady acceleration (the mean acceleration of a bounded motion is zero): above
+    STEADY_SHARE the effect is a sensor's offset (`force_report`)."""
+    mean_square = float(np.mean(total**2))
+    return float(np.mean(total)) ** 2 / mean_square if mean_square > 0 else 0.0
 
 
 def mode_shift(ctx, b_x: np.ndarray, b_v: np.ndarray | None = None) -> dict:

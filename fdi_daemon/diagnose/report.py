@@ -104,7 +104,19 @@ def _explanation(name: str) -> str:
 
 
 def summary_lines(report: dict[str, Any]) -> list[str]:
-    """A short human-readable summary for the terminal."""
+    """A short human-readable summary for the terminal: the baseline and the form of the
+    test, the refit check, the effects named, the gap and the ranking, where the error sat."""
+    return (
+        _baseline_lines(report)
+        + _linear_check_lines(report)
+        + _effect_lines(report)
+        + _gap_lines(report)
+        + [_where_line(report["regions"])]
+    )
+
+
+def _baseline_lines(report: dict[str, Any]) -> list[str]:
+    """The baseline, the form of the test and the noise floor."""
     lines = [
         f"baseline: {report['model']['baseline']}  "
         f"(output {report['model']['output_kind']}, held out from "
@@ -119,6 +131,12 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         )
     else:
         lines.append(f"noise floor (NRMSE): unknown ({floor['method']})")
+    return lines
+
+
+def _linear_check_lines(report: dict[str, Any]) -> list[str]:
+    """What the numerator refit's check found (`select.linear_round`), where it matters."""
+    lines = []
     check = report["linear_check"]
     if check.get("matching"):
         held = check.get("held_by")
@@ -145,6 +163,13 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
             "dead time nor a change of one parameter of the mode: it stays in the "
             "base"
         )
+    return lines
+
+
+def _effect_lines(report: dict[str, Any]) -> list[str]:
+    """The effects named with their parameters (or none), the rounds that were ambiguous,
+    the effects a later one holds, and what the force loop's spring does to the mode."""
+    lines = []
     if report["effect"] is None:
         lines.append("no significant missing effect")
     else:
@@ -179,7 +204,13 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
             f"{spring['damping_ratio']:.2g} (stiffness x "
             f"{spring['stiffness_ratio']:.3g}; read as {spring['mode_change']})"
         )
-    lines.append(
+    return lines
+
+
+def _gap_lines(report: dict[str, Any]) -> list[str]:
+    """The held-out gap before and after (also against the noise floor) and the first
+    five candidates of the ranking (``*``: accepted)."""
+    lines = [
         f"gap (NRMSE, held out): {report['gap_before']:.4g} -> "
         f"{report['gap_after']:.4g}"
         + (
@@ -188,7 +219,7 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
             if report["gap_before_to_floor"] is not None
             else ""
         )
-    )
+    ]
     lines.append("ranking:")
     for row in report["ranking"][:5]:
         mark = "*" if row["accepted"] else " "
@@ -197,9 +228,15 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
             f" {mark} {name:<18} gap {row['gap_after']:.4g}  "
             f"score {row['score']:.1f}  p {row['p_value']:.2g}"
         )
-    seg = [r for r in report["regions"] if r["kind"] == "time"][:1]
-    st = [r for r in report["regions"] if r["kind"] == "state"][:1]
-    fr = [r for r in report["regions"] if r["kind"] == "frequency"][:1]
+    return lines
+
+
+def _where_line(regions: list[dict]) -> str:
+    """Where the error sat before: the first time segment, state and frequency band of the
+    localisation's ``regions`` (`localize`)."""
+    seg = [r for r in regions if r["kind"] == "time"][:1]
+    st = [r for r in regions if r["kind"] == "state"][:1]
+    fr = [r for r in regions if r["kind"] == "frequency"][:1]
     where = []
     if seg:
         where.append(f"t {seg[0]['t0']:.3g}-{seg[0]['t1']:.3g} s")
@@ -210,5 +247,4 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
             f"{fr[0]['f0']:.3g}-{fr[0]['f1']:.3g} Hz "
             f"({100 * fr[0]['error_power_fraction']:.0f} % of error power)"
         )
-    lines.append("error sat at: " + "; ".join(where))
-    return lines
+    return "error sat at: " + "; ".join(where)

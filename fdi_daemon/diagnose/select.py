@@ -57,6 +57,7 @@ from fdi_daemon.diagnose.effects import (
     FittedEffect,
     NotApplicable,
     columns,
+    effect_columns,
     fit_effect,
 )
 from fdi_daemon.diagnose.force import (
@@ -523,12 +524,70 @@ def select_effects(
       without it (`_without_explanation`), and when it does not pay on top of them it is
       theirs and not named (``held_by``);
     - an effect E named in the first round on top of the refit: right after that round
-      (before the base's spring check, which could take a change of the mechanics that a
-      mode line reads), the match is named first, E refitted on top of it, when it still
-      matches on top of E (`_explanation_on_top`, ``on_top_of``); otherwise E holds it (a
-      friction's describing function or a static map's Bussgang gain also looks like a
-      gain change) and the refit stays in the base.
+      the match is named first, E refitted on top of it, where it still matches on top of
+      E (`_matching_on_top`); otherwise E holds it and the refit stays in the base.
     """
+    chosen, base_cols, prediction, linear = _starting_base(ctx, refit_linear, floor_sse, explain)
+    rounds: list[list[Candidate]] = []
+    ambiguous: list[dict] = []
+    spring: dict = {}
+    test = ctx.split.test
+    skip = set(LINEAR_EXPLANATIONS) if refit_linear else set()
+    while len([e for e in chosen if e.name not in BASE_TERMS]) < max_effects:
+        reference, refit_base = _round_reference(ctx, chosen, prediction, bool(rounds))
+        e0 = ctx.target[test] - reference[1][test]
+        sse0 = float(e0 @ e0)
+        if rounds and floor_sse is not None and sse0 <= floor_sse:
+            chosen, prediction = reference
+            break  # what is left is noise
+        n_eff = effective_samples(e0)
+        results = _round(ctx, chosen, base_cols, reference, sse0, n_eff, skip, progress)
+        rounds.append(results)
+        best, reference = _named_in_round(ctx, results, n_eff, reference, refit_base)
+        if best is None:
+            chosen, prediction = reference
+            break
+        tie = _runner_up(ctx, results, best)
+        if tie is not None:
+            ambiguous.append(tie)
+        by_mode = [mechanics_name(e) for e in best.base + [best.effect]]
+        if linear.get("matching") and explain is None and len(rounds) == 1:
+            # the first effect named on top of the refit, whose main content the check found
+            # to be a gain, a shift or a mode line (before the base's spring check)
+            if _stands_for(linear["matching"]) in {e.named_as for e in by_mode}:
+                # the effect named is the change the check found, read by the loop's free
+                # path (the loop's spring reading a mass): one effect, one name, read on
+                # the line, which has no free numerator to bend the mode with; the base
+                # is still the refit alone, so the rounds run again with the line (below)
+                break
+            held = _matching_on_top(ctx, by_mode, best, linear, floor_sse)
+            if held is not None:
+                held.rounds = rounds + held.rounds
+                return held
+        chosen, prediction, check = spring_check(ctx, by_mode, best.prediction, floor_sse, linear)
+        spring = check or spring
+        base_cols = effect_columns(ctx, chosen)
+    if (
+        linear.get("matching")
+        and explain is None
+        and not any(e.name not in BASE_TERMS for e in chosen)
+    ):
+        # nothing but the refit: name what it matches
+        return select_effects(
+            ctx, max_effects, progress, refit_linear, floor_sse, explain=linear["matching"]
+        )
+    return _after_the_rounds(
+        ctx, chosen, prediction, rounds, linear, spring, ambiguous, explain, floor_sse
+    )
+
+
+def _starting_base(
+    ctx: Context, refit_linear: bool, floor_sse: float | None, explain: str | None
+) -> tuple[list[FittedEffect], np.ndarray | None, np.ndarray, dict]:
+    """The base the first round starts from (`select_effects`): nothing; with
+    ``refit_linear`` the force balance's refit (inverse dynamics) or what `linear_round`
+    leaves (the refit or its explanation; ``explain`` named in the refit's place). Returns
+    (effects, their columns, their contribution over the record, the refit check)."""
     chosen: list[FittedEffect] = []
     base_cols = None
     prediction = np.zeros_like(ctx.target)
@@ -539,120 +598,141 @@ def select_effects(
     elif refit_linear:
         chosen, prediction, linear = linear_round(ctx, floor_sse, explain)
     if chosen:
-        base_cols = np.column_stack(
-            [
-                columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
-                for e in chosen
-            ]
-        )
+        base_cols = effect_columns(ctx, chosen)
         prediction = base_cols @ np.concatenate([np.ravel(c) for c in chosen[0].coefficients])
-    rounds: list[list[Candidate]] = []
-    ambiguous: list[dict] = []
-    spring: dict = {}
-    test = ctx.split.test
-    skip = set(LINEAR_EXPLANATIONS) if refit_linear else set()
-    while len([e for e in chosen if e.name not in BASE_TERMS]) < max_effects:
-        reference = (chosen, prediction)
-        refit_base = (
-            bool(rounds) and ctx.form == "simulation" and any(e.name in LOOPED for e in chosen)
-        )
-        if refit_base:
-            # the reference is the base given the fit each candidate gets on top of it
-            # (its loop refitted from where it stands, `in_the_loop`): what the loop's
-            # fit reaches by itself is no candidate's; a refit that is not physically
-            # possible is no base (the effects named stay as their round fitted them)
-            reference = _possible_or(in_the_loop(ctx, chosen, chosen), reference)
-        e0 = ctx.target[test] - reference[1][test]
-        sse0 = float(e0 @ e0)
-        if rounds and floor_sse is not None and sse0 <= floor_sse:
-            chosen, prediction = reference
-            break  # what is left is noise
-        n_eff = effective_samples(e0)
-        has_spring = any(e.name in SPRINGS for e in chosen)  # the loop's spring is in
-        taken = {e.name for e in chosen} | {NESTS.get(e.name) for e in chosen}
-        named_so_far = {e.named_as for e in chosen}
-        remaining = [
-            c
-            for c in ctx.candidates
-            if c not in taken and c not in skip and not (has_spring and c == "stiffness_change")
-        ]
-        results = []
-        for name in remaining:
-            try:
-                results.append(evaluate(name, ctx, chosen, base_cols, sse0, n_eff))
-            except NotApplicable:
-                pass
-            if progress is not None:
-                progress(name)
-        for c in results:
-            beats, gain, spread = margin(ctx, reference[1], c.prediction)
-            c.block_gain = (gain, spread)
-            c.accepted = c.accepted and beats and c.effect.named_as not in named_so_far
-        results.sort(key=lambda c: c.score)
-        rounds.append(results)
-        best = _choose(ctx, results, n_eff)
-        while best is not None and refit_base:
-            pays, there = _beyond_its_start(ctx, best)
-            if pays:
-                break
-            # the base's loop from the candidate's start did it: that fit of the base is
-            # kept when it fits the training part better, and the next candidate is tried
-            reference = min(
-                reference,
-                _possible_or(there, reference),
-                key=lambda fit: _sse(ctx, fit[1], ctx.split.fit),
-            )
-            best.accepted = False
-            best = _choose(ctx, results, n_eff)
-        if best is None:
-            chosen, prediction = reference
+    return chosen, base_cols, prediction, linear
+
+
+def _round_reference(
+    ctx: Context, chosen: list[FittedEffect], prediction: np.ndarray, later: bool
+) -> tuple[tuple[list[FittedEffect], np.ndarray], bool]:
+    """The reference a round's candidates are judged against, (effects, contribution), and
+    whether it is the base refitted: in a ``later`` round whose base holds a loop, the base
+    given the fit each candidate gets on top of it (its loop refitted from where it stands,
+    `in_the_loop`): what the loop's fit reaches by itself is no candidate's. A refit that is
+    not physically possible is no base (the effects named stay as their round fitted
+    them)."""
+    reference = (chosen, prediction)
+    refit_base = later and ctx.form == "simulation" and any(e.name in LOOPED for e in chosen)
+    if refit_base:
+        reference = _possible_or(in_the_loop(ctx, chosen, chosen), reference)
+    return reference, refit_base
+
+
+def _round(
+    ctx: Context,
+    chosen: list[FittedEffect],
+    base_cols: np.ndarray | None,
+    reference: tuple[list[FittedEffect], np.ndarray],
+    sse0: float,
+    n_eff: float,
+    skip: set[str],
+    progress,
+) -> list[Candidate]:
+    """One round: every candidate not yet in ``chosen`` (nor contained in an effect there,
+    nor in ``skip``; ``stiffness_change`` not where the loop's spring is in) fitted on top
+    of it (`evaluate`) and accepted only where it also beats the ``reference`` by the
+    margin of the held-out blocks (`margin`) and stands for an effect not named yet.
+    Returns the candidates sorted by score (best first)."""
+    has_spring = any(e.name in SPRINGS for e in chosen)  # the loop's spring is in
+    taken = {e.name for e in chosen} | {NESTS.get(e.name) for e in chosen}
+    named_so_far = {e.named_as for e in chosen}
+    remaining = [
+        c
+        for c in ctx.candidates
+        if c not in taken and c not in skip and not (has_spring and c == "stiffness_change")
+    ]
+    results = []
+    for name in remaining:
+        try:
+            results.append(evaluate(name, ctx, chosen, base_cols, sse0, n_eff))
+        except NotApplicable:
+            pass
+        if progress is not None:
+            progress(name)
+    for c in results:
+        beats, gain, spread = margin(ctx, reference[1], c.prediction)
+        c.block_gain = (gain, spread)
+        c.accepted = c.accepted and beats and c.effect.named_as not in named_so_far
+    results.sort(key=lambda c: c.score)
+    return results
+
+
+def _named_in_round(
+    ctx: Context,
+    results: list[Candidate],
+    n_eff: float,
+    reference: tuple[list[FittedEffect], np.ndarray],
+    refit_base: bool,
+) -> tuple[Candidate | None, tuple[list[FittedEffect], np.ndarray]]:
+    """The candidate a round names (`_choose`), or None, and the round's reference. Where
+    the reference is the base refitted (``refit_base``), the candidate must also pay
+    beyond its start (`_beyond_its_start`); where it does not, the base's loop from the
+    candidate's start did it: that fit of the base becomes the reference when it fits the
+    training part better, the candidate is not accepted and the next one is tried."""
+    best = _choose(ctx, results, n_eff)
+    while best is not None and refit_base:
+        pays, there = _beyond_its_start(ctx, best)
+        if pays:
             break
-        tie = _runner_up(ctx, results, best)
-        if tie is not None:
-            ambiguous.append(tie)
-        by_mode = [mechanics_name(e) for e in best.base + [best.effect]]
-        named = [e.name for e in by_mode if e.name not in BASE_TERMS]
-        if linear.get("matching") and explain is None and len(rounds) == 1:
-            # the first effect named on top of the refit, whose main content the check found
-            # to be a gain, a shift or a mode line: is it still, on top of that effect?
-            # (before the base's spring is checked: it can take a change of the mechanics
-            # that a mode line reads, and then no room is left for the line)
-            if _stands_for(linear["matching"]) in {e.named_as for e in by_mode}:
-                # the effect named is the change the check found, read by the loop's free
-                # path (the loop's spring reading a mass): one effect, one name, read on
-                # the line, which has no free numerator to bend the mode with
-                return select_effects(
-                    ctx, max_effects, progress, refit_linear, floor_sse, explain=linear["matching"]
-                )
-            refit = next(e for e in by_mode if e.name == "linear_refit")
-            held = _explanation_on_top(
-                ctx, named, linear["matching"], best.prediction, refit.n_params, floor_sse
-            )
-            if held is not None:
-                held.linear = {
-                    **linear,
-                    "named": linear["matching"],
-                    "on_top_of": [e.named_as for e in held.named if e.name != linear["matching"]],
-                }
-                held.linear.pop("matching")
-                held.rounds = rounds + held.rounds
-                return held
-        chosen, prediction, check = spring_check(ctx, by_mode, best.prediction, floor_sse, linear)
-        spring = check or spring
-        cols = [
-            columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
-            for e in chosen
-        ]
-        base_cols = np.column_stack(cols)
-    if (
-        linear.get("matching")
-        and explain is None
-        and not any(e.name not in BASE_TERMS for e in chosen)
-    ):
-        # nothing but the refit: name what it matches
-        return select_effects(
-            ctx, max_effects, progress, refit_linear, floor_sse, explain=linear["matching"]
+        reference = min(
+            reference,
+            _possible_or(there, reference),
+            key=lambda fit: _sse(ctx, fit[1], ctx.split.fit),
         )
+        best.accepted = False
+        best = _choose(ctx, results, n_eff)
+    return best, reference
+
+
+def _matching_on_top(
+    ctx: Context,
+    by_mode: list[FittedEffect],
+    best: Candidate,
+    linear: dict,
+    floor_sse: float | None,
+) -> Selection | None:
+    """Is the refit's main content, which the check found to be a gain, a shift or a mode
+    line (``linear["matching"]``), still that on top of the effects the first round named
+    (``by_mode``, named by the mode they move; ``best`` the candidate named)? Asked right
+    after the first round, before the base's spring check: that can take a change of the
+    mechanics that a mode line reads, and then no room is left for the line. Where it
+    still matches on top of them (`_explanation_on_top`), the selection with the match
+    named first and the effects refitted on top of it (the refit check's ``named`` and
+    ``on_top_of``); None where they hold it (a friction's describing function or a static
+    map's Bussgang gain also looks like a gain change): the refit stays in the base."""
+    named = [e.name for e in by_mode if e.name not in BASE_TERMS]
+    refit = next(e for e in by_mode if e.name == "linear_refit")
+    held = _explanation_on_top(
+        ctx, named, linear["matching"], best.prediction, refit.n_params, floor_sse
+    )
+    if held is not None:
+        held.linear = {
+            **linear,
+            "named": linear["matching"],
+            "on_top_of": [e.named_as for e in held.named if e.name != linear["matching"]],
+        }
+        held.linear.pop("matching")
+    return held
+
+
+def _after_the_rounds(
+    ctx: Context,
+    chosen: list[FittedEffect],
+    prediction: np.ndarray,
+    rounds: list[list[Candidate]],
+    linear: dict,
+    spring: dict,
+    ambiguous: list[dict],
+    explain: str | None,
+    floor_sse: float | None,
+) -> Selection:
+    """The selection after the rounds (`select_effects`): each effect named before a force
+    effect must still pay on top of it (`_each_pays_on_top`); effects named on top of an
+    explanation of the refit (``explain``) are fitted again without it
+    (`_without_explanation`: where it does not pay on top of them it is theirs, not named,
+    ``held_by``); nothing named leaves the model as it was (a refit alone is not a missing
+    effect); a round's tie is reported while its named effect is kept."""
     held_by_later: list[dict] = []
     if explain is None:
         chosen, prediction, held_by_later = _each_pays_on_top(ctx, chosen, prediction)
@@ -786,12 +866,7 @@ def _fit_set(
     prediction = np.zeros_like(ctx.target)
     base_cols = None
     if chosen:
-        base_cols = np.column_stack(
-            [
-                columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
-                for e in chosen
-            ]
-        )
+        base_cols = effect_columns(ctx, chosen)
         prediction = base_cols @ np.concatenate(
             [np.ravel(c) for e in chosen for c in e.coefficients]
         )
@@ -799,12 +874,7 @@ def _fit_set(
         e0 = ctx.target[test] - prediction[test]
         c = evaluate(name, ctx, chosen, base_cols, float(e0 @ e0), effective_samples(e0))
         chosen = c.base + [c.effect]
-        base_cols = np.column_stack(
-            [
-                columns(SPECS[e.name], e.param, ctx, ctx.regressors(SPECS[e.name], e.param))
-                for e in chosen
-            ]
-        )
+        base_cols = effect_columns(ctx, chosen)
         prediction = c.prediction
     e = ctx.target[test] - prediction[test]
     return chosen, prediction, float(e @ e)
@@ -984,17 +1054,56 @@ def spring_check(
     ):
         return chosen, prediction, {}
     rest = [e for e in chosen if e is not spring]
+    check, judged = _spring_pays(ctx, chosen, spring, prediction, floor_sse)
+    if judged is None:
+        return chosen, prediction, check
+    damper = _damper_beside_the_spring(ctx, rest, *judged)
+    if damper is not None:
+        check.update(named=True, damper=True)
+        return damper[0], damper[1], check
+    matching = linear.get("matching")
+    change = check["mode_change"]
+    check["named"] = (
+        change in MECHANICS
+        and MECHANICS[change] not in {e.named_as for e in rest}
+        and (matching not in MODE_LINES or matching == f"mode_{change}")
+    )
+    if check["named"]:
+        # the refit check's line, where it tried it, must read the change the same way
+        check["line_ratio"] = line = _line_ratio(linear, change)
+        check["named"] = (
+            line is None or (line - 1.0) * (spring.physical[f"{change}_ratio"] - 1.0) > 0.0
+        )
+    if not check["named"]:
+        return chosen, prediction, check
+    named = replace(spring, name=MECHANICS[change], physical={**spring.physical, "plausible": True})
+    return rest + [named], prediction, check
+
+
+def _spring_pays(
+    ctx: Context,
+    chosen: list[FittedEffect],
+    spring: FittedEffect,
+    prediction: np.ndarray,
+    floor_sse: float | None,
+) -> tuple[dict, tuple[float, float, int] | None]:
+    """Does the loop's ``spring`` pay on top of the other effects of ``chosen``, fitted
+    again without it (`force.in_the_loop`, ``spring=False``), as a candidate would
+    (`_judged`), with the error without it above the noise floor (``floor_sse``)? Returns
+    the check's figures and, where it does, (held-out SSE with it, n_eff, the parameters
+    of ``chosen``); None where it does not."""
+    rest = [e for e in chosen if e is not spring]
     _, without = in_the_loop(ctx, rest, rest, spring=False)
     test = ctx.split.test
     e0 = ctx.target[test] - without[test]
     e1 = ctx.target[test] - prediction[test]
     sse0, sse1 = float(e0 @ e0), float(e1 @ e1)
     if not (math.isfinite(sse0) and sse1 < sse0):  # without it the loop diverges, or worse
-        return chosen, prediction, {"named": False, "pays": False}
+        return {"named": False, "pays": False}, None
     n_eff = effective_samples(e0)
     k_total = sum(e.n_params for e in chosen)
     if n_eff - k_total <= 1:
-        return chosen, prediction, {"named": False, "pays": False}
+        return {"named": False, "pays": False}, None
     score, p, pays = _judged(sse0, sse1, spring.n_params, k_total, n_eff)
     check: dict[str, Any] = {
         "p_value": p,
@@ -1005,37 +1114,21 @@ def spring_check(
     }
     if not (pays and check["above_floor"]):
         check["named"] = False
-        return chosen, prediction, check
-    damper = _damper_beside_the_spring(ctx, rest, sse1, n_eff, k_total)
-    if damper is not None:
-        check.update(named=True, damper=True)
-        return damper[0], damper[1], check
-    matching = linear.get("matching")
-    check["named"] = (
-        check["mode_change"] in MECHANICS
-        and MECHANICS[check["mode_change"]] not in {e.named_as for e in rest}
-        and (matching not in MODE_LINES or matching == f"mode_{check['mode_change']}")
+        return check, None
+    return check, (sse1, n_eff, k_total)
+
+
+def _line_ratio(linear: dict, change: str) -> float | None:
+    """The ratio (``<change>_ratio``) that the refit check (`linear_round`) read on the mode
+    line of ``change`` ("stiffness", "mass"), None where it did not try that line."""
+    return next(
+        (
+            x["params"][f"{change}_ratio"]
+            for x in linear.get("explanations", [])
+            if x["effect"] == f"mode_{change}"
+        ),
+        None,
     )
-    if check["named"]:
-        key = f"{check['mode_change']}_ratio"
-        line = next(
-            (
-                x["params"][key]
-                for x in linear.get("explanations", [])
-                if x["effect"] == f"mode_{check['mode_change']}"
-            ),
-            None,
-        )
-        check["line_ratio"] = line
-        check["named"] = line is None or (line - 1.0) * (spring.physical[key] - 1.0) > 0.0
-    if not check["named"]:
-        return chosen, prediction, check
-    named = replace(
-        spring,
-        name=MECHANICS[check["mode_change"]],
-        physical={**spring.physical, "plausible": True},
-    )
-    return rest + [named], prediction, check
 
 
 def _damper_beside_the_spring(

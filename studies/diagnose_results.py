@@ -3,8 +3,8 @@ docs/diagnose.md, with the held-out gaps, the noise floor and the sizes read, ag
 truth each simulator hid.
 
 Run: ``python studies/diagnose_results.py [-o docs/diagnose_results.md] [SECTION ...]``.
-Sections (default: the first five, about 14 minutes on two cores shared with other jobs,
-at a load average of 5; all seven about 18):
+Sections (default: the first five; 8.4 minutes on two cores shared with other jobs, 13.6
+at a load average of 5; all seven 18 at that load):
 
 - ``examples``: the §V model with each hidden effect of the library and one parameter
   changed, with a model file and with ``--fit-linear``, on acceleration, velocity and

@@ -218,9 +218,9 @@ def test_rig_valve_gain_fault_is_named(ratio, excitation, diagnosis):
 def test_rig_supply_pressure_is_a_stiffness_change(supply, excitation, diagnosis):
     # the chambers' pressures, and with them the air spring n p A²/V, follow the supply:
     # the load's mode moves (10.2 -> 9.2 Hz at 80 %, an output-error fit of the recording,
-    # `git show b57fd1a:docs/diagnose.md` §8) while the gain below it stays. Every force effect's free spring
-    # fits it; what changed is read from the mode. The seal's Coulomb friction may come
-    # with it
+    # `git show b57fd1a:docs/diagnose.md` §8) while the gain below it stays. Every force
+    # effect's free spring fits it; what changed is read from the mode. The seal's Coulomb
+    # friction may come with it
     result = _diagnose(diagnosis, "supply_pressure", supply, **excitation)
     assert "stiffness_change" in result.named
     assert set(result.named) <= {"stiffness_change"} | SEAL

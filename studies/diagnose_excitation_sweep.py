@@ -1,6 +1,7 @@
-"""`fdi diagnose` under excitations other than the tests' multisine (docs/diagnose.md §9).
+"""`fdi diagnose` under excitations other than the tests' multisine (docs/diagnose_results.md).
 Run: ``python studies/diagnose_excitation_sweep.py [mechanics] [duffing] [rig]`` (all three
-by default; about five minutes each, the rig fifteen).
+by default; under a minute each for mechanics and duffing, about three for the rig, on two
+shared cores).
 
 mechanics: the §V model with its nominal model file, one parameter changed (mass × 0.8 and
 × 1.25, spring × 0.8, damper × 1.5), 24 s, under band-limited Gaussian noise to 15 Hz, a
@@ -13,7 +14,8 @@ RMS, 40 s), fault-free and with one effect (a pure Coulomb friction of 1 N and o
 an accelerometer bias, a valve gain, a payload, the supply pressure, the air bearing's
 contact friction, the four drive effects), under the excitations of `RIG_EXCITATIONS` other
 than the tests' multisine: band-passed noise 1–15 Hz and a 2–25 Hz multisine.
-Prints the names, the held-out gap before and after, the form and the ratios or the k₃ read.
+Prints the names, the held-out gap before and after, the noise floor, the form and the ratios,
+sizes or the k₃ read (N/m³).
 """
 
 from __future__ import annotations
@@ -25,7 +27,23 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def mechanics() -> None:
+def outcome(r, label: str, read: dict) -> dict:
+    """A case's diagnosis as the sweeps yield it."""
+    return {
+        "case": label,
+        "named": r.named,
+        "gap_before": r.gap_before,
+        "gap_after": r.gap_after,
+        "floor": r.info["noise_floor"]["floor"],
+        "form": r.info["form"],
+        "read": read,
+        "ambiguous": [tie["effects"] for tie in r.ambiguous],
+    }
+
+
+def mechanics_cases():
+    """The §V model with one parameter changed, under three excitations, two outputs:
+    yields `outcome` with ``read`` the ratio (or Δ(c/m)) of each named linear change."""
     from fdi_daemon.diagnose.workflow import run_diagnose
     from hil_sim.msd import MsdParams, multisine, simulate_recording
     from tests.diagnose_cases import FS, NAMED_RATIOS, NOISE, noise_input, nominal_model
@@ -53,15 +71,12 @@ def mechanics() -> None:
                     for e in r.selection.named
                     if e.named_as in NAMED_RATIOS
                 }
-                print(
-                    f"{label}, {parameter} x {ratio:g}, {kind}: {r.named} "
-                    f"{r.gap_before:.4f} -> {r.gap_after:.4f} "
-                    f"(floor {r.info['noise_floor']['floor']:.4f}) {read}",
-                    flush=True,
-                )
+                yield outcome(r, f"{label}, {parameter} x {ratio:g}, {kind}", read)
 
 
-def duffing() -> None:
+def duffing_cases():
+    """The Duffing oscillator (a fitted linear baseline), three k₃ under three excitations:
+    yields `outcome` with ``read`` {"k3_n_per_m3": k₃ read} (nan: no cubic spring named)."""
     from fdi_daemon.diagnose.workflow import run_diagnose
     from hil_sim.msd import MsdParams, multisine, simulate_recording
     from tests.diagnose_cases import FS, NOISE, noise_input
@@ -83,15 +98,13 @@ def duffing() -> None:
             read = params.gain_n_per_v * cubic.get(
                 "cubic_coefficient_input_equivalent", cubic.get("cubic_coefficient", math.nan)
             )
-            print(
-                f"k3 {k3:.0e}, {label}: {r.named} {r.gap_before:.4f} -> {r.gap_after:.4f} "
-                f"(floor {r.info['noise_floor']['floor']:.4f}), form {r.info['form']}, "
-                f"k3 read {read:.3g} N/m^3",
-                flush=True,
-            )
+            yield outcome(r, f"k3 {k3:.0e}, {label}", {"k3_n_per_m3": float(read)})
 
 
-def rig() -> None:
+def rig_cases():
+    """The pneumatic rig with its model file, fault-free and with one effect each, under the
+    two excitations unlike the tests' multisine: yields `outcome` with ``read`` the sizes
+    of the named effects."""
     from fdi_daemon.diagnose.workflow import run_diagnose
     from tests.diagnose_cases import (
         NAMED_RATIOS,
@@ -134,15 +147,24 @@ def rig() -> None:
                 )
                 if key in e.physical and isinstance(e.physical[key], float)
             }
-            print(
-                f"{excitation}, {label}: {r.named} {r.gap_before:.4f} -> "
-                f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {read}",
-                flush=True,
-            )
+            yield outcome(r, f"{excitation}, {label}", read)
+
+
+def show(case: dict) -> str:
+    """One case as the script prints it."""
+    return (
+        f"{case['case']}: {case['named']} {case['gap_before']:.4f} -> {case['gap_after']:.4f} "
+        f"(floor {'unknown' if case['floor'] is None else format(case['floor'], '.4f')}), "
+        f"form {case['form']}, {case['read']}"
+    )
+
+
+PARTS = {"mechanics": mechanics_cases, "duffing": duffing_cases, "rig": rig_cases}
 
 
 if __name__ == "__main__":
     sys.path.insert(0, str(REPO))
     parts = sys.argv[1:] or ["mechanics", "duffing", "rig"]
     for part in parts:
-        {"mechanics": mechanics, "duffing": duffing, "rig": rig}[part]()
+        for case in PARTS[part]():
+            print(show(case), flush=True)

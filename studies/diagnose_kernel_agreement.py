@@ -13,8 +13,7 @@ same names everywhere and gaps within 5 %.
 
 from __future__ import annotations
 
-import ast
-import re
+import json
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -38,25 +37,29 @@ EXPECTED = {
 }
 #: gaps after further apart than this share are a difference (issue 42)
 GAP_SHARE = 0.05
-_LINE = re.compile(r"(v\d+) (\S+) \S+: (\[.*?\]) ([\d.]+) -> ([\d.]+)")
 
 
-def sweep(kernel: str | None, indices: list[str]) -> dict[tuple[str, str], tuple[list, float]]:
-    """(variant, fault) -> (names, gap after) of the sweep under ``kernel``."""
+def sweep(kernel: str | None, indices: list[str], on_cell=None) -> dict[tuple[str, str], dict]:
+    """(variant, fault) -> the cell of the sweep under ``kernel`` (`diagnose_rig_variants.cells`:
+    names, gaps, floor, ratios); ``on_cell(cell)`` is called as each cell arrives."""
     from tests.diagnose_cases import openblas_environment
 
-    out = subprocess.run(
-        [sys.executable, str(SWEEP), *indices],
+    cells = {}
+    with subprocess.Popen(
+        [sys.executable, str(SWEEP), "--json", *indices],
         env=openblas_environment(kernel),
-        capture_output=True,
+        stdout=subprocess.PIPE,
         text=True,
-        check=True,
-    ).stdout
-    return {
-        (m[1], m[2]): (ast.literal_eval(m[3]), float(m[5]))
-        for m in map(_LINE.match, out.splitlines())
-        if m
-    }
+    ) as child:
+        assert child.stdout is not None
+        for text in child.stdout:
+            cell = json.loads(text)
+            cells[cell["variant"], cell["fault"]] = cell
+            if on_cell is not None:
+                on_cell(cell)
+    if child.returncode:
+        raise subprocess.CalledProcessError(child.returncode, child.args)
+    return cells
 
 
 def as_physics_says(names: list, fault: str) -> bool:
@@ -64,31 +67,47 @@ def as_physics_says(names: list, fault: str) -> bool:
     return set(names) <= SEAL | want and (not want or bool(want & set(names)))
 
 
-def main(indices: list[str]) -> None:
-    sys.path.insert(0, str(REPO))
+def kernels() -> tuple[str, str | None]:
+    """The two kernels compared: Haswell, and SkylakeX where the CPU has AVX-512 (None:
+    OpenBLAS's own choice)."""
     from tests.diagnose_cases import has_avx512
 
-    kernels = ("Haswell", "SkylakeX" if has_avx512() else None)
+    return "Haswell", "SkylakeX" if has_avx512() else None
+
+
+def compare(one: dict, other: dict) -> dict[tuple[str, str], dict[str, bool]]:
+    """Per cell of both sweeps: the same names, gaps after more than `GAP_SHARE` apart,
+    named as the physics says under the first and under the second kernel."""
+    compared = {}
+    for c in sorted(set(one) & set(other)):
+        a, b = one[c], other[c]
+        compared[c] = {
+            "same": a["named"] == b["named"],
+            "apart": abs(a["gap_after"] - b["gap_after"])
+            > GAP_SHARE * min(a["gap_after"], b["gap_after"]),
+            "right_one": as_physics_says(a["named"], c[1]),
+            "right_other": as_physics_says(b["named"], c[1]),
+        }
+    return compared
+
+
+def main(indices: list[str]) -> None:
+    sys.path.insert(0, str(REPO))
+    pair = kernels()
     with ThreadPoolExecutor(2) as pool:
-        one, other = pool.map(lambda k: sweep(k, indices), kernels)
-    cells = sorted(set(one) & set(other))
-    same = {c: one[c][0] == other[c][0] for c in cells}
-    apart = {
-        c: abs(one[c][1] - other[c][1]) > GAP_SHARE * min(one[c][1], other[c][1]) for c in cells
-    }
-    right = {
-        c: (as_physics_says(one[c][0], c[1]), as_physics_says(other[c][0], c[1])) for c in cells
-    }
-    print(f"{'cell':28s} {kernels[0]:>40s} | {kernels[1] or 'OpenBLAS own'}")
-    for c in cells:
-        if not same[c] or apart[c] or not all(right[c]):
-            (n1, g1), (n2, g2) = one[c], other[c]
-            print(f"{' '.join(c):28s} {str(n1) + f' {g1:.4f}':>40s} | {n2} {g2:.4f}")
+        one, other = pool.map(lambda k: sweep(k, indices), pair)
+    compared = compare(one, other)
+    print(f"{'cell':28s} {pair[0]:>40s} | {pair[1] or 'OpenBLAS own'}")
+    for c, v in compared.items():
+        if not v["same"] or v["apart"] or not (v["right_one"] and v["right_other"]):
+            a, b = one[c], other[c]
+            first = f"{a['named']} {a['gap_after']:.4f}"
+            print(f"{' '.join(c):28s} {first:>40s} | {b['named']} {b['gap_after']:.4f}")
+    count = {k: sum(v[k] for v in compared.values()) for k in next(iter(compared.values()))}
     print(
-        f"{len(cells)} cells: the same names {sum(same.values())}, gaps after more than "
-        f"{GAP_SHARE:.0%} apart {sum(apart.values())}, named as the physics says "
-        f"{sum(r[0] for r in right.values())} ({kernels[0]}) and "
-        f"{sum(r[1] for r in right.values())} ({kernels[1] or 'OpenBLAS own'})"
+        f"{len(compared)} cells: the same names {count['same']}, gaps after more than "
+        f"{GAP_SHARE:.0%} apart {count['apart']}, named as the physics says "
+        f"{count['right_one']} ({pair[0]}) and {count['right_other']} ({pair[1] or 'OpenBLAS own'})"
     )
 
 

@@ -1,5 +1,5 @@
 """`fdi diagnose` on random variants of the simulated rig, each with its own identified model
-(docs/diagnose.md §8, "Rig variants"). Run: ``python studies/diagnose_rig_variants.py
+(docs/diagnose_results.md, "Rig variants"). Run: ``python studies/diagnose_rig_variants.py
 [VARIANT ...]`` (default 0 1 2 3; about half a minute per variant).
 
 Per variant (`test_detect_other_rig.rig_variant`: another load mass, damping, valve, seal
@@ -12,13 +12,15 @@ linear damping doubled (a damper) and the rod seal's friction raised to a pure C
 friction of 0.5 N (static = Coulomb).
 Prints the names, the held-out gap before and after, the noise floor and the fitted ratio
 of a gain fault, a stiffness change or a mass change, or the damping a viscous friction
-adds per unit mass (Δ(c/m), 1/s), with the truth.
+adds per unit mass (Δ(c/m), 1/s), with the truth; with ``--json`` one JSON object per cell
+(`cells`; what `diagnose_kernel_agreement.py` and `diagnose_results.py` read).
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import json
 import sys
 import tempfile
 from pathlib import Path
@@ -53,7 +55,10 @@ def identified_model(rig: dict, folder: Path):
     return load_model(folder / "m.yaml")
 
 
-def main(indices: list[int]) -> None:
+def cells(indices: list[int]):
+    """Per variant in ``indices`` and per fault of `FAULTS`, one blind diagnosis: yields
+    ``{variant, fault, value, named, gap_before, gap_after, floor, ratios, truth,
+    ambiguous}`` (ratios: the fitted ratio or Δ(c/m) of each named linear change)."""
     sys.path.insert(0, str(REPO / "tests"))
     sys.path.insert(0, str(REPO))
     from test_detect_other_rig import rig_variant
@@ -73,11 +78,11 @@ def main(indices: list[int]) -> None:
             if fault == "payload_kg":
                 params["bearing_mass_kg"] = nominal.bearing_mass_kg + value
                 ratio = RigParams(**params).moving_mass_kg / nominal.moving_mass_kg
-                truth = f" (moving mass x {ratio:.3f})"
+                truth = f"moving mass x {ratio:.3f}"
             elif fault == "damping_x":
                 params["viscous_damping_n_s_per_m"] = nominal.viscous_damping_n_s_per_m * value
                 added = (value - 1.0) * nominal.viscous_damping_n_s_per_m / nominal.moving_mass_kg
-                truth = f" (damping per unit mass + {added:.1f} /s)"
+                truth = f"damping per unit mass + {added:.1f} /s"
             elif fault == "seal_coulomb_n":
                 params.update(seal_coulomb_n=value, seal_static_n=value)
             u, y = rig_recording(
@@ -88,17 +93,39 @@ def main(indices: list[int]) -> None:
                 variant=tuple(sorted(params.items())),
             )
             r = run_diagnose(u, y, RIG_FS, "acceleration", model.plant_b, model.plant_a)
-            ratios = {
-                e.named_as: round(float(e.physical[NAMED_RATIOS[e.named_as]]), 3)
-                for e in r.selection.named
-                if e.named_as in NAMED_RATIOS
+            yield {
+                "variant": f"v{index}",
+                "fault": fault or "none",
+                "value": value,
+                "named": r.named,
+                "gap_before": r.gap_before,
+                "gap_after": r.gap_after,
+                "floor": r.info["noise_floor"]["floor"],
+                "ratios": {
+                    e.named_as: round(float(e.physical[NAMED_RATIOS[e.named_as]]), 3)
+                    for e in r.selection.named
+                    if e.named_as in NAMED_RATIOS
+                },
+                "truth": truth,
+                "ambiguous": [tie["effects"] for tie in r.ambiguous],
             }
-            print(
-                f"v{index} {fault or 'none'} {value:g}: {r.named} {r.gap_before:.4f} -> "
-                f"{r.gap_after:.4f} (floor {r.info['noise_floor']['floor']:.4f}) {ratios}" + truth,
-                flush=True,
-            )
+
+
+def line(cell: dict) -> str:
+    """One cell as the script prints it."""
+    truth = f" ({cell['truth']})" if cell["truth"] else ""
+    return (
+        f"{cell['variant']} {cell['fault']} {cell['value']:g}: {cell['named']} "
+        f"{cell['gap_before']:.4f} -> {cell['gap_after']:.4f} (floor {cell['floor']:.4f}) "
+        f"{cell['ratios']}{truth}"
+    )
+
+
+def main(indices: list[int], as_json: bool = False) -> None:
+    for cell in cells(indices):
+        print(json.dumps(cell) if as_json else line(cell), flush=True)
 
 
 if __name__ == "__main__":
-    main([int(a) for a in sys.argv[1:]] or [0, 1, 2, 3])
+    arguments = [a for a in sys.argv[1:] if a != "--json"]
+    main([int(a) for a in arguments] or [0, 1, 2, 3], as_json="--json" in sys.argv[1:])

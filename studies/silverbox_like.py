@@ -1,4 +1,4 @@
-"""A Silverbox-like record (docs/diagnose.md §9) and what `fdi diagnose` makes of it.
+"""A Silverbox-like record (docs/diagnose_results.md) and what `fdi diagnose` makes of it.
 
 An electronic Duffing oscillator recorded as the Silverbox benchmark is:
 
@@ -94,23 +94,39 @@ def record(beta: float, seed: int = 1, band_hz: float = 200.0, realisations: int
     return rec.v_in, rec["position"], k3 / W0**2
 
 
-def main(betas: list[float], band_hz: float) -> None:
+def diagnose_record(beta: float, band_hz: float = 200.0) -> dict:
+    """`run_diagnose` on the record of strength ``beta`` (a fitted linear baseline, position
+    out): names, gaps, floor, the input-equivalent sizes of the named effects and the true
+    cubic coefficient (V per V³)."""
     from fdi_daemon.diagnose.workflow import run_diagnose
 
-    for beta in betas:
-        u, y, truth = record(beta, band_hz=band_hz)
-        result = run_diagnose(u, y, FS, "position")
-        sizes = {
+    u, y, truth = record(beta, band_hz=band_hz)
+    result = run_diagnose(u, y, FS, "position")
+    return {
+        "beta": beta,
+        "band_hz": band_hz,
+        "named": result.named,
+        "gap_before": result.gap_before,
+        "gap_after": result.gap_after,
+        "floor": result.info["noise_floor"]["floor"],
+        "sizes": {
             e.name: {
                 k: round(v, 4) for k, v in e.physical.items() if k.endswith("input_equivalent")
             }
             for e in result.selection.named
-        }
+        },
+        "k3_truth": truth,
+    }
+
+
+def main(betas: list[float], band_hz: float) -> None:
+    for beta in betas:
+        r = diagnose_record(beta, band_hz)
         print(
-            f"beta {beta}, band {band_hz:g} Hz: named {result.named}, gap "
-            f"{result.gap_before:.4f} -> {result.gap_after:.4f} "
-            f"(floor {result.info['noise_floor']['floor']}), "
-            f"sizes {sizes}, k3 truth {truth:.4f} V/V^3",
+            f"beta {beta}, band {band_hz:g} Hz: named {r['named']}, gap "
+            f"{r['gap_before']:.4f} -> {r['gap_after']:.4f} "
+            f"(floor {r['floor']}), "
+            f"sizes {r['sizes']}, k3 truth {r['k3_truth']:.4f} V/V^3",
             flush=True,
         )
 

@@ -88,7 +88,7 @@ def test_a_stribeck_form_is_named_by_its_level_at_rest(coulomb, excess, possible
 
 @pytest.mark.parametrize("effect", ["cubic_stiffness", "output_saturation"])
 def test_a_hidden_spring_or_clip_is_named_alone(effect, diagnosis):
-    # before the loop's joint fit (docs/diagnose.md §4.3 step 4) the hidden cubic spring
+    # before the loop's joint fit (docs/diagnose.md §4.3, the joint fit) the hidden cubic spring
     # was named with an output clip of gain ≈ 0 second, standing in for the part of the
     # spring the loop had not fitted; a clip must have a clip's gain (`map_share`). Later
     # a sensor offset came second, credited with the loop's fit from its own start

@@ -56,7 +56,8 @@ def _diagnose_under(case: str, kernel: str | None) -> dict:
     return json.loads(next(line for line in out.splitlines() if line.startswith("{")))
 
 
-#: measured on 29 Nov 2026 (AMD EPYC, AVX-512; docs/diagnose.md §5.1): the known differences
+#: measured on 29 Nov 2026 (AMD EPYC, AVX-512; `git show b57fd1a:docs/diagnose.md` §5.1): the
+#: known differences
 _AVX512 = has_avx512()
 _NAMES_DIFFER = pytest.mark.xfail(
     _AVX512, strict=True, reason="issue 42: under AVX-512 a backlash is named second"

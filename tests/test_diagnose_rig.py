@@ -218,9 +218,9 @@ def test_rig_valve_gain_fault_is_named(ratio, excitation, diagnosis):
 def test_rig_supply_pressure_is_a_stiffness_change(supply, excitation, diagnosis):
     # the chambers' pressures, and with them the air spring n p A²/V, follow the supply:
     # the load's mode moves (10.2 -> 9.2 Hz at 80 %, an output-error fit of the recording,
-    # docs/diagnose.md §8) while the gain below it stays. Every force effect's free spring
-    # fits it; what changed is read from the mode. The seal's Coulomb friction may come
-    # with it
+    # `git show b57fd1a:docs/diagnose.md` §8) while the gain below it stays. Every force
+    # effect's free spring fits it; what changed is read from the mode. The seal's Coulomb
+    # friction may come with it
     result = _diagnose(diagnosis, "supply_pressure", supply, **excitation)
     assert "stiffness_change" in result.named
     assert set(result.named) <= {"stiffness_change"} | SEAL
@@ -246,7 +246,7 @@ def test_rig_payload_is_a_mass_change(bearing_mass_kg, excitation, diagnosis):
     nominal = RigParams()
     true = (nominal.piston_rod_mass_kg + bearing_mass_kg) / nominal.moving_mass_kg
     # heavier or lighter, as it is (the ratio is the load's mode's, which the chambers' air
-    # spring shapes too: docs/diagnose.md §9)
+    # spring shapes too: docs/diagnose.md §9, "A linear change is read from one mode")
     assert (mass.physical["mass_ratio"] - 1.0) * (true - 1.0) > 0.0
     assert result.gap_after <= 0.5 * result.gap_before
 

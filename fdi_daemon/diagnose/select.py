@@ -1138,7 +1138,7 @@ def _damper_beside_the_spring(
     physically possible and pays on top of the spring's fit (held-out SSE ``sse_spring``,
     ``k_total`` parameters): the spring's free numerator can carry a damper, and the
     friction's free path beside it can bend its mode towards another reading (the rig's
-    load damping × 2 read as a mass × 0.835, docs/diagnose.md §9)."""
+    load damping × 2 read as a mass × 0.835, `git show b57fd1a:docs/diagnose.md` §9)."""
     width = len(ctx.a_dom)
     damper = FittedEffect("viscous_friction", None, [np.zeros(width)], n_linear=width, n_free=width)
     effects, prediction = in_the_loop(ctx, rest + [damper], rest)

@@ -75,7 +75,7 @@ def run_diagnose(
     roundings (the rig's 3.4 N Coulomb friction under 0.4 V was named with an input
     saturation on one and on four threads, alone on two). The products are small,
     so one thread is also the fastest: that record 8.1 s on one thread, 10.8 s on two (a
-    2-core machine, docs/diagnose.md §9)."""
+    2-core machine, `git show b57fd1a:docs/diagnose.md` §9)."""
     y = np.asarray(y, float)
     ctx, info = prepare(u, y, fs_hz, output_kind, plant_b, plant_a, order, form)
     result = _diagnose(*in_form(ctx, info, y, info["form"]), y, progress)

@@ -317,11 +317,12 @@ def _load_stopped(f: F64, ii: I64, eo: int) -> bool:  # pragma: no cover - jit
     s_step = f[s]
     s_accel = f[s + 1]
     s_xhat = f[s + 2]
-    return (
+    stopped: bool = (
         s_xhat > 0.0
         and s_accel <= STOPPED_ENERGY_FRACTION * s_xhat
         and s_step > FLAT_ENERGY_FRACTION * s_xhat
     )
+    return stopped
 
 
 @jit

@@ -440,6 +440,11 @@ def effect_columns(ctx: Context, effects: list[FittedEffect]) -> np.ndarray:
     )
 
 
+def effect_coefficients(effects: list[FittedEffect]) -> np.ndarray:
+    """The coefficients of ``effects`` in the order of `effect_columns`' columns."""
+    return np.concatenate([np.ravel(c) for e in effects for c in e.coefficients])
+
+
 #: at most this many training samples are used to search a nonlinear parameter
 SEARCH_SAMPLES = 65536
 

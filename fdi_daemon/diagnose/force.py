@@ -46,6 +46,7 @@ from fdi_daemon.core.compiled import jit
 from fdi_daemon.diagnose.effects import (
     SPECS,
     FittedEffect,
+    effect_coefficients,
     effect_columns,
     friction_form,
     physical_report,
@@ -319,7 +320,7 @@ def _padded(b: np.ndarray, width: int) -> np.ndarray:
 def _held(eff, before: dict) -> np.ndarray:
     """The coefficients of ``eff`` as fitted before (``before``: by name), else zeros."""
     if eff.name in before:
-        return np.concatenate([np.ravel(c) for c in before[eff.name].coefficients])
+        return effect_coefficients([before[eff.name]])
     return np.zeros(sum(np.size(c) for c in eff.coefficients))
 
 

@@ -57,6 +57,7 @@ from fdi_daemon.diagnose.effects import (
     FittedEffect,
     NotApplicable,
     columns,
+    effect_coefficients,
     effect_columns,
     fit_effect,
 )
@@ -192,10 +193,7 @@ def evaluate(
     else:
         x_new = columns(SPECS[name], eff.param, ctx, ctx.regressors(SPECS[name], eff.param))
         xx = x_new if base_cols is None else np.column_stack([base_cols, x_new])
-        theta = np.concatenate(
-            [np.concatenate([np.ravel(c) for c in e.coefficients]) for e in effects]
-        )
-        prediction = xx @ theta
+        prediction = xx @ effect_coefficients(effects)
     sse1 = _sse(ctx, prediction, ctx.split.test)  # a force loop that diverges: inf
     k = eff.n_params + sum(e.n_params for e in refitted if e.name not in {b.name for b in base})
     k_total = eff.n_params + sum(b.n_params for b in refitted)
@@ -599,7 +597,7 @@ def _starting_base(
         chosen, prediction, linear = linear_round(ctx, floor_sse, explain)
     if chosen:
         base_cols = effect_columns(ctx, chosen)
-        prediction = base_cols @ np.concatenate([np.ravel(c) for c in chosen[0].coefficients])
+        prediction = base_cols @ effect_coefficients(chosen)
     return chosen, base_cols, prediction, linear
 
 
@@ -867,9 +865,7 @@ def _fit_set(
     base_cols = None
     if chosen:
         base_cols = effect_columns(ctx, chosen)
-        prediction = base_cols @ np.concatenate(
-            [np.ravel(c) for e in chosen for c in e.coefficients]
-        )
+        prediction = base_cols @ effect_coefficients(chosen)
     for name in names:
         e0 = ctx.target[test] - prediction[test]
         c = evaluate(name, ctx, chosen, base_cols, float(e0 @ e0), effective_samples(e0))

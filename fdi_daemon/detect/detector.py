@@ -306,7 +306,7 @@ class Detector:
             # a clipping accelerometer is no friction evidence (`episode_tick`), and a load
             # that stopped may be held by friction or have lost its drive: say so
             why = {"accel_clipping": True} if ii[self.epi + E.P_CLIPPED] else {}
-            if ii[self.epi + E.P_STOPPED]:
+            if E.load_stopped(self.arena.f, ii, self.epi):  # over the window of this tick
                 why["load_stopped"] = True
             return [self._event(t, "other_fault", theta1, theta2, coulomb_change=change, **why)]
         kind = _KINDS[int(ii[self.epi + E.P_KIND])]

@@ -43,6 +43,7 @@ __all__ = [
     "episode_restart",
     "episode_rebase",
     "episode_tick",
+    "load_stopped",
     "EPISODE_INTS",
     "episode_floats",
     "NO_CHANGE",
@@ -99,7 +100,6 @@ MIN_RCOND = 1e-6
     P_WARMUP,
     P_CLIPPED,
     P_FAULT_AT,
-    P_STOPPED,
 ) = (
     0,
     1,
@@ -134,9 +134,8 @@ MIN_RCOND = 1e-6
     35,
     36,
     37,
-    38,
 )
-EPISODE_INTS = 39
+EPISODE_INTS = 38
 # floats at P_O_SCAL
 (
     S_THETA_REF,
@@ -252,7 +251,6 @@ def episode_start(
     ii[eo + P_FAULT_AT] = -1 if drift else 0
     ii[eo + P_KIND] = KIND_NONE
     ii[eo + P_CLIPPED] = 0
-    ii[eo + P_STOPPED] = 0
     f[sc + S_LEVEL_CHANGE] = math.nan
     f[sc + S_EVIDENCE] = math.nan
     # the growing-fault test against the frozen reference starts at its threshold: what
@@ -305,7 +303,7 @@ def _friction_kind(f: F64, ii: I64, eo: int, fmin: float) -> int:  # pragma: no 
 
 
 @jit
-def _load_stopped(f: F64, ii: I64, eo: int) -> bool:  # pragma: no cover - jit
+def load_stopped(f: F64, ii: I64, eo: int) -> bool:  # pragma: no cover - jit
     """Over the last test window the load has stopped although the model says it moves
     (Σẍ² ≤ ``STOPPED_ENERGY_FRACTION``·Σx̂̈²) and the accelerometer is alive (Σ(Δẍ)² above
     ``FLAT_ENERGY_FRACTION``·Σx̂̈²: a dead sensor repeats one value, a held load still shows
@@ -417,7 +415,6 @@ def episode_tick(
         f[mo + 1] = accel * accel
         f[mo + 2] = xhat * xhat
         sums_push(f, ii, ii[eo + P_O_MOTION], m, 3, eo + P_MOTION, mo)
-        ii[eo + P_STOPPED] = 1 if _load_stopped(f, ii, eo) else 0
     f[sc + S_ACCEL_PAST] = accel
     # θ as reported: the settled window, else the post window, else the sliding window
     out[0] = theta1

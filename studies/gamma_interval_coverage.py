@@ -1,7 +1,7 @@
 """Does γ_f's 99 % interval hold the simulator's true ratio? (docs/identification.md,
 "How well γ_f is known"). Run: ``python studies/gamma_interval_coverage.py [--rigs 4]
-[--seeds 3] [--excitations ...]`` (15–40 s per calibration run; the default 36 runs: about
-15 minutes).
+[--seeds 3] [--excitations ...] [--highpass-hz HZ]`` (15–40 s per calibration run; the
+default 36 runs: about 15 minutes).
 
 Calibration runs: rigs (the default rig, then `tests/test_detect_other_rig.py`'s seeded
 variants 0, 1, ...) × scenario seeds × the documented excitations (``--excitations`` picks):
@@ -138,9 +138,16 @@ def _chirp_spec() -> dict:
 
 
 def calibrate(
-    rig_name: str, rig: dict[str, float], excitation: str, seed: int, plant: Path, root: Path
+    rig_name: str,
+    rig: dict[str, float],
+    excitation: str,
+    seed: int,
+    plant: Path,
+    root: Path,
+    extra: Sequence[str] = (),
 ) -> CalibrationRun:
-    """Simulate one calibration run, `fdi signature` it, compare with the truth."""
+    """Simulate one calibration run, `fdi signature` it (with the excitation's options and
+    ``extra`` ones), compare with the truth."""
     from conftest_ident import true_gamma
 
     from fdi_daemon.io.model_file import load_model
@@ -151,7 +158,7 @@ def calibrate(
     rec = simulate(scenario_from_dict(_scenario(excitation, rig)), seed=seed)
     path = write_recording(root / f"cal-{excitation.replace(' ', '_')}-{seed}.npz", rec)
     out = root / "signature.yaml"
-    _fdi("signature", path, "--model", plant, *options, "-o", out)
+    _fdi("signature", path, "--model", plant, *options, *extra, "-o", out)
     t0, t1 = (float(x) for x in options[options.index("--fault-window") + 1].split(":"))
     model = load_model(out)
     if model.fault_filter is None:
@@ -198,8 +205,10 @@ def study(
     seeds: Sequence[int],
     root: Path,
     excitations: Sequence[str] = tuple(EXCITATIONS),
+    extra: Sequence[str] = (),
 ) -> list[CalibrationRun]:
-    """Every (rig, seed, excitation) run, printed as it finishes."""
+    """Every (rig, seed, excitation) run, printed as it finishes; ``extra``: more `fdi
+    signature` options for every run."""
     _paths()
     runs = []
     for rig_name, rig in rigs(rig_count).items():
@@ -208,7 +217,7 @@ def study(
         plant = plant_model(rig, folder)
         for seed in seeds:
             for excitation in excitations:
-                run = calibrate(rig_name, rig, excitation, seed, plant, folder)
+                run = calibrate(rig_name, rig, excitation, seed, plant, folder, extra)
                 print(run.line(), flush=True)
                 runs.append(run)
     return runs
@@ -223,9 +232,15 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument(
         "--excitations", nargs="+", choices=list(EXCITATIONS), default=list(EXCITATIONS)
     )
+    parser.add_argument(
+        "--highpass-hz",
+        type=float,
+        help="the velocity's high-pass cut-off for every run (default: fdi signature's)",
+    )
     args = parser.parse_args(argv)
+    extra = () if args.highpass_hz is None else ("--highpass-hz", str(args.highpass_hz))
     with tempfile.TemporaryDirectory() as tmp:
-        runs = study(args.rigs, range(args.seeds), Path(tmp), args.excitations)
+        runs = study(args.rigs, range(args.seeds), Path(tmp), args.excitations, extra)
     for part, label in (
         ("interval", "99 % interval"),
         ("profile_interval", "its profile part alone"),

@@ -6,7 +6,10 @@ cases and a fault-free record on the same models (docs/detector.md §3, "Growing
 Run: ``python studies/growing_friction_detection.py [default|v0|v1 ...]`` (a minute or two
 per rig); ``python studies/growing_friction_detection.py tail`` prints the fault-free
 excursion tail the threshold's τ comes from (about 3 minutes); ``... during`` the ramp with
-another fault stepped in during the drift path's episode (`faults_during_episode`).
+another fault stepped in during the drift path's episode (`faults_during_episode`);
+``... lowcut HZ [default|v0|v1 ...]`` the same, on seeds 4-9, with every rig's signature made
+by README step 2 with ``--highpass-hz HZ`` (`lowcut_models`; docs/detector.md §3, "The
+1–3 Hz ramp without position").
 
 Prints per rig, operation and seed the first `fault_detected` after the onset (delay in s,
 its path) and what followed, before the path (``drift_shift_level: 0``) and with it; for
@@ -30,6 +33,8 @@ CONTACT_SUPPLY = 55.0e3 / 69.0e3
 SIGNATURE_SUPPLY = 0.45
 RAMP_STEPS_PER_S = 64
 SEEDS = (4, 5)
+#: the seeds of ``lowcut`` (where the CUSUM's margin over h is thin)
+LOWCUT_SEEDS = (4, 5, 6, 7, 8, 9)
 OPERATIONS = {
     "three-tone 2.5/6/8.5 Hz": [
         {"kind": "multisine", "amplitudes_v": [0.6, 0.5, 0.4], "frequencies_hz": [2.5, 6.0, 8.5]}
@@ -88,6 +93,40 @@ def models(names=("default", "v0", "v1")):
         rig = rig_variant(int(name[1:]))
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             out[name] = (rig, model_of(rig, Path(tempfile.mkdtemp(prefix=f"growing_{name}_"))))
+    return out
+
+
+def lowcut_models(highpass_hz: float, names=("default", "v0", "v1")):
+    """rig name -> (rig overrides, model) with the velocity's high-pass at ``highpass_hz``:
+    README step 2's `fdi signature` (six-carrier paired calibration) with ``--highpass-hz``
+    on the rig's own recordings, on the shipped plant (default rig) or the rig's own from
+    `fdi identify` (`paired_carriers_calibration`)."""
+    from conftest_detect import MODEL
+    from friction_level_variants import _record
+    from paired_carriers_calibration import (
+        CALIBRATION,
+        carrier_windows,
+        paired_signature,
+        plant_model,
+    )
+    from test_detect_other_rig import rig_variant
+
+    from fdi_daemon.io.model_file import load_model
+
+    option = ("--highpass-hz", str(highpass_hz))
+    out = {}
+    for name in names:
+        rig = {} if name == "default" else rig_variant(int(name[1:]))
+        root = Path(tempfile.mkdtemp(prefix=f"growing_lowcut_{name}_"))
+        recs = {rec: root / f"{rec}.npz" for rec in ("ident_chirp", "ident_chirp_long")}
+        recs[CALIBRATION] = root / f"{CALIBRATION}.npz"
+        for rec in recs if name != "default" else (CALIBRATION,):
+            _record(rig, rec, recs[rec])
+        plant = MODEL if name == "default" else plant_model(recs, root / "plant.yaml")
+        model = paired_signature(
+            recs[CALIBRATION], plant, carrier_windows(), root / "m.yaml", *option
+        )
+        out[name] = (rig, load_model(model))
     return out
 
 
@@ -207,10 +246,12 @@ def main(argv):
     if argv[:1] == ["during"]:
         faults_during_episode()
         return
-    names = tuple(argv) or ("default", "v0", "v1")
-    for name, (rig, model) in models(names).items():
+    lowcut = argv[:1] == ["lowcut"]
+    names = tuple(argv[2 * lowcut :]) or ("default", "v0", "v1")
+    built = lowcut_models(float(argv[1]), names) if lowcut else models(names)
+    for name, (rig, model) in built.items():
         for op_name, op in OPERATIONS.items():
-            for seed in SEEDS:
+            for seed in LOWCUT_SEEDS if lowcut else SEEDS:
                 before = measure_ramp(without_drift_path(model), rig, op, seed)
                 after = measure_ramp(model, rig, op, seed)
                 print(f"| {name} | {op_name} | {seed} | {fmt(before)} | {fmt(after)} |", flush=True)

@@ -59,10 +59,21 @@ def record(root: Path) -> dict[str, Path]:
 def make_model(recs: dict[str, Path], calibration: str, windows: tuple[str, str], out: Path):
     """`fdi identify` on the chirps, then `fdi signature` on a paired ``calibration``
     (reference window, fault window), as README's "made by" block."""
+    return paired_signature(recs[calibration], plant_model(recs, out), windows, out)
+
+
+def plant_model(recs: dict[str, Path], out: Path) -> Path:
+    """README's `fdi identify` on the chirps, written to ``out`` (returned)."""
     _fdi("identify", recs["ident_chirp"], "--validate", recs["ident_chirp_long"], "-o", out)
+    return out
+
+
+def paired_signature(rec: Path, model: Path, windows: tuple[str, str], out: Path, *options: str):
+    """README's `fdi signature` on a paired run ``rec`` with ``model``'s plant (and
+    ``options`` more), written to ``out`` (returned)."""
     _fdi(
-        "signature", recs[calibration], "--model", out, "--reference-window", windows[0],
-        "--fault-window", windows[1], "--lowpass-hz", "10", "-o", out,
+        "signature", rec, "--model", model, "--reference-window", windows[0],
+        "--fault-window", windows[1], "--lowpass-hz", "10", *options, "-o", out,
     )  # fmt: skip
     return out
 

@@ -176,10 +176,12 @@ def test_the_shipped_models_steady_fault_level_stays_within_20_percent_of_its_me
 
 @pytest.mark.xfail(
     strict=True,
-    reason="measured: 5th-95th percentile at -77/+36 % of the "
-    "median (1.00 against a truth of 1.0): the observer's velocity is trusted "
-    "at every operation, and on this rig G_e from one 6 Hz calibration does not "
-    "describe friction at 1-3 Hz (docs/identification.md)",
+    reason="measured: 5th-95th percentile at -35/+38 % of the "
+    "median (1.05 against a truth of 1.0) with the level read only above half the "
+    "calibration's band (5.5-6.5 Hz: from 2.75 Hz, shown 74 % of the time); -77/+36 % "
+    "before that gate, when the observer's velocity was trusted at every operation: on "
+    "this rig G_e from one 6 Hz calibration does not describe friction at 1-3 Hz, nor "
+    "within 20 % above (docs/identification.md)",
 )
 def test_a_steady_faults_level_stays_within_20_percent_of_its_median(observer_model):
     rec = _steady()

@@ -130,6 +130,8 @@ def test_signature_end_to_end_on_the_papers_model(msd_recordings, tmp_path):  # 
     prov = result.provenance
     assert "identify" in prov and prov["signature"]["cost_profile"]["flat"] is False
     assert prov["signature"]["fault_window_s"] == [1.5, 6.0]
+    lo, hi = ff.band_hz  # the 8 Hz sine of the fault window, within the Welch resolution
+    assert 6.0 <= lo <= 8.0 <= hi <= 10.0
     assert plot.read_bytes()[:8] == PNG
 
 

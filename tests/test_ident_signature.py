@@ -137,3 +137,20 @@ def test_fault_filter_refit_at_gamma_recovers_g_e():
     est = signal.freqz(fit.b, fit.f, worN=w)[1]
     assert np.max(np.abs(est - true)) / np.max(np.abs(true)) < 0.01
     assert sig.fit_percent(residual, fit.y_sim) > 99
+
+
+def test_calibration_band_spans_the_excited_tones():
+    """Sines at 6 and 9 Hz (1.0 and 0.5 V, 20 s at 256 Hz) plus noise 40 dB below: the band is
+    the span of the input spectrum within 20 dB of its peak, the tones widened by at most
+    the Welch resolution (0.5 Hz here); the noise and the 2 Hz tone 26 dB down lie outside."""
+    fs = 256.0
+    t = np.arange(int(20 * fs)) / fs
+    rng = np.random.default_rng(7)
+    v_in = (
+        np.sin(2 * np.pi * 6.0 * t)
+        + 0.5 * np.sin(2 * np.pi * 9.0 * t)
+        + 0.05 * np.sin(2 * np.pi * 2.0 * t)
+        + 0.01 * rng.standard_normal(t.size)
+    )
+    lo, hi = sig.calibration_band_hz(v_in, fs)
+    assert 5.0 <= lo <= 6.0 and 9.0 <= hi <= 10.0

@@ -17,6 +17,7 @@ def sample_model():
             f=np.array([1.0, -1.2, 0.5, -0.1]),
             nk=0,
             gamma_f=2.4,
+            band_hz=(5.25, 12.5),
         ),
         velocity={"highpass_hz": 1.0, "highpass_order": 3},
         provenance={"source_sha256": "ab" * 32, "fit_percent": np.float64(93.5)},
@@ -31,6 +32,7 @@ def test_round_trip_keeps_every_key(tmp_path):
     np.testing.assert_array_equal(back.plant_a, model.plant_a)
     np.testing.assert_array_equal(back.fault_filter.b, model.fault_filter.b)
     assert back.fault_filter.gamma_f == 2.4
+    assert back.fault_filter.band_hz == (5.25, 12.5)
     assert back.velocity == model.velocity
     assert back.provenance["fit_percent"] == 93.5
     assert back.extra["effects"][0]["name"] == "coulomb_friction"
@@ -55,6 +57,15 @@ def test_round_trip_keeps_every_key(tmp_path):
             "fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], f: [1], gamma_f: .nan}\n",
             r"gamma_f must be a finite number",
         ),
+        (
+            "fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], f: [1], band_hz: [6]}\n",
+            r"fault_filter.band_hz must be \[lo, hi\] in Hz",
+        ),
+        (
+            "fs: 256\nplant: {b: [0, 1], a: [1]}\n"
+            "fault_filter: {b: [1], f: [1], band_hz: [12, 6]}\n",
+            r"fault_filter.band_hz must be \[lo, hi\] in Hz with 0 < lo <= hi",
+        ),
         ("fs: 256\nplant: {b: [0, 1], a: [1]}\nvelocity: 3\n", r"velocity must be a mapping"),
         ("- just a list\n", r"must be a mapping"),
         ("fs: [unclosed\n", r"not valid YAML at line"),
@@ -65,6 +76,15 @@ def test_invalid_models_name_the_key(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(ConfigError, match=message):
         load_model(path)
+
+
+def test_a_model_without_a_calibration_band_has_none(tmp_path):
+    """Models made before `fdi signature` recorded the band load as before, and save as before."""
+    model = sample_model()
+    model.fault_filter.band_hz = None
+    path = save_model(tmp_path / "m.yaml", model)
+    assert "band_hz" not in path.read_text()
+    assert load_model(path).fault_filter.band_hz is None
 
 
 def test_missing_model_file(tmp_path):

@@ -275,8 +275,13 @@ def run(args: argparse.Namespace) -> int:
     nb, nf, nk = orders
     # at the grid's edge γ_f is no value: null in the model (the monitor's G_e, fitted at the
     # edge γ, is kept; the band method, which tracks (1, γ_f), refuses such a model)
+    band = sig.calibration_band_hz(v_in[first:end], float(model.fs))
     model.fault_filter = FaultFilter(
-        b=fault_fit.b, f=fault_fit.f, nk=nk, gamma_f=None if result.at_edge else result.gamma_f
+        b=fault_fit.b,
+        f=fault_fit.f,
+        nk=nk,
+        gamma_f=None if result.at_edge else result.gamma_f,
+        band_hz=band,
     )
     model.velocity = estimator.settings()
     prov = dict(model.provenance)
@@ -320,6 +325,7 @@ def run(args: argparse.Namespace) -> int:
         result,
         estimator,
         fault_fit,
+        band,
         full_band_pct,
         full_band_vaf,
         explained if method == "auto" else None,
@@ -464,8 +470,11 @@ def _interval_parts(result) -> str:
     )
 
 
-def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf, explained) -> None:
-    """The summary; ``explained``: VAF % per velocity that auto tried, or None."""
+def _report(
+    args, result, estimator, fault_fit, band, full_band_pct, full_band_vaf, explained
+) -> None:
+    """The summary; ``band``: the calibration's band (Hz); ``explained``: VAF % per velocity
+    that auto tried, or None."""
     import sys
 
     from fdi_daemon.ident.signature import LOW_VAF_PERCENT
@@ -510,6 +519,7 @@ def _report(args, result, estimator, fault_fit, full_band_pct, full_band_vaf, ex
         f"f = {[round(float(v), 6) for v in fault_fit.f]}; explains {full_band_vaf:.1f} % of "
         f"the unfiltered fault residual's variance ({full_band_pct:.2f} % 1 - NRMSE)",
         f"velocity          : {described}",
+        f"calibration band  : {band[0]:g} .. {band[1]:g} Hz (the excitation in the fault window)",
         f"model written     : {args.output}",
     ]
     print("\n".join(lines))

@@ -143,6 +143,7 @@ class Monitor:
             arena=self.arena,
             trust_phase_deg=self.settings.velocity_trust_phase_deg,
             trust_share=self.settings.velocity_trust_share,
+            band_fraction=self.settings.signature_band_fraction,
         )
         self.arena.i[self.detector.io + K.D_CHAIN] = self.pipeline.io
         self._io = self.detector.io

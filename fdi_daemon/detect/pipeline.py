@@ -13,11 +13,17 @@ Per tick::
 θ is reported as NaN while the rig is at rest: the RMS of v̂ over the window below
 ``min_velocity_rms_mps`` (at rest g1 is the filtered sign of noise, and the fit means nothing).
 
-``trusted``: the window's velocity lies mostly where v̂ is right, i.e. at most
-``trust_share`` of Σ v̂² passes a 2nd-order low-pass at the frequency below which v̂'s phase
-error exceeds ``trust_phase_deg`` (`core.velocity_observer.trusted_from_hz`: 3.9 Hz for the
-1 Hz high-pass at 30°, none for the observers). Where it is not, sign v̂ is wrong for a
-large part of each cycle and θ1 under-reads friction (docs/detector.md §4a).
+``trusted``: the window's velocity lies mostly where v̂ is right and where the signature
+describes friction, i.e. at most ``trust_share`` of Σ v̂² passes a 2nd-order low-pass at
+``trusted_from_hz``, the higher of
+- the frequency below which v̂'s phase error exceeds ``trust_phase_deg``
+  (`core.velocity_observer.trusted_from_hz`: 3.9 Hz for the 1 Hz high-pass at 30°, 1.9 Hz
+  for 0.5 Hz, none for the observers): below it sign v̂ is wrong for a large part of each
+  cycle and θ1 under-reads friction (docs/detector.md §4a);
+- ``band_fraction`` of the lowest frequency of the signature's calibration (the model's
+  ``fault_filter.band_hz``; none when the model does not record it): G_e, fitted on the
+  friction of those frequencies, does not describe it far below them (docs/detector.md §3,
+  "The 1–3 Hz ramp without position": 2.6 Hz for README step 2's six carriers).
 
 The blocks (`core.iir.IIRFilter`, the velocity estimators) give the coefficients; the
 state lives in an `Arena` and every tick is the compiled `detect.kernel.chain_tick`:
@@ -47,7 +53,7 @@ from fdi_daemon.core.window_ls import MIN_RCOND, solve_sums
 from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.settings import DetectorSettings, velocity_settings
 from fdi_daemon.errors import ConfigError
-from fdi_daemon.io.model_file import FdiModel
+from fdi_daemon.io.model_file import FaultFilter, FdiModel
 
 __all__ = ["Pipeline", "PipelineBatch"]
 
@@ -106,6 +112,12 @@ class WindowView:
         return tuple(pl.arena.f[so : so + 6].tolist())
 
 
+def _calibrated_from_hz(ff: FaultFilter) -> float:
+    """The lowest frequency (Hz) of the signature's calibration, 0.0 where the model does
+    not record it (a model made before `fdi signature` did)."""
+    return 0.0 if ff.band_hz is None else ff.band_hz[0]
+
+
 class Pipeline:
     """Ĝ, residual, velocity, G_e regressors and the window least squares of one rig."""
 
@@ -138,6 +150,7 @@ class Pipeline:
         arena: Arena | None = None,
         trust_phase_deg: float = DetectorSettings.velocity_trust_phase_deg,
         trust_share: float = DetectorSettings.velocity_trust_share,
+        band_fraction: float = DetectorSettings.signature_band_fraction,
     ) -> None:
         ff = model.fault_filter
         if ff is None:
@@ -176,7 +189,9 @@ class Pipeline:
             assert isinstance(vel, VelocityEstimator)  # neither needs_model nor needs_position
             vel_a, vel_b, method = vel, None, 0
         plant = self.plant if isinstance(self.plant, IIRFilter) else None  # not external_plant
-        self.trusted_from_hz = trusted_from_hz(vel, trust_phase_deg)
+        self.trusted_from_hz = max(
+            trusted_from_hz(vel, trust_phase_deg), band_fraction * _calibrated_from_hz(ff)
+        )
         low = (
             IIRFilter(*(c.tolist() for c in butter(2, self.trusted_from_hz, model.fs)))
             if self.trusted_from_hz > 0

@@ -108,6 +108,11 @@ class DetectorSettings:
     """... and a window counts as evidence that friction is gone only when at most this
     share of its velocity energy lies below that frequency: elsewhere sign v̂ is wrong for
     much of each cycle and θ1 under-reads friction, so the clearing count holds."""
+    signature_band_fraction: float = 0.5
+    """... or below this fraction of the lowest frequency the signature was calibrated at
+    (the model's ``fault_filter.band_hz``; 0.5: an octave below it), whichever is higher:
+    G_e describes the friction of its calibration's frequencies, not of slower motion (one
+    fitted at 6-11.4 Hz reads the calibrated fault at -0.2 under a 2.9 Hz sine)."""
 
     @classmethod
     def from_mapping(

@@ -47,6 +47,7 @@ from scipy.optimize import minimize_scalar
 from fdi_daemon.ident.gamma_interval import BootstrapInterval, bootstrap_interval
 from fdi_daemon.ident.output_error import OEFit, fit_output_error
 from fdi_daemon.ident.signature_advice import CalibrationContext, advise
+from fdi_daemon.ident.spectral import informative_mask, smooth_input_psd, welch_segment_samples
 
 #: χ² quantile with one degree of freedom at 99 %
 CHI2_1_99 = 6.634896601021214
@@ -85,6 +86,19 @@ def plant_residual(plant, v_in: np.ndarray, accel: np.ndarray) -> np.ndarray:
     with ``run``: the Ĝ IIR, or Ĝ plus `fdi diagnose` effects), started at rest at the first
     sample as in the monitor."""
     return np.asarray(accel, dtype=float) - plant.run(np.asarray(v_in, dtype=float))
+
+
+def calibration_band_hz(v_in: np.ndarray, fs_hz: float) -> tuple[float, float]:
+    """The frequencies (Hz) a calibration ran at: the span of its input's spectrum within
+    20 dB of the peak (Welch, `spectral.smooth_input_psd`: the rule `fdi identify` takes for
+    Ĝ's excited band). G_e is fitted on the friction of these frequencies only, and the
+    monitor trusts its friction level only where a window's motion lies near them
+    (`detect.pipeline`, ``signature_band_fraction``)."""
+    v_in = np.asarray(v_in, dtype=float)
+    freq = np.fft.rfftfreq(min(welch_segment_samples(len(v_in)), len(v_in)), 1.0 / fs_hz)
+    psd = smooth_input_psd(v_in, fs_hz, freq)
+    excited = freq[informative_mask(freq, np.ones_like(freq), psd, 0.0)]
+    return float(excited[0]), float(excited[-1])
 
 
 def reference_difference(residual: np.ndarray, lag_samples: int) -> np.ndarray:

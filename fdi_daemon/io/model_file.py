@@ -3,7 +3,9 @@
 Keys (DESIGN.md; more are welcome, these keep their meaning):
 - ``fs``: sampling rate in Hz;
 - ``plant: {b: [b0..bn], a: [1, a1..an]}``: Ĝ = B/A in powers of q⁻¹ (eq. 1, b0 = 0);
-- ``fault_filter: {b: [...], f: [1, ...], nk: 0, gamma_f: x}``: G_e = B/F (eq. 8) and γ_f (eq. 11);
+- ``fault_filter: {b: [...], f: [1, ...], nk: 0, gamma_f: x, band_hz: [lo, hi]}``: G_e = B/F
+  (eq. 8), γ_f (eq. 11) and the frequencies (Hz) of the calibration they were fitted on
+  (optional: models made before it was recorded have none);
 - ``velocity``: settings of the velocity estimator (high-pass + integrator), kept as a mapping;
 - ``detector``: detector settings, kept as a mapping;
 - ``provenance``: where the model came from (source hash, date, fit metrics);
@@ -43,6 +45,9 @@ class FaultFilter:
     f: np.ndarray
     nk: int = 0
     gamma_f: float | None = 0.0  # None: not identified (the cost's minimum at the grid edge)
+    #: the span (Hz) of the calibration's excitation that G_e and γ_f were fitted on
+    #: (`ident.signature.calibration_band_hz`); None: not recorded (a model made before)
+    band_hz: tuple[float, float] | None = None
 
 
 @dataclass
@@ -83,6 +88,8 @@ class FdiModel:
                 "nk": int(ff.nk),
                 "gamma_f": None if ff.gamma_f is None else float(ff.gamma_f),
             }
+            if ff.band_hz is not None:
+                out["fault_filter"]["band_hz"] = [float(v) for v in ff.band_hz]
         for key in ("velocity", "detector", "provenance"):
             value = getattr(self, key)
             if value:
@@ -124,7 +131,9 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
     plant_a = _coefficients(plant, "a", f"{source}: plant", monic=True)
     fault_filter = None
     if data.get("fault_filter") is not None:
-        ff = _section(data, "fault_filter", ("b", "f", "nk", "gamma_f"), ("b", "f"), source)
+        ff = _section(
+            data, "fault_filter", ("b", "f", "nk", "gamma_f", "band_hz"), ("b", "f"), source
+        )
         nk = ff.get("nk", 0)
         if not isinstance(nk, int) or isinstance(nk, bool) or nk < 0:
             raise ConfigError(f"{source}: fault_filter.nk must be a whole number >= 0")
@@ -140,6 +149,7 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
             f=_coefficients(ff, "f", f"{source}: fault_filter", monic=True),
             nk=nk,
             gamma_f=None if gamma is None else float(gamma),
+            band_hz=_band(ff.get("band_hz"), f"{source}: fault_filter.band_hz"),
         )
     sections = {
         key: _mapping(data, key, source, required=False)
@@ -169,6 +179,20 @@ def _section(
     )
     _require(section, required, f"{source}: {key}")
     return section
+
+
+def _band(value: Any, where: str) -> tuple[float, float] | None:
+    """A frequency band [lo, hi] in Hz, 0 < lo <= hi, or None when absent (null)."""
+    if value is None:
+        return None
+    if (
+        not isinstance(value, list)
+        or len(value) != 2
+        or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)
+        or not (math.isfinite(value[1]) and 0 < value[0] <= value[1])
+    ):
+        raise ConfigError(f"{where} must be [lo, hi] in Hz with 0 < lo <= hi (got {value!r})")
+    return float(value[0]), float(value[1])
 
 
 def _positive(data: dict[str, Any], key: str, source: str) -> float:

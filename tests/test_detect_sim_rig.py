@@ -243,9 +243,10 @@ def test_friction_creeping_in_over_ten_minutes_is_one_episode_never_cleared():
     assert "friction_isolated" in kinds
 
 
-def _changing_operation(event, duration_s=200.0):
-    """Random operation (0.3-1.6 V, 1-12 Hz, segments of 5-60 s), ``event`` at 120 s: at
-    seed 4 the operation there is ~9.3 Hz at 0.7 V until ~134 s, then 1.3 V."""
+def _changing_operation(event, duration_s=200.0, seed=4, removed=None):
+    """Random operation (0.3-1.6 V, 1-12 Hz, segments of 5-60 s), ``event`` at 120 s (and
+    ``removed`` at 130 s): at seed 4 the operation there is ~9.3 Hz at 0.7 V until ~134 s,
+    then 1.3 V."""
     return _scenario(
         {
             "name": "changing",
@@ -258,8 +259,9 @@ def _changing_operation(event, duration_s=200.0):
                     "segment_s": [5.0, 60.0],
                 }
             ],
-            "events": [{"t_s": 120.0, **event}],
-        }
+            "events": [{"t_s": 120.0, **event}] + ([{"t_s": 130.0, **removed}] if removed else []),
+        },
+        seed=seed,
     )
 
 
@@ -294,6 +296,55 @@ def test_a_load_stopped_by_a_weak_drive_is_not_friction(fault):
     assert "friction_isolated" not in kinds
     assert kinds == ["fault_detected", "other_fault"]
     assert events[-1].get("load_stopped") is True
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "seed,fault,duration_s",
+    [
+        (6, {"fault": "valve_gain", "value": 0.4}, 200.0),
+        (5, {"fault": "supply_pressure", "value": 0.3}, 180.0),
+        (5, {"fault": "valve_gain", "value": 0.4}, 200.0),
+    ],
+    ids=["valve_40_percent_6_hz", "supply_30_percent_2_hz", "valve_40_percent_then_1_hz"],
+)
+def test_a_weakened_drive_is_not_cleared_while_it_lasts(seed, fault, duration_s):
+    """Under weak operation one test window at a time stays below h although the fault is
+    there (seed 6, 0.25 V at 6 Hz: T 10-27 against h = 30, 19 times the noise): the episode
+    clears on the innovations' mean power over a window (the alarm's deadband), and not
+    under operation that would not show the fault as measured (seed 5 from 186 s, 1-2 Hz).
+    Before: `cleared` at +1.16 s, +1.09 s and +67.3 s (`studies/other_fault_clearing.py`)."""
+    kinds = _kinds(_changing_operation(fault, duration_s=duration_s, seed=seed))
+    assert kinds == ["fault_detected", "other_fault"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured 2026-11-30: the supply at 30 % (seed 5) is cleared at 188.1 s under 1-2 Hz "
+    "operation, where its innovations are within the deadband; its linear change (Δθ) does not "
+    "describe it well enough for the operation gate to hold the count (docs/detector.md §3)",
+)
+def test_a_lost_supply_is_not_cleared_under_1_to_2_hz_operation():
+    events = _changing_operation({"fault": "supply_pressure", "value": 0.3}, seed=5)
+    assert _kinds(events) == ["fault_detected", "other_fault"]
+
+
+@pytest.mark.slow
+def test_a_weakened_drive_restored_under_changing_operation_is_cleared():
+    """The valve at 40 % from 120 s to 130 s (seed 6): cleared within 3 s of the repair."""
+    events = [
+        e
+        for e in _changing_operation(
+            {"fault": "valve_gain", "value": 0.4},
+            duration_s=140.0,
+            seed=6,
+            removed={"fault": "valve_gain", "value": 1.0},
+        )
+        if e["kind"] != "calibrated"
+    ]
+    assert _kinds(events) == ["fault_detected", "other_fault", "cleared"]
+    assert 130.0 < events[-1]["t"] < 133.0
 
 
 @pytest.mark.parametrize(

@@ -14,7 +14,10 @@ From ``fault_detected`` until ``cleared`` the detector keeps, on top of the quie
   over the test window): said in an ``other_fault`` event, never taken as friction (a weak
   valve or a lost supply stops the load as friction does, and the accelerometer cannot
   tell them apart);
-- the frozen-reference test T = mean over M of e²/σ²_ref (persistence, clearing).
+- the frozen-reference test T = mean over M of e²/σ²_ref (persistence, clearing), and for
+  clearing the mean of e²/σ²_ref over the window of n (the alarm's deadband) and the power
+  the fault as measured (Δθ at the ``other_fault`` decision) would show under the window's
+  operation.
 
 ``episode_tick`` returns the transition of the tick (none, isolated, other fault, cleared)
 and applies it to the detector's state; Python only formats the event. The cost of a tick
@@ -156,8 +159,9 @@ EPISODE_INTS = 38
     S_DRIFT_SHIFT,
     S_DRIFT_H,
     S_DRIFT_S,
-) = (0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 19, 20, 21, 22)
-SCAL_FLOATS = 23
+    S_FAULT_CHANGE,
+) = (0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 19, 20, 21, 22, 23)
+SCAL_FLOATS = 27
 
 
 def episode_floats(n: int, m: int) -> int:
@@ -253,6 +257,7 @@ def episode_start(
     ii[eo + P_CLIPPED] = 0
     f[sc + S_LEVEL_CHANGE] = math.nan
     f[sc + S_EVIDENCE] = math.nan
+    f[sc + S_FAULT_CHANGE] = math.nan
     # the growing-fault test against the frozen reference starts at its threshold: what
     # raised the episode is there until the innovations say otherwise
     f[sc + S_DRIFT] = f[sc + S_DRIFT_H]
@@ -300,6 +305,76 @@ def _friction_kind(f: F64, ii: I64, eo: int, fmin: float) -> int:  # pragma: no 
         if ok and f[th] >= fmin:
             return KIND_HARMONICS
     return KIND_NONE
+
+
+@jit
+def _clear_excess(ii: I64, eo: int, threshold: float) -> float:  # pragma: no cover - jit
+    """(h − 1)·√(m/n): the test window's excess over the fault-free mean of e²/σ²_ref (1),
+    taken from m samples to the window's n at the same significance (the excess of a mean
+    of n terms shrinks as 1/√n): the alarm's deadband (`innovations_back_to_normal`)."""
+    excess: float = (threshold - 1.0) * math.sqrt(ii[eo + P_M] / ii[eo + P_N])
+    return excess
+
+
+@jit
+def innovations_back_to_normal(
+    f: F64, ii: I64, eo: int, threshold: float
+) -> bool:  # pragma: no cover - jit
+    """The alarm's deadband (ISA-18.2: an alarm clears below the level that raised it):
+    the mean of e²/σ²_ref over the window of n samples (the ``beyond`` window's Σe²) is
+    within `_clear_excess` of its fault-free value 1. One test window of m below h says
+    only that this window shows no fault: under weak operation a valve at 40 % gave T of
+    10-27 against h = 30 for a second, 19 times the reference's noise. False until the
+    window holds n samples."""
+    n = ii[eo + P_N]
+    if ii[eo + P_BEYOND + 1] < n:
+        return False
+    sigma2 = f[ii[eo + P_O_SCAL] + S_SIGMA2_REF]
+    mean_z = f[ii[eo + P_O_BEYOND] + (n + 2) * W + 14] / (n * sigma2)
+    back: bool = mean_z <= 1.0 + _clear_excess(ii, eo, threshold)
+    return back
+
+
+@jit
+def fault_power(f: F64, ii: I64, eo: int) -> float:  # pragma: no cover - jit
+    """The mean of (φᵀΔθ)²/σ²_ref over the post window (φ = g1, g2, x̂̈, 1): the innovation
+    power that the fault as measured (Δθ at S_FAULT_CHANGE, `measure_fault`) would show
+    under the window's operation. A valve's loss of gain shows in proportion to x̂̈, so
+    hardly at 1-2 Hz, where the acceleration is small."""
+    n = ii[eo + P_N]
+    s = ii[eo + P_O_POST] + (n + 2) * W
+    sc = ii[eo + P_O_SCAL]
+    d = sc + S_FAULT_CHANGE
+    q = 0.0
+    k = 0
+    for i in range(4):
+        for j in range(i, 4):
+            q += (1.0 if i == j else 2.0) * f[d + i] * f[d + j] * f[s + k]
+            k += 1
+    rows = max(ii[eo + P_POST + 1], 1)
+    power: float = q / (rows * f[sc + S_SIGMA2_REF])
+    return power
+
+
+@jit
+def measure_fault(f: F64, ii: I64, eo: int, threshold: float) -> None:  # pragma: no cover - jit
+    """Δθ = θ_post − θ_ref, the fault as a linear change of the residual fit (eq. 16's φ
+    with x̂̈ and 1), from the post window when the episode becomes another fault; kept only
+    where it explains what the clearing test would see (`fault_power` above
+    `_clear_excess`), NaN otherwise (a fault the linear change does not describe: the
+    clearing test alone decides)."""
+    n = ii[eo + P_N]
+    sc = ii[eo + P_O_SCAL]
+    d = sc + S_FAULT_CHANGE
+    f[d] = math.nan
+    th = ii[eo + P_O_TH]
+    _, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th)
+    if not ok:
+        return
+    for q in range(4):
+        f[d + q] = f[th + q] - f[sc + S_THETA_REF + q]
+    if not fault_power(f, ii, eo) >= _clear_excess(ii, eo, threshold):
+        f[d] = math.nan
 
 
 @jit
@@ -470,6 +545,7 @@ def episode_tick(
         fault_at = ii[eo + P_FAULT_AT]
         if state == 3 and fault_at >= 0 and ticks - fault_at >= ii[eo + P_TIMEOUT]:
             ii[eo + P_QUIET] = 0
+            measure_fault(f, ii, eo, threshold)
             return TO_OTHER
     if state == 4:
         if not trusted:
@@ -488,9 +564,19 @@ def episode_tick(
         # level is still at least half its margin above normal (issue 43): a fault that
         # creeps in keeps its episode until the level path confirms it, never raise-clear
         # ... and (growing-fault path) while the innovations against the frozen reference
-        # still show the shift along the signature (its CUSUM at or above h)
+        # still show the shift along the signature (its CUSUM at or above h); it clears on
+        # the innovations' mean power over the window, not one test window
+        # (`innovations_back_to_normal`), and only under operation that would show the
+        # fault as measured: elsewhere the count holds (`fault_power`)
+        if not math.isnan(f[sc + S_FAULT_CHANGE]) and fault_power(f, ii, eo) < _clear_excess(
+            ii, eo, threshold
+        ):
+            return NO_CHANGE
         normal = (
-            frozen_stat <= threshold and not over >= 0.5 and f[sc + S_DRIFT] < f[sc + S_DRIFT_H]
+            frozen_stat <= threshold
+            and innovations_back_to_normal(f, ii, eo, threshold)
+            and not over >= 0.5
+            and f[sc + S_DRIFT] < f[sc + S_DRIFT_H]
         )
         needed = ii[eo + P_CLEAR]
     ii[eo + P_QUIET] = ii[eo + P_QUIET] + 1 if normal and moving else 0

@@ -43,23 +43,13 @@ ONSET_S, REMOVED_S, END_S = 120.0, 130.0, 200.0
 
 def events(model, seed: int, fault: dict, removal: dict | None) -> list[dict]:
     """The monitor's events (calibration left out) on one run."""
+    from conftest_detect import changing_operation_spec
+
     from fdi_daemon.detect.monitor import Monitor
     from hil_sim.scenarios import scenario_from_dict, simulate
 
-    spec = {
-        "name": "changing",
-        "duration_s": END_S,
-        "excitation": [
-            {
-                "kind": "random",
-                "amplitude_v": [0.3, 1.6],
-                "frequency_hz": [1.0, 12.0],
-                "segment_s": [5.0, 60.0],
-            }
-        ],
-        "events": [{"t_s": ONSET_S, **fault}]
-        + ([{"t_s": REMOVED_S, **removal}] if removal else []),
-    }
+    timed = [{"t_s": ONSET_S, **fault}] + ([{"t_s": REMOVED_S, **removal}] if removal else [])
+    spec = changing_operation_spec(timed, END_S)
     out = Monitor(model).run(simulate(scenario_from_dict(spec), seed=seed))[0]
     return [e for e in out if e["kind"] != "calibrated"]
 

@@ -86,5 +86,24 @@ def msd_system(
     return model, Recording(cols, {"fs": str(FS_HZ)})
 
 
+#: random operation of the changing-operation cases: 0.3-1.6 V, 1-12 Hz, segments of 5-60 s
+CHANGING_OPERATION = {
+    "kind": "random",
+    "amplitude_v": [0.3, 1.6],
+    "frequency_hz": [1.0, 12.0],
+    "segment_s": [5.0, 60.0],
+}
+
+
+def changing_operation_spec(events: list[dict], duration_s: float) -> dict:
+    """A scenario of CHANGING_OPERATION with ``events`` (hil_sim's scenario mapping)."""
+    return {
+        "name": "changing",
+        "duration_s": duration_s,
+        "excitation": [dict(CHANGING_OPERATION)],
+        "events": events,
+    }
+
+
 def first_event(events, kind):
     return next((e for e in events if e["kind"] == kind), None)

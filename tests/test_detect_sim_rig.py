@@ -6,7 +6,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest_detect import MODEL, SCENARIOS, first_event, scenario_recording, sim_rig_model
+from conftest_detect import (
+    MODEL,
+    SCENARIOS,
+    changing_operation_spec,
+    first_event,
+    scenario_recording,
+    sim_rig_model,
+)
 
 from fdi_daemon.detect.monitor import Monitor
 from fdi_daemon.detect.settings import DetectorSettings
@@ -247,22 +254,8 @@ def _changing_operation(event, duration_s=200.0, seed=4, removed=None):
     """Random operation (0.3-1.6 V, 1-12 Hz, segments of 5-60 s), ``event`` at 120 s (and
     ``removed`` at 130 s): at seed 4 the operation there is ~9.3 Hz at 0.7 V until ~134 s,
     then 1.3 V."""
-    return _scenario(
-        {
-            "name": "changing",
-            "duration_s": duration_s,
-            "excitation": [
-                {
-                    "kind": "random",
-                    "amplitude_v": [0.3, 1.6],
-                    "frequency_hz": [1.0, 12.0],
-                    "segment_s": [5.0, 60.0],
-                }
-            ],
-            "events": [{"t_s": 120.0, **event}] + ([{"t_s": 130.0, **removed}] if removed else []),
-        },
-        seed=seed,
-    )
+    events = [{"t_s": 120.0, **event}] + ([{"t_s": 130.0, **removed}] if removed else [])
+    return _scenario(changing_operation_spec(events, duration_s), seed=seed)
 
 
 @pytest.mark.slow

@@ -7,9 +7,12 @@ Run: ``python studies/growing_friction_detection.py [default|v0|v1 ...]`` (a min
 per rig); ``python studies/growing_friction_detection.py tail`` prints the fault-free
 excursion tail the threshold's τ comes from (about 3 minutes); ``... during`` the ramp with
 another fault stepped in during the drift path's episode (`faults_during_episode`);
-``... lowcut HZ [default|v0|v1 ...]`` the same, on seeds 4-9, with every rig's signature made
-by README step 2 with ``--highpass-hz HZ`` (`lowcut_models`; docs/detector.md §3, "The
-1–3 Hz ramp without position").
+``... lowcut HZ [default|v0|v1|v2 ...]`` the same, on seeds 4-9, with every rig's signature
+made by README step 2 with ``--highpass-hz HZ`` (the whole monitor on that cut-off;
+`step2_models`); ``... drift HZ [default|v0|v1|v2 ...]`` with README step 2's
+``--drift-highpass-hz HZ`` (the growing-fault path alone on it; docs/detector.md §3, "The
+1–3 Hz ramp without position"). ``tail`` and ``drift`` measure the shipped model, whose
+signature has its drift path on 0.5 Hz (README step 2).
 
 Prints per rig, operation and seed the first `fault_detected` after the onset (delay in s,
 its path) and what followed, before the path (``drift_shift_level: 0``) and with it; for
@@ -96,11 +99,11 @@ def models(names=("default", "v0", "v1")):
     return out
 
 
-def lowcut_models(highpass_hz: float, names=("default", "v0", "v1")):
-    """rig name -> (rig overrides, model) with the velocity's high-pass at ``highpass_hz``:
-    README step 2's `fdi signature` (six-carrier paired calibration) with ``--highpass-hz``
-    on the rig's own recordings, on the shipped plant (default rig) or the rig's own from
-    `fdi identify` (`paired_carriers_calibration`)."""
+def step2_models(option: tuple[str, ...], names=("default", "v0", "v1")):
+    """rig name -> (rig overrides, model): README step 2's `fdi signature` (six-carrier
+    paired calibration) with ``option`` on the rig's own recordings, on the shipped plant
+    (default rig) or the rig's own from `fdi identify` (`paired_carriers_calibration`);
+    e.g. ``("--highpass-hz", "0.5")``, ``("--drift-highpass-hz", "0.5")``."""
     from conftest_detect import MODEL
     from friction_level_variants import _record
     from paired_carriers_calibration import (
@@ -113,11 +116,10 @@ def lowcut_models(highpass_hz: float, names=("default", "v0", "v1")):
 
     from fdi_daemon.io.model_file import load_model
 
-    option = ("--highpass-hz", str(highpass_hz))
     out = {}
     for name in names:
         rig = {} if name == "default" else rig_variant(int(name[1:]))
-        root = Path(tempfile.mkdtemp(prefix=f"growing_lowcut_{name}_"))
+        root = Path(tempfile.mkdtemp(prefix=f"growing_step2_{name}_"))
         recs = {rec: root / f"{rec}.npz" for rec in ("ident_chirp", "ident_chirp_long")}
         recs[CALIBRATION] = root / f"{CALIBRATION}.npz"
         for rec in recs if name != "default" else (CALIBRATION,):
@@ -246,9 +248,12 @@ def main(argv):
     if argv[:1] == ["during"]:
         faults_during_episode()
         return
-    lowcut = argv[:1] == ["lowcut"]
+    option = {"lowcut": "--highpass-hz", "drift": "--drift-highpass-hz"}.get(
+        argv[0] if argv else ""
+    )
+    lowcut = option is not None
     names = tuple(argv[2 * lowcut :]) or ("default", "v0", "v1")
-    built = lowcut_models(float(argv[1]), names) if lowcut else models(names)
+    built = step2_models((option, argv[1]), names) if option else models(names)
     for name, (rig, model) in built.items():
         for op_name, op in OPERATIONS.items():
             for seed in LOWCUT_SEEDS if lowcut else SEEDS:

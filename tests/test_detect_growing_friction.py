@@ -146,23 +146,61 @@ def test_half_size_ramp_over_one_second_found_within_1_5_s_rig_variants(variant_
     assert "cleared" not in [e["kind"] for e in events]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "issue 43 target not met under 1.2/2/2.9 Hz with the high-pass velocity (the shipped "
-        "model): its sign is wrong for much of each cycle there (docs/detector.md §4a), θ1 "
-        "reads −0.02…+0.01 for a fault of 0.5 and the drift CUSUM peaks at 92–95 (default), "
-        "72–73 (v0), 153 (v1) against h = 201; met with a position-fused velocity "
-        "(docs/detector.md, 'The 1–3 Hz ramp with a position-fused velocity'), and with a "
-        "0.5 Hz high-pass signature on the default rig (+0.68 s, CUSUM 205–210) and v1 but "
-        "not v0, a model not shipped as it breaks the one-alarm creep of "
-        "test_replay_alarms.py (docs/detector.md, 'The 1–3 Hz ramp without position')"
-    ),
-)
 def test_half_size_ramp_over_one_second_found_within_1_5_s_low_frequency():
+    """Under 1.2/2/2.9 Hz the shipped model's drift path, on its own 0.5 Hz high-pass velocity
+    and G_e (README step 2's ``--drift-highpass-hz 0.5``), finds the ramp; one episode."""
     events = _events(sim_rig_model(), _ramp("low 1.2/2/2.9 Hz"))
     detected = first_event(events, "fault_detected")
-    assert detected is not None and detected["t"] - G.ONSET_S <= 1.5
+    assert detected is not None and 0.0 < detected["t"] - G.ONSET_S <= 1.5
+    assert detected["path"] == "drift"
+    assert "cleared" not in [e["kind"] for e in events]
+
+
+def test_the_drift_signature_changes_only_the_growing_fault_path():
+    """θ, the friction level and the residual test stay on the monitor's own velocity and
+    G_e: with or without ``fault_filter.drift``, test case 2 gives the same trace and events."""
+    model = sim_rig_model()
+    assert model.fault_filter.drift is not None and model.fault_filter.drift.highpass_hz == 0.5
+    without = copy.deepcopy(model)
+    without.fault_filter.drift = None
+    rec = scenario_recording("test_case_2")
+    (events, trace), (events0, trace0) = Monitor(model).run(rec), Monitor(without).run(rec)
+    assert [e["kind"] for e in events] == [e["kind"] for e in events0]
+    assert [e["t"] for e in events] == [e["t"] for e in events0]
+    for name in ("theta1", "theta2", "statistic", "friction_level"):
+        np.testing.assert_array_equal(getattr(trace, name), getattr(trace0, name))
+
+
+@pytest.fixture(scope="module")
+def drift_variant_models():
+    """README step 2 with ``--drift-highpass-hz 0.5`` on each variant's own recordings."""
+    return G.step2_models(("--drift-highpass-hz", "0.5"), ("v0", "v1", "v2"))
+
+
+V0_LOW = pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "v0 under 1.2/2/2.9 Hz: the drift CUSUM on its 0.5 Hz velocity peaks at 125-164 "
+        "against h = 201 on seeds 4-6, 8, 9 (found on seed 7 only, +0.71 s; the whole "
+        "monitor on 0.5 Hz likewise): at each reversal of its 1-3 Hz motion the load sticks and the "
+        "residual turns against g1 for ~15 ticks (a stuck load is not the Coulomb regressor's "
+        "sliding friction), so S loses what the ramp gave it; not the velocity's phase "
+        "(docs/detector.md §3, 'The 1–3 Hz ramp without position')"
+    ),
+)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rig", [pytest.param("v0", marks=V0_LOW), "v1", "v2"])
+def test_half_size_ramp_found_within_1_5_s_low_frequency_rig_variants(drift_variant_models, rig):
+    from hil_sim.scenarios import scenario_from_dict, simulate
+
+    overrides, model = drift_variant_models[rig]
+    spec = G.ramp_spec(LOW, overrides, duration_s=14.0)
+    events = _events(model, simulate(scenario_from_dict(spec), seed=4))
+    detected = first_event(events, "fault_detected")
+    assert detected is not None and 0.0 < detected["t"] - G.ONSET_S <= 1.5
+    assert "cleared" not in [e["kind"] for e in events]
 
 
 @pytest.mark.slow

@@ -313,6 +313,37 @@ def test_signature_with_the_model_observer_stores_its_settings(exact_model, tmp_
     assert velocity["method"] == "model_observer" and velocity["leak_hz"] == 0.02
 
 
+def test_signature_with_a_drift_cut_off_stores_the_growing_fault_path_signature(
+    exact_model, tmp_path, capsys
+):
+    """--drift-highpass-hz: a second G_e and γ on the high-pass velocity at that cut-off, in
+    fault_filter.drift; the monitor's own G_e is the one made without the option. A later
+    `fdi signature` without it drops the drift signature with the rest of the old one."""
+    model_path = exact_model
+    rec = _stepped_fault_recording(load_model(model_path), tmp_path / "drift.csv", 1.5, 0.1)
+    common = ["signature", str(rec), "--fault-window", "2.5:10", "--gamma-grid", "0:4:0.5"]
+    plain, drift = tmp_path / "plain.yaml", tmp_path / "drift.yaml"
+    assert main([*common, "--model", str(model_path), "-o", str(plain)]) == 0
+    option = ["--drift-highpass-hz", "0.5"]
+    assert main([*common, "--model", str(model_path), "-o", str(drift), *option]) == 0
+    assert "drift signature   : high-pass 0.5 Hz" in capsys.readouterr().out
+    with_drift, without = load_model(drift), load_model(plain)
+    np.testing.assert_array_equal(with_drift.fault_filter.b, without.fault_filter.b)
+    d = with_drift.fault_filter.drift
+    assert d.highpass_hz == 0.5 and 0.0 <= d.gamma <= 4.0
+    assert not np.array_equal(d.b, without.fault_filter.b)
+    assert with_drift.provenance["signature"]["drift"]["highpass_hz"] == 0.5
+    again = tmp_path / "again.yaml"
+    assert main([*common, "--model", str(drift), "-o", str(again)]) == 0
+    assert load_model(again).fault_filter.drift is None
+    # the low cut-off is the high-pass estimator's: refused with another velocity
+    observer = [*common, "--model", str(model_path), "-o", str(again), *option]
+    capsys.readouterr()
+    assert "needs the high-pass velocity" in _bad(
+        [*observer, "--velocity-method", "model_observer"], capsys
+    )
+
+
 def _bad(args, capsys):
     code = main(args)
     err = capsys.readouterr().err
@@ -478,6 +509,9 @@ def test_outputs_that_would_destroy_an_input_and_out_of_range_options(
     assert "name the same file" in _bad([*sig, "-o", out, "--plot", out], capsys)
     assert "more than 2001" in _bad([*sig, "-o", out, "--gamma-grid", "0:1e9:1e-9"], capsys)
     assert "--orders" in _bad([*sig, "-o", out, "--orders", "400:300:0"], capsys)
+    assert "--drift-highpass-hz must be > 0" in _bad(
+        [*sig, "-o", out, "--drift-highpass-hz", "0"], capsys
+    )
     unstable = yaml.safe_load(model.read_text())
     unstable["plant"]["a"] = [1.0, -3.0, 3.0]
     (tmp_path / "unstable.yaml").write_text(yaml.safe_dump(unstable))

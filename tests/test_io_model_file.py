@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from fdi_daemon.errors import ConfigError
-from fdi_daemon.io.model_file import FaultFilter, FdiModel, load_model, save_model
+from fdi_daemon.io.model_file import DriftFilter, FaultFilter, FdiModel, load_model, save_model
 
 
 def sample_model():
@@ -18,6 +18,9 @@ def sample_model():
             nk=0,
             gamma_f=2.4,
             band_hz=(5.25, 12.5),
+            drift=DriftFilter(
+                b=np.array([0.2, -0.1]), f=np.array([1.0, -0.5]), nk=1, gamma=3.1, highpass_hz=0.5
+            ),
         ),
         velocity={"highpass_hz": 1.0, "highpass_order": 3},
         provenance={"source_sha256": "ab" * 32, "fit_percent": np.float64(93.5)},
@@ -33,6 +36,10 @@ def test_round_trip_keeps_every_key(tmp_path):
     np.testing.assert_array_equal(back.fault_filter.b, model.fault_filter.b)
     assert back.fault_filter.gamma_f == 2.4
     assert back.fault_filter.band_hz == (5.25, 12.5)
+    drift = back.fault_filter.drift
+    np.testing.assert_array_equal(drift.b, [0.2, -0.1])
+    np.testing.assert_array_equal(drift.f, [1.0, -0.5])
+    assert (drift.nk, drift.gamma, drift.highpass_hz) == (1, 3.1, 0.5)
     assert back.velocity == model.velocity
     assert back.provenance["fit_percent"] == 93.5
     assert back.extra["effects"][0]["name"] == "coulomb_friction"
@@ -66,6 +73,25 @@ def test_round_trip_keeps_every_key(tmp_path):
             "fault_filter: {b: [1], f: [1], band_hz: [12, 6]}\n",
             r"fault_filter.band_hz must be \[lo, hi\] in Hz with 0 < lo <= hi",
         ),
+        (
+            "fs: 256\nplant: {b: [0, 1], a: [1]}\n"
+            "fault_filter: {b: [1], f: [1], drift: {b: [1], f: [1], gamma: 3}}\n",
+            r"fault_filter.drift: missing required key highpass_hz",
+        ),
+        (
+            "fs: 256\nplant: {b: [0, 1], a: [1]}\n"
+            "fault_filter: {b: [1], f: [1], drift: {b: [1], f: [1], gamma: 3, highpass_hz: 0}}\n",
+            r"fault_filter.drift.highpass_hz must be a positive number of Hz",
+        ),
+        (
+            "fs: 256\nplant: {b: [0, 1], a: [1]}\n"
+            "fault_filter: {b: [1], f: [1], drift: {b: [1], f: [2], gamma: 3, highpass_hz: 1}}\n",
+            r"fault_filter.drift.f must start with 1",
+        ),
+        (
+            "fs: 256\nplant: {b: [0, 1], a: [1]}\nfault_filter: {b: [1], f: [1], drift: 3}\n",
+            r"fault_filter: drift must be a mapping",
+        ),
         ("fs: 256\nplant: {b: [0, 1], a: [1]}\nvelocity: 3\n", r"velocity must be a mapping"),
         ("- just a list\n", r"must be a mapping"),
         ("fs: [unclosed\n", r"not valid YAML at line"),
@@ -85,6 +111,15 @@ def test_a_model_without_a_calibration_band_has_none(tmp_path):
     path = save_model(tmp_path / "m.yaml", model)
     assert "band_hz" not in path.read_text()
     assert load_model(path).fault_filter.band_hz is None
+
+
+def test_a_model_without_a_drift_signature_has_none(tmp_path):
+    """Models made without `fdi signature --drift-highpass-hz` load and save as before."""
+    model = sample_model()
+    model.fault_filter.drift = None
+    path = save_model(tmp_path / "m.yaml", model)
+    assert "drift" not in path.read_text()
+    assert load_model(path).fault_filter.drift is None
 
 
 def test_missing_model_file(tmp_path):

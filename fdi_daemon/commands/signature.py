@@ -15,6 +15,7 @@ HELP = "identify the friction signature (G_e, gamma_f) from a window with a fric
 #: computed from the valve voltage and the accelerometer alone (the position observer needs
 #: a position sensor on every sample, a choice the user makes).
 AUTO_METHODS = ("highpass", "model_observer")
+DRIFT_NEEDS_HIGHPASS = "--drift-highpass-hz needs the high-pass velocity estimator"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -61,6 +62,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="velocity estimator high-pass cut-off (default: the model's "
         "velocity settings, else 1 Hz; with model_observer, 0.5 Hz on "
         "the residual path)",
+    )
+    parser.add_argument(
+        "--drift-highpass-hz",
+        type=float,
+        metavar="HZ",
+        help="also fit the growing-fault path's own G_e and gamma with the velocity's "
+        "high-pass at HZ (lower than the monitor's, so that sign v is right at 1-3 Hz; "
+        "stored as fault_filter.drift; high-pass velocity only; docs/detector.md §3)",
     )
     parser.add_argument(
         "--velocity-method",
@@ -142,11 +151,10 @@ def run(args: argparse.Namespace) -> int:
 
     from fdi_daemon.commands.identify import load_io, parse_range
     from fdi_daemon.core.velocity import DEFAULT_SETTINGS
-    from fdi_daemon.core.velocity_observer import velocity_from_settings
     from fdi_daemon.detect.monitor import check_stable
     from fdi_daemon.detect.settings import velocity_settings
     from fdi_daemon.diagnose.augment import nominal_plant
-    from fdi_daemon.errors import ConfigError, UserError
+    from fdi_daemon.errors import UserError
     from fdi_daemon.ident import provenance
     from fdi_daemon.ident import signature as sig
     from fdi_daemon.ident.signature_advice import CalibrationContext, plant_resonance_hz
@@ -169,6 +177,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--flat-fraction must lie in (0, 1]")
     if not args.min_depth >= 0:
         raise UserError("--min-depth must be >= 0")
+    if args.drift_highpass_hz is not None and not args.drift_highpass_hz > 0:
+        raise UserError("--drift-highpass-hz must be > 0")
     check_outputs(
         {"--output": args.output, "--plot": args.plot},
         (args.recording, args.model),
@@ -203,6 +213,8 @@ def run(args: argparse.Namespace) -> int:
         model.velocity.get("method", "highpass") if model.velocity else "auto"
     )
     candidates = AUTO_METHODS if method == "auto" else (method,)
+    if args.drift_highpass_hz is not None and method not in ("auto", "highpass"):
+        raise UserError(DRIFT_NEEDS_HIGHPASS)
     prefilter = _prefilter(args, model.fs)
     radius = args.max_pole_radius
     if radius is None:
@@ -225,19 +237,10 @@ def run(args: argparse.Namespace) -> int:
         referenced=args.reference_window is not None,
         resonance_hz=plant_resonance_hz(model.plant_a, float(model.fs)),
     )
-    fits: list[tuple[Any, ...]] = []
-    for candidate in candidates:
-        if fits and fits[-1][0] >= sig.LOW_VAF_PERCENT:
-            break  # the signature fits: keep the estimator tried first
-        settings = velocity_settings(model.velocity or DEFAULT_SETTINGS)
-        if candidate != settings.get("method", "highpass"):
-            settings = {"method": candidate}  # the other method's own defaults
-        if args.highpass_hz is not None:
-            settings["highpass_hz"] = args.highpass_hz
-        try:
-            estimator = velocity_from_settings(settings, fs_hz=model.fs)
-        except ValueError as exc:
-            raise ConfigError(f"{args.model}: velocity: {exc}") from None
+
+    def fit(candidate: str, estimator: Any) -> tuple[Any, ...]:
+        """(VAF %, fit %, candidate, estimator, result, G_e) of the signature under
+        ``estimator``'s velocity: the γ profile, then G_e on the full band at γ_f."""
         velocity = _velocity(estimator, rec, args.recording, accel, plant_residual)
         result = _estimate(
             sig,
@@ -265,11 +268,28 @@ def run(args: argparse.Namespace) -> int:
             )
         full_band_pct = sig.fit_percent(residual[first:end], fault_fit.y_sim)
         full_band_vaf = sig.variance_accounted_for(residual[first:end], fault_fit.y_sim)
-        fits.append((full_band_vaf, full_band_pct, candidate, estimator, result, fault_fit))
+        return full_band_vaf, full_band_pct, candidate, estimator, result, fault_fit
+
+    fits: list[tuple[Any, ...]] = []
+    for candidate in candidates:
+        if fits and fits[-1][0] >= sig.LOW_VAF_PERCENT:
+            break  # the signature fits: keep the estimator tried first
+        settings = velocity_settings(model.velocity or DEFAULT_SETTINGS)
+        if candidate != settings.get("method", "highpass"):
+            settings = {"method": candidate}  # the other method's own defaults
+        if args.highpass_hz is not None:
+            settings["highpass_hz"] = args.highpass_hz
+        fits.append(fit(candidate, _estimator(settings, model.fs, args.model)))
     # of those tried, the velocity under which the signature explains most of the residual
     full_band_vaf, full_band_pct, _, estimator, result, fault_fit = max(
         fits, key=lambda fit: fit[0]
     )
+    drift = None
+    if args.drift_highpass_hz is not None:  # the growing-fault path's own signature
+        if estimator.settings().get("method", "highpass") != "highpass":
+            raise UserError(DRIFT_NEEDS_HIGHPASS)  # auto took the observer
+        slow = {**estimator.settings(), "highpass_hz": args.drift_highpass_hz}
+        drift = fit("highpass", _estimator(slow, model.fs, args.model))
     explained = {fit[2]: round(float(fit[0]), 2) for fit in fits}
 
     nb, nf, nk = orders
@@ -282,6 +302,7 @@ def run(args: argparse.Namespace) -> int:
         nk=nk,
         gamma_f=None if result.at_edge else result.gamma_f,
         band_hz=band,
+        drift=None if drift is None else _drift_filter(drift, nk, args.drift_highpass_hz),
     )
     model.velocity = estimator.settings()
     prov = dict(model.provenance)
@@ -307,6 +328,8 @@ def run(args: argparse.Namespace) -> int:
         "cost_profile_relative": [round(float(c), 6) for c in result.relative_cost()],
         "recommendation": result.recommendation,
     }
+    if drift is not None:
+        prov["signature"]["drift"] = _drift_provenance(drift, args.drift_highpass_hz)
     model.provenance = prov
     save_model(args.output, model)
     if args.plot:
@@ -330,7 +353,53 @@ def run(args: argparse.Namespace) -> int:
         full_band_vaf,
         explained if method == "auto" else None,
     )
+    if drift is not None:
+        _report_drift(drift, args.drift_highpass_hz)
     return 0
+
+
+def _estimator(settings: dict[str, Any], fs: float, model_path: str) -> Any:
+    """The velocity estimator of ``settings`` (a bad setting: one line naming the model)."""
+    from fdi_daemon.core.velocity_observer import velocity_from_settings
+    from fdi_daemon.errors import ConfigError
+
+    try:
+        return velocity_from_settings(settings, fs_hz=fs)
+    except ValueError as exc:
+        raise ConfigError(f"{model_path}: velocity: {exc}") from None
+
+
+def _drift_filter(drift: tuple[Any, ...], nk: int, highpass_hz: float) -> Any:
+    """The model's ``fault_filter.drift`` from the fit under the low cut-off's velocity: G_e
+    and the γ it was fitted at (least cost, also at the grid's edge)."""
+    from fdi_daemon.io.model_file import DriftFilter
+
+    result, fault_fit = drift[4], drift[5]
+    return DriftFilter(
+        b=fault_fit.b, f=fault_fit.f, nk=nk, gamma=float(result.gamma_f), highpass_hz=highpass_hz
+    )
+
+
+def _drift_provenance(drift: tuple[Any, ...], highpass_hz: float) -> dict[str, Any]:
+    """How well the growing-fault path's signature is known (provenance.signature.drift)."""
+    vaf, pct, _, _, result, _ = drift
+    return {
+        "highpass_hz": float(highpass_hz),
+        "gamma_f_status": result.status,
+        "interval_99": [float(v) for v in result.interval],
+        "fault_filter_fit_percent_full_band": float(pct),
+        "fault_filter_vaf_percent_full_band": float(vaf),
+    }
+
+
+def _report_drift(drift: tuple[Any, ...], highpass_hz: float) -> None:
+    """One line on the growing-fault path's signature."""
+    vaf, _, _, _, result, _ = drift
+    print(
+        f"drift signature   : high-pass {highpass_hz:g} Hz, γ {result.gamma_f:.4g} (99 % "
+        f"{result.interval[0]:.3g} .. {result.interval[1]:.3g}, {result.status}), G_e "
+        f"explains {vaf:.1f} % of the fault residual's variance"
+    )
 
 
 def _velocity(estimator, rec, path, accel, residual):

@@ -445,7 +445,7 @@ def episode_tick(
     acc = acc + f[tr + 2] * xhat
     acc = acc + f[tr + 3] * 1.0
     e = r - acc
-    # the growing-fault CUSUM against the frozen reference along s = g1 + γ g2 (S_DRIFT_S,
+    # the growing-fault CUSUM against the frozen reference along its regressor s (S_DRIFT_S,
     # set by the caller), capped at twice its threshold so that it falls below the
     # threshold within a bounded time once the shift is gone
     if f[sc + S_DRIFT_SHIFT] > 0.0:

@@ -8,6 +8,9 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
     r  = ẍ − x̂̈                          eq. (3)  (a bad ẍ, NaN, is replaced by x̂̈)
     v̂  = V(q) ẍ | L(q) x̂̈ + V(q) r | P(q) x + A(q) ẍ    the three velocity methods
     g1 = G_e(q)[sign v̂], g2 = G_e(q)[v̂]  eq. (15)
+    s_d = G_d(q)[sign v̂_d] + γ_d G_d(q)[v̂_d]   the growing-fault path's regressor: a
+             second high-pass velocity v̂_d = V_d(q) ẍ (lower cut-off) and its own G_d, γ_d
+             where the model has them (``fault_filter.drift``), else g1 + γ g2
     θ  = argmin Σ_N (r − θ1 g1 − θ2 g2)²  eqs. (16)–(17): six window sums + Σ v̂²
     level = Σ s·r / Σ s²,  s = g1 + γ g2    the friction level: eq. (17) on the calibrated
              signature's direction (1, γ), in units of the calibrated fault
@@ -76,14 +79,16 @@ __all__ = [
 QUIET, LEVEL_ALARM, CALIBRATED, FAST_ALARM, ISOLATED, OTHER_FAULT, CLEARED, DRIFT_ALARM = range(8)
 
 # filters
-F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL, F_VEL_LOW = range(6)
-CHAIN_FILTERS = 6
-# --- chain ints (offsets from the chain's int base)
-C_METHOD, C_EXTERNAL, C_N, C_WIDTH, C_ORDER = 0, 1, 2, 3, 4  # C_ORDER .. +6: the filters
-C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT = range(
-    C_ORDER + CHAIN_FILTERS, C_ORDER + CHAIN_FILTERS + 8
+(F_PLANT, F_VEL_A, F_VEL_B, F_GE_SIGN, F_GE_VEL, F_VEL_LOW, F_VEL_DRIFT, F_GD_SIGN, F_GD_VEL) = (
+    range(9)
 )
-CHAIN_INTS = C_OUT + 1
+CHAIN_FILTERS = 9
+# --- chain ints (offsets from the chain's int base)
+C_METHOD, C_EXTERNAL, C_N, C_WIDTH, C_ORDER = 0, 1, 2, 3, 4  # C_ORDER .. +9: the filters
+C_POS, C_COUNT, C_B, C_A, C_Z, C_SUMS, C_ROW, C_OUT, C_DRIFT = range(
+    C_ORDER + CHAIN_FILTERS, C_ORDER + CHAIN_FILTERS + 9
+)
+CHAIN_INTS = C_DRIFT + 1
 # --- chain floats at C_OUT
 (
     O_XHAT,
@@ -118,8 +123,10 @@ CHAIN_INTS = C_OUT + 1
     O_TRUST_SHARE,
     O_GAMMA,
     O_LEVEL,
-) = range(32)
-CHAIN_OUT = 32
+    O_DRIFT_GAMMA,
+    O_DRIFT_S,
+) = range(34)
+CHAIN_OUT = 34
 SUMS_WIDTH = 10  # S11, S12, S22, S1y, S2y, Syy, Σv̂², Σ(LP v̂)², Σẍ², Σx̂̈²
 #: a run of this many equal, non-zero ẍ samples is a flat top; two flat tops at one value
 #: within a window are the accelerometer's rail (clipping)
@@ -217,6 +224,10 @@ def chain_tick(
     g1 = iir_step(f, bo + 3 * L, ao + 3 * L, zo + 3 * (L - 1), ii[od + 3], s)
     g2 = iir_step(f, bo + 4 * L, ao + 4 * L, zo + 4 * (L - 1), ii[od + 4], v)
     v_low = iir_step(f, bo + 5 * L, ao + 5 * L, zo + 5 * (L - 1), ii[od + 5], v)
+    if ii[io + C_DRIFT]:
+        f[out + O_DRIFT_S] = _drift_regressor(f, ii, io, accel)
+    else:
+        f[out + O_DRIFT_S] = g1 + f[out + O_GAMMA] * g2
     row = ii[io + C_ROW]
     f[row] = g1 * g1
     f[row + 1] = g1 * g2
@@ -281,6 +292,23 @@ def chain_tick(
     f[out + O_V] = v
     f[out + O_G1] = g1
     f[out + O_G2] = g2
+
+
+@jit(inline=True)
+def _drift_regressor(f: F64, ii: I64, io: int, accel: float) -> float:  # pragma: no cover - jit
+    """s_d = G_d[sign v̂_d] + γ_d G_d[v̂_d] (eqs. 15 and 11 on the drift signature) with
+    v̂_d = V_d(q) ẍ (m/s), the high-pass velocity at the drift signature's cut-off."""
+    L = ii[io + C_WIDTH]
+    bo = ii[io + C_B] + F_VEL_DRIFT * L
+    ao = ii[io + C_A] + F_VEL_DRIFT * L
+    zo = ii[io + C_Z] + F_VEL_DRIFT * (L - 1)
+    od = io + C_ORDER + F_VEL_DRIFT
+    v = iir_step(f, bo, ao, zo, ii[od], accel)
+    s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+    d1 = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], s)
+    d2 = iir_step(f, bo + 2 * L, ao + 2 * L, zo + 2 * (L - 1), ii[od + 2], v)
+    gamma: float = f[ii[io + C_OUT] + O_DRIFT_GAMMA]
+    return d1 + gamma * d2
 
 
 @jit(inline=True)
@@ -493,7 +521,8 @@ def _drift_tick(
     xhat: float,
 ) -> None:  # pragma: no cover - jit
     """The growing-fault path's statistic: Page's CUSUM (`core.cusum`) of the innovation
-    along the signature's regressor s = g1 + γ g2, matched to a shift of
+    along the signature's regressor s (``chain_tick``'s s_d: g1 + γ g2, or the drift
+    signature's on its own low-cut-off velocity), matched to a shift of
     ``drift_shift_level`` calibrated faults, against the residual test's reference as it
     was when the CUSUM's run began (at S = 0; B&N §8.1's two-model approach: the moving
     reference would learn a fault that grows, the frozen one does not); restarted from 0
@@ -510,8 +539,7 @@ def _drift_tick(
             f[ref + q] = f[th + q]
         f[ref + 4] = f[ii[res + 22] + 4]
     e = r - (f[ref] * g1 + f[ref + 1] * g2 + f[ref + 2] * xhat + f[ref + 3])
-    s = g1 + f[out + O_GAMMA] * g2
-    total = f[fo + E_DRIFT] + cusum_increment(e, s, f[ref + 4], shift)
+    total = f[fo + E_DRIFT] + cusum_increment(e, f[out + O_DRIFT_S], f[ref + 4], shift)
     f[fo + E_DRIFT] = total if total > 0.0 else 0.0
 
 
@@ -551,7 +579,7 @@ def _episode(
     ep = ii[io + D_EPI]
     band = fo + E_LO1 if ii[io + D_HAS_BAND] else -1
     out = ii[ii[io + D_CHAIN] + C_OUT]
-    f[ii[ep + E.P_O_SCAL] + E.S_DRIFT_S] = g1 + f[out + O_GAMMA] * g2
+    f[ii[ep + E.P_O_SCAL] + E.S_DRIFT_S] = f[out + O_DRIFT_S]
     packed_row_into(f, ii[res + 15], 4, ii[res + 16])  # this tick's row of the residual fit
     change = E.episode_tick(
         f,

@@ -9,6 +9,9 @@ Per tick::
     v̂  = P(q) x + A(q) ẍ                       position fusion (core.velocity_position)
     g1  = G_e(q)[sign v̂],  g2 = G_e(q)[v̂]     eq. (15), G_e = q^-nk B/F, two IIR states
     θ   = argmin Σ_N (r - θ1 g1 - θ2 g2)²      eqs. (16)–(17), core.window_ls
+    s_d = G_d(q)[sign v̂_d] + γ_d G_d(q)[v̂_d]   the growing-fault path's regressor, on its
+          own high-pass velocity v̂_d (a lower cut-off) where the model has a drift signature
+          (``fault_filter.drift``), else g1 + γ g2 (docs/detector.md §3, "Growing friction")
 
 θ is reported as NaN while the rig is at rest: the RMS of v̂ over the window below
 ``min_velocity_rms_mps`` (at rest g1 is the filtered sign of noise, and the fit means nothing).
@@ -35,6 +38,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -42,7 +46,7 @@ from fdi_daemon.core.compiled import Arena
 from fdi_daemon.core.filter_design import butter
 from fdi_daemon.core.iir import IIRFilter
 from fdi_daemon.core.kernels import sums_floats
-from fdi_daemon.core.velocity import VelocityEstimator
+from fdi_daemon.core.velocity import DEFAULT_SETTINGS, VelocityEstimator
 from fdi_daemon.core.velocity_observer import (
     ModelVelocityObserver,
     trusted_from_hz,
@@ -53,7 +57,7 @@ from fdi_daemon.core.window_ls import MIN_RCOND, solve_sums
 from fdi_daemon.detect import kernel as K
 from fdi_daemon.detect.settings import DetectorSettings, velocity_settings
 from fdi_daemon.errors import ConfigError
-from fdi_daemon.io.model_file import FaultFilter, FdiModel
+from fdi_daemon.io.model_file import DriftFilter, FaultFilter, FdiModel
 
 __all__ = ["Pipeline", "PipelineBatch"]
 
@@ -116,6 +120,25 @@ def _calibrated_from_hz(ff: FaultFilter) -> float:
     """The lowest frequency (Hz) of the signature's calibration, 0.0 where the model does
     not record it (a model made before `fdi signature` did)."""
     return 0.0 if ff.band_hz is None else ff.band_hz[0]
+
+
+def _drift_filters(model: FdiModel, drift: DriftFilter | None) -> list[Any]:
+    """The growing-fault path's velocity V_d, the high-pass estimator at the drift
+    signature's cut-off (the model's own settings when its velocity is the high-pass one, as
+    `fdi signature --drift-highpass-hz` requires, else the estimator's defaults), and its G_d
+    for sign v̂_d and v̂_d (eq. 15); [None] * 3 without a drift signature (the path then uses
+    g1 + γ g2, `kernel.chain_tick`)."""
+    if drift is None:
+        return [None] * 3
+    settings = velocity_settings(model.velocity)
+    if settings.get("method", "highpass") != "highpass":
+        settings = velocity_settings(DEFAULT_SETTINGS)
+    try:
+        velocity = velocity_from_settings({**settings, "highpass_hz": drift.highpass_hz}, model.fs)
+    except ValueError as exc:
+        raise ConfigError(f"fault_filter.drift: {exc}") from None
+    b_d = np.concatenate([np.zeros(int(drift.nk)), np.asarray(drift.b, dtype=float)])
+    return [velocity, IIRFilter(b_d, drift.f), IIRFilter(b_d, drift.f)]
 
 
 class Pipeline:
@@ -198,6 +221,7 @@ class Pipeline:
             else None
         )  # None: v̂ is trusted everywhere
         filters = [plant, vel_a, vel_b, self.ge_sign, self.ge_velocity, low]
+        filters += _drift_filters(model, ff.drift)
         width = max(f.b.size for f in filters if f is not None)
         self.arena = arena if arena is not None else Arena()
         nf = K.CHAIN_FILTERS
@@ -232,11 +256,13 @@ class Pipeline:
             sums_o,
             row_o,
             out_o,
+            int(ff.drift is not None),
         )
         f[out_o + K.O_MIN_V2] = float(min_velocity_rms_mps) ** 2 * n
         f[out_o + K.O_MIN_RCOND] = float(min_rcond)
         f[out_o + K.O_TRUST_SHARE] = float(trust_share)
         f[out_o + K.O_GAMMA] = self.signature_gamma = model.signature_gamma()
+        f[out_o + K.O_DRIFT_GAMMA] = math.nan if ff.drift is None else ff.drift.gamma
         self.reset()
 
     def _out(self, k: int) -> float:

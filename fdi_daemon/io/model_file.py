@@ -5,7 +5,10 @@ Keys (DESIGN.md; more are welcome, these keep their meaning):
 - ``plant: {b: [b0..bn], a: [1, a1..an]}``: Ĝ = B/A in powers of q⁻¹ (eq. 1, b0 = 0);
 - ``fault_filter: {b: [...], f: [1, ...], nk: 0, gamma_f: x, band_hz: [lo, hi]}``: G_e = B/F
   (eq. 8), γ_f (eq. 11) and the frequencies (Hz) of the calibration they were fitted on
-  (optional: models made before it was recorded have none);
+  (optional: models made before it was recorded have none); optionally
+  ``drift: {b: [...], f: [1, ...], nk: 0, gamma: x, highpass_hz: hz}``, the growing-fault
+  path's own G_e and γ, fitted with the velocity's high-pass at ``highpass_hz``
+  (`fdi signature --drift-highpass-hz`; docs/detector.md §3, "Growing friction");
 - ``velocity``: settings of the velocity estimator (high-pass + integrator), kept as a mapping;
 - ``detector``: detector settings, kept as a mapping;
 - ``provenance``: where the model came from (source hash, date, fit metrics);
@@ -48,6 +51,21 @@ class FaultFilter:
     #: the span (Hz) of the calibration's excitation that G_e and γ_f were fitted on
     #: (`ident.signature.calibration_band_hz`); None: not recorded (a model made before)
     band_hz: tuple[float, float] | None = None
+    #: the growing-fault path's own signature (None: it uses this one)
+    drift: DriftFilter | None = None
+
+
+@dataclass
+class DriftFilter:
+    """The growing-fault path's signature: G_e = q^-nk B/F (eq. 8) fitted at γ (eq. 11, its
+    least-cost γ) with the high-pass velocity estimator's cut-off at ``highpass_hz`` (Hz),
+    lower than the monitor's, so that sign v̂ is right at 1–3 Hz (docs/detector.md §3)."""
+
+    b: np.ndarray
+    f: np.ndarray
+    nk: int
+    gamma: float
+    highpass_hz: float
 
 
 @dataclass
@@ -90,6 +108,15 @@ class FdiModel:
             }
             if ff.band_hz is not None:
                 out["fault_filter"]["band_hz"] = [float(v) for v in ff.band_hz]
+            if ff.drift is not None:
+                d = ff.drift
+                out["fault_filter"]["drift"] = {
+                    "b": _floats(d.b),
+                    "f": _floats(d.f),
+                    "nk": int(d.nk),
+                    "gamma": float(d.gamma),
+                    "highpass_hz": float(d.highpass_hz),
+                }
         for key in ("velocity", "detector", "provenance"):
             value = getattr(self, key)
             if value:
@@ -132,11 +159,13 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
     fault_filter = None
     if data.get("fault_filter") is not None:
         ff = _section(
-            data, "fault_filter", ("b", "f", "nk", "gamma_f", "band_hz"), ("b", "f"), source
+            data,
+            "fault_filter",
+            ("b", "f", "nk", "gamma_f", "band_hz", "drift"),
+            ("b", "f"),
+            source,
         )
-        nk = ff.get("nk", 0)
-        if not isinstance(nk, int) or isinstance(nk, bool) or nk < 0:
-            raise ConfigError(f"{source}: fault_filter.nk must be a whole number >= 0")
+        nk = _delay(ff, f"{source}: fault_filter")
         gamma = ff.get("gamma_f", 0.0)
         if gamma is not None and (
             isinstance(gamma, bool)
@@ -150,6 +179,7 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
             nk=nk,
             gamma_f=None if gamma is None else float(gamma),
             band_hz=_band(ff.get("band_hz"), f"{source}: fault_filter.band_hz"),
+            drift=_drift(ff, f"{source}: fault_filter"),
         )
     sections = {
         key: _mapping(data, key, source, required=False)
@@ -179,6 +209,36 @@ def _section(
     )
     _require(section, required, f"{source}: {key}")
     return section
+
+
+def _delay(section: dict[str, Any], where: str) -> int:
+    """G_e's delay nk (samples), a whole number >= 0 (0 when absent)."""
+    nk = section.get("nk", 0)
+    if not isinstance(nk, int) or isinstance(nk, bool) or nk < 0:
+        raise ConfigError(f"{where}.nk must be a whole number >= 0")
+    return nk
+
+
+def _drift(fault_filter: dict[str, Any], where: str) -> DriftFilter | None:
+    """``fault_filter.drift`` (the growing-fault path's signature), None when absent."""
+    if fault_filter.get("drift") is None:
+        return None
+    section = _mapping(fault_filter, "drift", where, required=True)
+    where = f"{where}.drift"
+    d, _ = split_known(section, ("b", "f", "nk", "gamma", "highpass_hz"), where, noun="key")
+    _require(d, ("b", "f", "gamma", "highpass_hz"), where)
+    gamma, hz = d["gamma"], d["highpass_hz"]
+    if isinstance(gamma, bool) or not isinstance(gamma, (int, float)) or not math.isfinite(gamma):
+        raise ConfigError(f"{where}.gamma must be a finite number")
+    if isinstance(hz, bool) or not isinstance(hz, (int, float)) or not 0 < hz < math.inf:
+        raise ConfigError(f"{where}.highpass_hz must be a positive number of Hz")
+    return DriftFilter(
+        b=_coefficients(d, "b", where),
+        f=_coefficients(d, "f", where, monic=True),
+        nk=_delay(d, where),
+        gamma=float(gamma),
+        highpass_hz=float(hz),
+    )
 
 
 def _band(value: Any, where: str) -> tuple[float, float] | None:

@@ -104,22 +104,15 @@ def test_invalid_models_name_the_key(tmp_path, text, message):
         load_model(path)
 
 
-def test_a_model_without_a_calibration_band_has_none(tmp_path):
-    """Models made before `fdi signature` recorded the band load as before, and save as before."""
+@pytest.mark.parametrize("field", ["band_hz", "drift"])
+def test_a_model_without_an_optional_fault_filter_field_has_none(tmp_path, field):
+    """Models made before `fdi signature` recorded the calibration band, or made without
+    ``--drift-highpass-hz``, load and save as before."""
     model = sample_model()
-    model.fault_filter.band_hz = None
+    setattr(model.fault_filter, field, None)
     path = save_model(tmp_path / "m.yaml", model)
-    assert "band_hz" not in path.read_text()
-    assert load_model(path).fault_filter.band_hz is None
-
-
-def test_a_model_without_a_drift_signature_has_none(tmp_path):
-    """Models made without `fdi signature --drift-highpass-hz` load and save as before."""
-    model = sample_model()
-    model.fault_filter.drift = None
-    path = save_model(tmp_path / "m.yaml", model)
-    assert "drift" not in path.read_text()
-    assert load_model(path).fault_filter.drift is None
+    assert field not in path.read_text()
+    assert getattr(load_model(path).fault_filter, field) is None
 
 
 def test_missing_model_file(tmp_path):

@@ -149,63 +149,22 @@ def _orders(text: str) -> tuple[int, int, int]:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from fdi_daemon.commands.identify import load_io, parse_range
+    from fdi_daemon.commands.identify import load_io
     from fdi_daemon.core.velocity import DEFAULT_SETTINGS
     from fdi_daemon.detect.monitor import check_stable
     from fdi_daemon.detect.settings import velocity_settings
     from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.errors import UserError
-    from fdi_daemon.ident import provenance
     from fdi_daemon.ident import signature as sig
     from fdi_daemon.ident.signature_advice import CalibrationContext, plant_resonance_hz
     from fdi_daemon.io.model_file import FaultFilter, load_model, save_model
-    from fdi_daemon.io.outputs import check_outputs
-    from fdi_daemon.io.recordings import same_rate
 
-    t0, t1 = parse_range(args.fault_window, "--fault-window")
-    if not t1 > t0:
-        raise UserError(f"--fault-window needs T0 < T1, got {args.fault_window}")
-    lo, hi, step = parse_range(args.gamma_grid, "--gamma-grid", 3)
-    try:
-        grid = sig.gamma_grid(lo, hi, step)
-    except ValueError as exc:
-        raise UserError(f"--gamma-grid: {exc}") from None
-    if len(grid) < 3:
-        raise UserError("--gamma-grid needs at least 3 points")
-    orders = _orders(args.orders)
-    if not 0 < args.flat_fraction <= 1:
-        raise UserError("--flat-fraction must lie in (0, 1]")
-    if not args.min_depth >= 0:
-        raise UserError("--min-depth must be >= 0")
-    if args.drift_highpass_hz is not None and not args.drift_highpass_hz > 0:
-        raise UserError("--drift-highpass-hz must be > 0")
-    check_outputs(
-        {"--output": args.output, "--plot": args.plot},
-        (args.recording, args.model),
-        plots=("--plot",),
-        rewrites={"--output": args.model},
-    )
-
+    t0, t1, grid, orders = _checked_options(args)
     model = load_model(args.model)
     check_stable(model.plant_a, "plant.a")  # an unstable Ĝ gives no residual to fit
     rec, v_in, accel = load_io(args.recording, args.columns)
-    if not same_rate(rec.fs, model.fs):
-        raise UserError(
-            f"{args.recording}: fs = {rec.fs:g} Hz but the model has fs = {model.fs:g} Hz"
-        )
     t = rec.t
-    if t0 < t[0] or t1 > t[-1] + 1.0 / rec.fs:
-        raise UserError(
-            f"--fault-window {args.fault_window} lies outside the recording "
-            f"({t[0]:g} to {t[-1]:g} s)"
-        )
-    inside = (t >= t0) & (t < t1)
-    needed = 2 * (sum(orders) + 10)
-    if inside.sum() < needed:
-        raise UserError(
-            f"--fault-window {args.fault_window} holds {int(inside.sum())} "
-            f"samples; at least {needed} are needed"
-        )
+    inside = _fault_window(args, rec, model.fs, t0, t1, orders)
 
     # a plant-only model (`fdi identify`'s) has no velocity yet: auto; a model with velocity
     # settings keeps them (without a method: the high-pass estimator, as every model before)
@@ -284,6 +243,7 @@ def run(args: argparse.Namespace) -> int:
     full_band_vaf, full_band_pct, _, estimator, result, fault_fit = max(
         fits, key=lambda fit: fit[0]
     )
+    fits_percent = (float(full_band_pct), float(full_band_vaf))
     drift = None
     if args.drift_highpass_hz is not None:  # the growing-fault path's own signature
         if estimator.settings().get("method", "highpass") != "highpass":
@@ -306,28 +266,9 @@ def run(args: argparse.Namespace) -> int:
     )
     model.velocity = estimator.settings()
     prov = dict(model.provenance)
-    prov["signature"] = {
-        **provenance.source_entry(args.recording, provenance.command_line("signature", args)),
-        "fault_window_s": [t0, t1],
-        "samples": int(inside.sum()),
-        "reference_window_s": (
-            None
-            if args.reference_window is None
-            else list(parse_range(args.reference_window, "--reference-window"))
-        ),
-        "prefilter_hz": args.prefilter_hz,
-        "lowpass_hz": args.lowpass_hz,
-        "max_pole_radius": float(radius),
-        "velocity_method": method,
-        "vaf_percent_by_velocity": explained,
-        "fault_filter_fit_percent_full_band": float(full_band_pct),
-        "fault_filter_vaf_percent_full_band": float(full_band_vaf),
-        "gamma_f_status": result.status,
-        "gamma_at_least_cost": float(result.gamma_f),
-        "cost_profile": result.summary(),
-        "cost_profile_relative": [round(float(c), 6) for c in result.relative_cost()],
-        "recommendation": result.recommendation,
-    }
+    prov["signature"] = _signature_provenance(
+        args, [t0, t1], int(inside.sum()), radius, method, explained, result, fits_percent
+    )
     if drift is not None:
         prov["signature"]["drift"] = _drift_provenance(drift, args.drift_highpass_hz)
     model.provenance = prov
@@ -356,6 +297,106 @@ def run(args: argparse.Namespace) -> int:
     if drift is not None:
         _report_drift(drift, args.drift_highpass_hz)
     return 0
+
+
+def _checked_options(args: argparse.Namespace) -> tuple[float, float, Any, tuple[int, int, int]]:
+    """(t0, t1, the γ grid, (nb, nf, nk)) from the options, each checked (one line each)."""
+    from fdi_daemon.commands.identify import parse_range
+    from fdi_daemon.errors import UserError
+    from fdi_daemon.ident import signature as sig
+    from fdi_daemon.io.outputs import check_outputs
+
+    t0, t1 = parse_range(args.fault_window, "--fault-window")
+    if not t1 > t0:
+        raise UserError(f"--fault-window needs T0 < T1, got {args.fault_window}")
+    lo, hi, step = parse_range(args.gamma_grid, "--gamma-grid", 3)
+    try:
+        grid = sig.gamma_grid(lo, hi, step)
+    except ValueError as exc:
+        raise UserError(f"--gamma-grid: {exc}") from None
+    if len(grid) < 3:
+        raise UserError("--gamma-grid needs at least 3 points")
+    orders = _orders(args.orders)
+    if not 0 < args.flat_fraction <= 1:
+        raise UserError("--flat-fraction must lie in (0, 1]")
+    if not args.min_depth >= 0:
+        raise UserError("--min-depth must be >= 0")
+    if args.drift_highpass_hz is not None and not args.drift_highpass_hz > 0:
+        raise UserError("--drift-highpass-hz must be > 0")
+    check_outputs(
+        {"--output": args.output, "--plot": args.plot},
+        (args.recording, args.model),
+        plots=("--plot",),
+        rewrites={"--output": args.model},
+    )
+    return t0, t1, grid, orders
+
+
+def _fault_window(
+    args: argparse.Namespace, rec: Any, fs: float, t0: float, t1: float, orders: tuple[int, ...]
+) -> Any:
+    """The samples of the fault window [t0, t1) s (a boolean mask), checked against the
+    recording: its rate is the model's ``fs``, the window lies inside it and holds enough
+    samples for the orders."""
+    from fdi_daemon.errors import UserError
+    from fdi_daemon.io.recordings import same_rate
+
+    if not same_rate(rec.fs, fs):
+        raise UserError(f"{args.recording}: fs = {rec.fs:g} Hz but the model has fs = {fs:g} Hz")
+    t = rec.t
+    if t0 < t[0] or t1 > t[-1] + 1.0 / rec.fs:
+        raise UserError(
+            f"--fault-window {args.fault_window} lies outside the recording "
+            f"({t[0]:g} to {t[-1]:g} s)"
+        )
+    inside = (t >= t0) & (t < t1)
+    needed = 2 * (sum(orders) + 10)
+    if inside.sum() < needed:
+        raise UserError(
+            f"--fault-window {args.fault_window} holds {int(inside.sum())} "
+            f"samples; at least {needed} are needed"
+        )
+    return inside
+
+
+def _signature_provenance(
+    args: argparse.Namespace,
+    window_s: list[float],
+    samples: int,
+    radius: float,
+    method: str,
+    explained: dict[str, float],
+    result: Any,
+    fits_percent: tuple[float, float],
+) -> dict[str, Any]:
+    """provenance.signature: the source and command, the window (s) and its samples, the
+    options, the velocity tried, how well G_e explains the residual (``fits_percent``: fit
+    % and VAF % on the full band), γ_f's status and cost profile, the recommendation."""
+    from fdi_daemon.commands.identify import parse_range
+    from fdi_daemon.ident import provenance
+
+    return {
+        **provenance.source_entry(args.recording, provenance.command_line("signature", args)),
+        "fault_window_s": window_s,
+        "samples": samples,
+        "reference_window_s": (
+            None
+            if args.reference_window is None
+            else list(parse_range(args.reference_window, "--reference-window"))
+        ),
+        "prefilter_hz": args.prefilter_hz,
+        "lowpass_hz": args.lowpass_hz,
+        "max_pole_radius": float(radius),
+        "velocity_method": method,
+        "vaf_percent_by_velocity": explained,
+        "fault_filter_fit_percent_full_band": fits_percent[0],
+        "fault_filter_vaf_percent_full_band": fits_percent[1],
+        "gamma_f_status": result.status,
+        "gamma_at_least_cost": float(result.gamma_f),
+        "cost_profile": result.summary(),
+        "cost_profile_relative": [round(float(c), 6) for c in result.relative_cost()],
+        "recommendation": result.recommendation,
+    }
 
 
 def _estimator(settings: dict[str, Any], fs: float, model_path: str) -> Any:

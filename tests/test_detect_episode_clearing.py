@@ -74,4 +74,4 @@ def test_the_deadband_is_the_test_windows_threshold_over_the_whole_window():
     window = f[ii[eo + E.P_O_BEYOND] + (n + 2) * E.W + 14] / (n * f[sc + E.S_SIGMA2_REF])
     assert math.isclose(window, mean_z, rel_tol=1e-9)
     assert mean_z > 1.0 + E._clear_excess(ii, eo, h)  # the fault is there
-    assert not E.innovations_back_to_normal(f, ii, eo, h)
+    assert not E.innovations_back_to_normal(f, ii, eo, E._clear_excess(ii, eo, h))

@@ -318,11 +318,11 @@ def _clear_excess(ii: I64, eo: int, threshold: float) -> float:  # pragma: no co
 
 @jit
 def innovations_back_to_normal(
-    f: F64, ii: I64, eo: int, threshold: float
+    f: F64, ii: I64, eo: int, excess: float
 ) -> bool:  # pragma: no cover - jit
     """The alarm's deadband (ISA-18.2: an alarm clears below the level that raised it):
     the mean of e²/σ²_ref over the window of n samples (the ``beyond`` window's Σe²) is
-    within `_clear_excess` of its fault-free value 1. One test window of m below h says
+    within ``excess`` (`_clear_excess`) of its fault-free value 1. One test window of m below h says
     only that this window shows no fault: under weak operation a valve at 40 % gave T of
     10-27 against h = 30 for a second, 19 times the reference's noise. False until the
     window holds n samples."""
@@ -331,7 +331,7 @@ def innovations_back_to_normal(
         return False
     sigma2 = f[ii[eo + P_O_SCAL] + S_SIGMA2_REF]
     mean_z = f[ii[eo + P_O_BEYOND] + (n + 2) * W + 14] / (n * sigma2)
-    back: bool = mean_z <= 1.0 + _clear_excess(ii, eo, threshold)
+    back: bool = mean_z <= 1.0 + excess
     return back
 
 
@@ -568,13 +568,12 @@ def episode_tick(
         # the innovations' mean power over the window, not one test window
         # (`innovations_back_to_normal`), and only under operation that would show the
         # fault as measured: elsewhere the count holds (`fault_power`)
-        if not math.isnan(f[sc + S_FAULT_CHANGE]) and fault_power(f, ii, eo) < _clear_excess(
-            ii, eo, threshold
-        ):
+        excess = _clear_excess(ii, eo, threshold)
+        if not math.isnan(f[sc + S_FAULT_CHANGE]) and fault_power(f, ii, eo) < excess:
             return NO_CHANGE
         normal = (
             frozen_stat <= threshold
-            and innovations_back_to_normal(f, ii, eo, threshold)
+            and innovations_back_to_normal(f, ii, eo, excess)
             and not over >= 0.5
             and f[sc + S_DRIFT] < f[sc + S_DRIFT_H]
         )

@@ -5,7 +5,8 @@ linearly over 1 s (bearing supply 80 -> 62 %, `ramp_spec`), under two operations
 cases and a fault-free record on the same models (docs/detector.md §3, "Growing friction").
 Run: ``python studies/growing_friction_detection.py [default|v0|v1 ...]`` (a minute or two
 per rig); ``python studies/growing_friction_detection.py tail`` prints the fault-free
-excursion tail the threshold's τ comes from (about 3 minutes); ``... during`` the ramp with
+excursion tail the threshold's τ comes from (about 3 minutes; ``tail v0 v1 v2``: on those
+variants, each with its model from README step 2 with ``--drift-highpass-hz 0.5``); ``... during`` the ramp with
 another fault stepped in during the drift path's episode (`faults_during_episode`);
 ``... lowcut HZ [default|v0|v1|v2 ...]`` the same, on seeds 4-9, with every rig's signature
 made by README step 2 with ``--highpass-hz HZ`` (the whole monitor on that cut-off;
@@ -176,22 +177,30 @@ def fmt(m):
     return f"{d}, then {later}, isolated {i}, {m['false_before']} before onset"
 
 
-def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201), model=None):
+def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201), model=None, rig=None):
     """The fault-free CUSUM's excursions (runs of S > 0) on an hour of changing operation
     that no test replays (seed 7), the model (default: the shipped one) with the alarm out
     of reach: how many peak above each level (the threshold's basis, docs/detector.md). One
-    `Monitor.step` a sample, about 3 minutes."""
+    `Monitor.step` a sample, about 3 minutes. ``rig``: the hour played on a rig variant
+    (its overrides)."""
     import copy
 
     import numpy as np
-    from conftest_detect import scenario_recording, sim_rig_model
+    import yaml
+    from conftest_detect import SCENARIOS, scenario_recording, sim_rig_model
 
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.io.sample import Sample
+    from hil_sim.scenarios import scenario_from_dict, simulate
 
     model = copy.deepcopy(sim_rig_model() if model is None else model)
     model.detector = {**(model.detector or {}), "drift_correlation_samples": 10**6}
-    rec = scenario_recording("fault_free_hour", seed=seed)
+    if rig:
+        spec = yaml.safe_load((SCENARIOS / "fault_free_hour.yaml").read_text())
+        spec["rig"] = {**spec.get("rig", {}), **rig}
+        rec = simulate(scenario_from_dict(spec), seed=seed)
+    else:
+        rec = scenario_recording("fault_free_hour", seed=seed)
     position = np.asarray(rec.columns["position"], dtype=float)
     mon = Monitor(model)
     peaks, peak = [], 0.0
@@ -272,7 +281,11 @@ def faults_during_episode(seed: int = 4, fault_t_s: float = 12.0):
 
 def main(argv):
     if argv[:1] == ["tail"]:
-        excursion_tail()
+        if len(argv) == 1:
+            excursion_tail()
+        for name, (rig, model) in step2_models(("--drift-highpass-hz", "0.5"), argv[1:]).items():
+            print(f"{name} (README step 2 with --drift-highpass-hz 0.5):", end=" ")
+            excursion_tail(model=model, rig=rig)
         return
     if argv[:1] == ["during"]:
         faults_during_episode()

@@ -5,14 +5,17 @@ linearly over 1 s (bearing supply 80 -> 62 %, `ramp_spec`), under two operations
 cases and a fault-free record on the same models (docs/detector.md §3, "Growing friction").
 Run: ``python studies/growing_friction_detection.py [default|v0|v1 ...]`` (a minute or two
 per rig); ``python studies/growing_friction_detection.py tail`` prints the fault-free
-excursion tail the threshold's τ comes from (about 3 minutes); ``... during`` the ramp with
+excursion tail the threshold's τ comes from (about 3 minutes; ``tail v0 v1 v2``: on those
+variants, each with its model from README step 2 with ``--drift-highpass-hz 0.5``); ``... during`` the ramp with
 another fault stepped in during the drift path's episode (`faults_during_episode`);
 ``... lowcut HZ [default|v0|v1|v2 ...]`` the same, on seeds 4-9, with every rig's signature
 made by README step 2 with ``--highpass-hz HZ`` (the whole monitor on that cut-off;
 `step2_models`); ``... drift HZ [default|v0|v1|v2 ...]`` with README step 2's
 ``--drift-highpass-hz HZ`` (the growing-fault path alone on it; docs/detector.md §3, "The
-1–3 Hz ramp without position"). ``tail`` and ``drift`` measure the shipped model, whose
-signature has its drift path on 0.5 Hz (README step 2).
+1–3 Hz ramp without position"); ``... peaks HZ [default|v0|v1|v2 ...]`` the same models,
+the drift CUSUM's peak over the 1.5 s after the onset divided by h, with the alarm out of
+reach (`ramp_peak`). ``tail`` measures the shipped model, whose signature has its drift
+path on 0.5 Hz (README step 2).
 
 Prints per rig, operation and seed the first `fault_detected` after the onset (delay in s,
 its path) and what followed, before the path (``drift_shift_level: 0``) and with it; for
@@ -174,22 +177,30 @@ def fmt(m):
     return f"{d}, then {later}, isolated {i}, {m['false_before']} before onset"
 
 
-def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201), model=None):
+def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201), model=None, rig=None):
     """The fault-free CUSUM's excursions (runs of S > 0) on an hour of changing operation
     that no test replays (seed 7), the model (default: the shipped one) with the alarm out
     of reach: how many peak above each level (the threshold's basis, docs/detector.md). One
-    `Monitor.step` a sample, about 3 minutes."""
+    `Monitor.step` a sample, about 3 minutes. ``rig``: the hour played on a rig variant
+    (its overrides)."""
     import copy
 
     import numpy as np
-    from conftest_detect import scenario_recording, sim_rig_model
+    import yaml
+    from conftest_detect import SCENARIOS, scenario_recording, sim_rig_model
 
     from fdi_daemon.detect.monitor import Monitor
     from fdi_daemon.io.sample import Sample
+    from hil_sim.scenarios import scenario_from_dict, simulate
 
     model = copy.deepcopy(sim_rig_model() if model is None else model)
     model.detector = {**(model.detector or {}), "drift_correlation_samples": 10**6}
-    rec = scenario_recording("fault_free_hour", seed=seed)
+    if rig:
+        spec = yaml.safe_load((SCENARIOS / "fault_free_hour.yaml").read_text())
+        spec["rig"] = {**spec.get("rig", {}), **rig}
+        rec = simulate(scenario_from_dict(spec), seed=seed)
+    else:
+        rec = scenario_recording("fault_free_hour", seed=seed)
     position = np.asarray(rec.columns["position"], dtype=float)
     mon = Monitor(model)
     peaks, peak = [], 0.0
@@ -206,6 +217,33 @@ def excursion_tail(seed: int = 7, levels=(25, 40, 50, 63, 100, 201), model=None)
     print(f"fault-free hour seed {seed}: {p.size} excursions, largest {p.max():.1f}")
     for level in levels:
         print(f"  above {level}: {int((p > level).sum())}")
+
+
+def ramp_peak(model, rig, operation, seed=4, within_s=1.5):
+    """The drift CUSUM's largest value over ``within_s`` after the ramp's onset, over h,
+    with the alarm out of reach (``drift_correlation_samples`` 10⁶; the fast and level
+    paths as they are); and its largest before the onset (absolute)."""
+    import copy
+
+    from fdi_daemon.detect.monitor import Monitor
+    from fdi_daemon.io.sample import Sample
+    from hil_sim.scenarios import scenario_from_dict, simulate
+
+    h = Monitor(model).detector.drift_threshold
+    model = copy.deepcopy(model)
+    model.detector = {**(model.detector or {}), "drift_correlation_samples": 10**6}
+    rec = simulate(scenario_from_dict(ramp_spec(operation, rig, duration_s=10.0)), seed=seed)
+    mon = Monitor(model)
+    after = before = 0.0
+    for k in range(len(rec)):
+        t = float(rec.t[k])
+        mon.step(Sample(k, t, float(rec.v_in[k]), float(rec.accel[k])))
+        s = mon.detector.drift_statistic
+        if t < ONSET_S:
+            before = max(before, s)
+        elif t <= ONSET_S + within_s:
+            after = max(after, s)
+    return after / h, before
 
 
 #: faults stepped in at 12 s, during the drift path's episode of the three-tone ramp
@@ -243,10 +281,26 @@ def faults_during_episode(seed: int = 4, fault_t_s: float = 12.0):
 
 def main(argv):
     if argv[:1] == ["tail"]:
-        excursion_tail()
+        if len(argv) == 1:
+            excursion_tail()
+        for name, (rig, model) in step2_models(("--drift-highpass-hz", "0.5"), argv[1:]).items():
+            print(f"{name} (README step 2 with --drift-highpass-hz 0.5):", end=" ")
+            excursion_tail(model=model, rig=rig)
         return
     if argv[:1] == ["during"]:
         faults_during_episode()
+        return
+    if argv[:1] == ["peaks"]:
+        peaks = step2_models(("--drift-highpass-hz", argv[1]), tuple(argv[2:]) or ("default",))
+        for name, (rig, model) in peaks.items():
+            for op_name, op in OPERATIONS.items():
+                got = [ramp_peak(model, rig, op, seed) for seed in LOWCUT_SEEDS]
+                shown = " ".join(f"{a:.2f}" for a, _ in got)
+                print(
+                    f"| {name} | {op_name} | peak/h seeds 4-9: {shown} | "
+                    f"before onset max {max(b for _, b in got):.0f} |",
+                    flush=True,
+                )
         return
     option = {"lowcut": "--highpass-hz", "drift": "--drift-highpass-hz"}.get(
         argv[0] if argv else ""

@@ -146,10 +146,12 @@ def test_half_size_ramp_over_one_second_found_within_1_5_s_rig_variants(variant_
     assert "cleared" not in [e["kind"] for e in events]
 
 
-def test_half_size_ramp_over_one_second_found_within_1_5_s_low_frequency():
+@pytest.mark.parametrize("seed", G.LOWCUT_SEEDS)
+def test_half_size_ramp_over_one_second_found_within_1_5_s_low_frequency(seed):
     """Under 1.2/2/2.9 Hz the shipped model's drift path, on its own 0.5 Hz high-pass velocity
-    and G_e (README step 2's ``--drift-highpass-hz 0.5``), finds the ramp; one episode."""
-    events = _events(sim_rig_model(), _ramp("low 1.2/2/2.9 Hz"))
+    and G_e (README step 2's ``--drift-highpass-hz 0.5``) with its own reference fit on them,
+    finds the ramp on every seed of the study; one episode."""
+    events = _events(sim_rig_model(), _ramp("low 1.2/2/2.9 Hz", seed))
     detected = first_event(events, "fault_detected")
     assert detected is not None and 0.0 < detected["t"] - G.ONSET_S <= 1.5
     assert detected["path"] == "drift"
@@ -171,6 +173,25 @@ def test_the_drift_signature_changes_only_the_growing_fault_path():
         np.testing.assert_array_equal(getattr(trace, name), getattr(trace0, name))
 
 
+def test_the_drift_cusum_has_its_own_reference_on_the_drift_regressors():
+    """With a drift signature the CUSUM's reference is (R) fitted on its regressors (G_d[sign
+    v̂_d], G_d[v̂_d], x̂̈, 1), not the residual test's on g1, g2; a data gap restarts it with the
+    other windows; without a drift signature there is none (the residual test's is used)."""
+    model = sim_rig_model()
+    mon = Monitor(model)
+    rec = _ramp("low 1.2/2/2.9 Hz")
+    for k in range(int(G.ONSET_S * 256)):
+        mon.step(Sample(k, float(rec.t[k]), float(rec.v_in[k]), float(rec.accel[k])))
+    det = mon.detector
+    assert det.drift_test is not None and det.drift_test.ok and det.residual_test.ok
+    assert det.drift_test.theta[:2] != det.residual_test.theta[:2]
+    det.restart()
+    assert not det.drift_test.ok
+    without = copy.deepcopy(model)
+    without.fault_filter.drift = None
+    assert Monitor(without).detector.drift_test is None
+
+
 @pytest.fixture(scope="module")
 def drift_variant_models():
     """README step 2 with ``--drift-highpass-hz 0.5`` on each variant's own recordings."""
@@ -180,24 +201,41 @@ def drift_variant_models():
 V0_LOW = pytest.mark.xfail(
     strict=True,
     reason=(
-        "v0 under 1.2/2/2.9 Hz: the drift CUSUM on its 0.5 Hz velocity peaks at 125-164 "
-        "against h = 201 on seeds 4-6, 8, 9 (found on seed 7 only, +0.71 s; the whole "
+        "v0 under 1.2/2/2.9 Hz: the drift CUSUM on its 0.5 Hz velocity and reference peaks at "
+        "0.83-0.98 h within 1.5 s on seeds 4-6, 8, 9 (found on seed 7 only, +0.69 s; the whole "
         "monitor on 0.5 Hz likewise): at each reversal of its 1-3 Hz motion the load sticks and the "
         "residual turns against g1 for ~15 ticks (a stuck load is not the Coulomb regressor's "
         "sliding friction), so S loses what the ramp gave it; not the velocity's phase "
         "(docs/detector.md §3, 'The 1–3 Hz ramp without position')"
     ),
 )
+V1_LOW_SEED_7 = pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "v1 under 1.2/2/2.9 Hz, seed 7: the drift CUSUM peaks at 0.99 h within 1.5 s (2.5-3.1 h "
+        "on the other seeds); docs/detector.md §3, 'The drift path on its own 0.5 Hz velocity'"
+    ),
+)
+LOW_VARIANT_CASES = (
+    [pytest.param("v0", 4, marks=V0_LOW)]
+    + [
+        pytest.param("v1", seed, marks=V1_LOW_SEED_7) if seed == 7 else ("v1", seed)
+        for seed in G.LOWCUT_SEEDS
+    ]
+    + [("v2", seed) for seed in G.LOWCUT_SEEDS]
+)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("rig", [pytest.param("v0", marks=V0_LOW), "v1", "v2"])
-def test_half_size_ramp_found_within_1_5_s_low_frequency_rig_variants(drift_variant_models, rig):
+@pytest.mark.parametrize("rig,seed", LOW_VARIANT_CASES)
+def test_half_size_ramp_found_within_1_5_s_low_frequency_rig_variants(
+    drift_variant_models, rig, seed
+):
     from hil_sim.scenarios import scenario_from_dict, simulate
 
     overrides, model = drift_variant_models[rig]
     spec = G.ramp_spec(LOW, overrides, duration_s=14.0)
-    events = _events(model, simulate(scenario_from_dict(spec), seed=4))
+    events = _events(model, simulate(scenario_from_dict(spec), seed=seed))
     detected = first_event(events, "fault_detected")
     assert detected is not None and 0.0 < detected["t"] - G.ONSET_S <= 1.5
     assert "cleared" not in [e["kind"] for e in events]

@@ -89,10 +89,13 @@ class Detector:
         baseline: bool = False,
         arena: Arena | None = None,
         baseline_bins: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        drift_reference: bool = False,
     ) -> None:
         """``baseline``: the level's excess is taken over a commissioning baseline (else
         the calibration's level is the fault-free one); ``baseline_bins``: its (edges,
-        median, margin) per velocity-RMS bin, for the kernel."""
+        median, margin) per velocity-RMS bin, for the kernel; ``drift_reference``: the
+        model has a drift signature (``fault_filter.drift``), whose regressors get their
+        own reference fit for the growing-fault path (`kernel._drift_fit_tick`)."""
         self.settings = settings
         self.has_baseline = bool(baseline)
         self.fs_hz = float(fs_hz)
@@ -134,6 +137,21 @@ class Detector:
             s.guard_min_sigma_v,
             arena=arena,
         )
+        #: the growing-fault path's reference: (R) with the drift signature's regressors
+        #: (G_d[sign v̂_d], G_d[v̂_d], x̂̈, 1), fitted as the residual test's is
+        self.drift_test = (
+            InnovationTest(
+                N_REGRESSORS,
+                self.window_samples,
+                self.lag_samples,
+                self.test_samples,
+                s.reference_every_samples,
+                s.min_sigma_mps2,
+                arena=arena,
+            )
+            if drift_reference and s.method == "sequential"
+            else None
+        )
         bins = 0 if baseline_bins is None else len(baseline_bins[1])
         self.fo, self.io = fo, io = arena.alloc(
             K.E_CAL + 2 * self.calibration_samples + 3 * bins + 1, K.DET_INTS
@@ -171,6 +189,7 @@ class Detector:
         ii[io + K.D_BINS] = bins
         ii[io + K.D_RES] = self.residual_test.io
         ii[io + K.D_CMD] = self.command_test.io
+        ii[io + K.D_DRIFT_RES] = -1 if self.drift_test is None else self.drift_test.io
         ii[io + K.D_FLOATS] = fo
         f[fo + K.E_THRESHOLD] = s.threshold
         f[fo + K.E_GUARD_THRESHOLD] = s.guard_threshold
@@ -250,6 +269,8 @@ class Detector:
         self._tick = 0
         self.residual_test.reset()
         self.command_test.reset()  # and the history of v_in (its regressors)
+        if self.drift_test is not None:
+            self.drift_test.reset()
         self._guard_until = 0
         self._above = 0
         self._level_above = 0

@@ -25,7 +25,9 @@ and its quiet-path decisions (`Pipeline`, `Detector` and `Monitor` own the state
 
 ``detector_tick``: the residual test on φ = (g1, g2, x̂̈, 1), the command test on an AR(4)
 of v_in (`core.kernels.itest_tick`, phase by phase; their reference fits are pushed and
-re-solved before the chain, ``detector_pre``), the operating-point guard, the friction
+re-solved before the chain, ``detector_pre``), where the model has a drift signature the
+growing-fault path's own reference fit on φ_d = (d1, d2, x̂̈, 1) (s_d's G_d pair in place of
+g1, g2; the same fit, not tested), the operating-point guard, the friction
 level's excess over its fault-free value, the quiet path's counters (level path, fast path,
 calibration buffer) and a running alarm episode (`detect.episode_kernel`). It returns a
 code; anything but ``QUIET`` is an event that Python formats (`Detector.decide`).
@@ -125,8 +127,10 @@ CHAIN_INTS = C_DRIFT + 1
     O_LEVEL,
     O_DRIFT_GAMMA,
     O_DRIFT_S,
-) = range(34)
-CHAIN_OUT = 34
+    O_DRIFT_G1,
+    O_DRIFT_G2,
+) = range(36)
+CHAIN_OUT = 36
 SUMS_WIDTH = 10  # S11, S12, S22, S1y, S2y, Syy, Σv̂², Σ(LP v̂)², Σẍ², Σx̂̈²
 #: a run of this many equal, non-zero ẍ samples is a flat top; two flat tops at one value
 #: within a window are the accelerometer's rail (clipping)
@@ -160,8 +164,9 @@ SLIDING_SHARE = 0.5
     D_CODE,
     D_EPI,
     D_LEVEL,
-) = range(23)
-DET_INTS = 23
+    D_DRIFT_RES,
+) = range(24)
+DET_INTS = 24
 # --- detector floats
 (
     E_THRESHOLD,
@@ -180,7 +185,10 @@ DET_INTS = 23
     E_DRIFT_H,
     E_DRIFT_REF,  # .. +4: the reference θ (4) and 1/σ² frozen at the start of a CUSUM run
 ) = range(15)
-E_CAL = 19  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
+#: .. +4: the CUSUM's own reference θ (4) and 1/σ² frozen at the start of its run: the drift
+#: reference's (on s_d's regressors) where the model has a drift signature, else E_DRIFT_REF's
+E_DRIFT_FIT = 19
+E_CAL = 24  # calibration buffer (θ1, θ2) × calibration samples, then the baseline bins
 STATE_CALIBRATING, STATE_MONITORING, STATE_DETECTED, STATE_ISOLATED, STATE_OTHER = range(1, 6)
 
 
@@ -296,8 +304,9 @@ def chain_tick(
 
 @jit(inline=True)
 def _drift_regressor(f: F64, ii: I64, io: int, accel: float) -> float:  # pragma: no cover - jit
-    """s_d = G_d[sign v̂_d] + γ_d G_d[v̂_d] (eqs. 15 and 11 on the drift signature) with
-    v̂_d = V_d(q) ẍ (m/s), the high-pass velocity at the drift signature's cut-off."""
+    """s_d = d1 + γ_d d2, d1 = G_d[sign v̂_d], d2 = G_d[v̂_d] (eqs. 15 and 11 on the drift
+    signature) with v̂_d = V_d(q) ẍ (m/s), the high-pass velocity at the drift signature's
+    cut-off; d1, d2 also at O_DRIFT_G1, O_DRIFT_G2 (the drift reference's regressors)."""
     L = ii[io + C_WIDTH]
     bo = ii[io + C_B] + F_VEL_DRIFT * L
     ao = ii[io + C_A] + F_VEL_DRIFT * L
@@ -307,7 +316,10 @@ def _drift_regressor(f: F64, ii: I64, io: int, accel: float) -> float:  # pragma
     s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
     d1 = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], s)
     d2 = iir_step(f, bo + 2 * L, ao + 2 * L, zo + 2 * (L - 1), ii[od + 2], v)
-    gamma: float = f[ii[io + C_OUT] + O_DRIFT_GAMMA]
+    out = ii[io + C_OUT]
+    f[out + O_DRIFT_G1] = d1
+    f[out + O_DRIFT_G2] = d2
+    gamma: float = f[out + O_DRIFT_GAMMA]
     return d1 + gamma * d2
 
 
@@ -378,8 +390,8 @@ def detector_pre(f: F64, ii: I64, io: int) -> None:  # pragma: no cover - jit
     """The detector's work that does not need this tick's signals, done before the chain so
     that the reference solves' chains of divisions overlap with it: with a lag, the rows
     the reference windows have reached into their sums and the reference fits
-    (`itest_tick` of both tests, four regressors each, inlined phase by phase; both have
-    the same lag)."""
+    (`itest_tick` of both tests and of the drift reference where there is one, four
+    regressors each, inlined phase by phase; all have the same lag)."""
     res = ii[io + D_RES]
     cmd = ii[io + D_CMD]
     lag = ii[res + 2]
@@ -388,6 +400,10 @@ def detector_pre(f: F64, ii: I64, io: int) -> None:  # pragma: no cover - jit
         itest_flush_p(f, ii, cmd, 4, lag - 1)
         itest_solve_p(f, ii, res, 4)
         itest_solve_p(f, ii, cmd, 4)
+        drt = ii[io + D_DRIFT_RES]
+        if drt >= 0:
+            itest_flush_p(f, ii, drt, 4, lag - 1)
+            itest_solve_p(f, ii, drt, 4)
 
 
 @jit(inline=True)
@@ -422,6 +438,8 @@ def detector_tick(
         itest_flush_p(f, ii, cmd, 4, 0)
         itest_solve_p(f, ii, res, 4)
         itest_solve_p(f, ii, cmd, 4)
+    if ii[io + D_DRIFT_RES] >= 0:
+        _drift_fit_tick(f, ii, ii[io + D_DRIFT_RES], out, xhat, r)
     stat = itest_statistic_p(f, ii, res, 4)
     guard_stat = itest_statistic_p(f, ii, cmd, 4)
     for q in range(3, 0, -1):
@@ -490,7 +508,7 @@ def detector_tick(
         )
     else:
         alarm = armed and stat > f[fo + E_THRESHOLD]
-        _drift_tick(f, ii, res, fo, out, armed, r, g1, g2, xhat)
+        _drift_tick(f, ii, res, ii[io + D_DRIFT_RES], fo, out, armed, r, g1, g2, xhat)
     ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if alarm else 0
     if ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE]:
         ii[io + D_ABOVE] = 0
@@ -508,10 +526,41 @@ def detector_tick(
 
 
 @jit(inline=True)
+def _drift_fit_tick(
+    f: F64, ii: I64, drt: int, out: int, xhat: float, r: float
+) -> None:  # pragma: no cover - jit
+    """This tick's row of the drift reference (an innovation test block on φ_d = (d1, d2,
+    x̂̈, 1), y = r: the residual fit (R) with g1, g2 replaced by the drift signature's
+    G_d[sign v̂_d], G_d[v̂_d], `_drift_regressor`), and its fit when the reference has no lag
+    (with one, `detector_pre` refits it). Its statistic is not needed: the CUSUM takes only
+    its θ and σ² (`_drift_tick`)."""
+    ph = ii[drt + 15]
+    f[ph] = f[out + O_DRIFT_G1]
+    f[ph + 1] = f[out + O_DRIFT_G2]
+    f[ph + 2] = xhat
+    f[ph + 3] = 1.0
+    f[ph + 4] = r
+    itest_insert_p(f, ii, drt, 4)
+    if ii[drt + 2] == 0:
+        itest_flush_p(f, ii, drt, 4, 0)
+        itest_solve_p(f, ii, drt, 4)
+
+
+@jit(inline=True)
+def _freeze(f: F64, ii: I64, test: int, ref: int) -> None:  # pragma: no cover - jit
+    """An innovation test's reference θ (4) and 1/σ² into f[ref:ref+5]."""
+    th = ii[test + 20]
+    for q in range(4):
+        f[ref + q] = f[th + q]
+    f[ref + 4] = f[ii[test + 22] + 4]
+
+
+@jit(inline=True)
 def _drift_tick(
     f: np.ndarray,
     ii: np.ndarray,
     res: int,
+    drt: int,
     fo: int,
     out: int,
     armed: bool,
@@ -523,21 +572,26 @@ def _drift_tick(
     """The growing-fault path's statistic: Page's CUSUM (`core.cusum`) of the innovation
     along the signature's regressor s (``chain_tick``'s s_d: g1 + γ g2, or the drift
     signature's on its own low-cut-off velocity), matched to a shift of
-    ``drift_shift_level`` calibrated faults, against the residual test's reference as it
-    was when the CUSUM's run began (at S = 0; B&N §8.1's two-model approach: the moving
-    reference would learn a fault that grows, the frozen one does not); restarted from 0
-    while the reference is not ready or the operating-point guard holds (the innovations
-    then describe the operating point, not friction)."""
+    ``drift_shift_level`` calibrated faults, against a reference as it was when the CUSUM's
+    run began (at S = 0; B&N §8.1's two-model approach: the moving reference would learn a
+    fault that grows, the frozen one does not). The reference is the drift reference
+    (test block ``drt``, `_drift_fit_tick`: (R) on the drift signature's regressors, the
+    ones s_d is made of) where the model has a drift signature (``drt`` ≥ 0), else the
+    residual test's; the residual test's is frozen too, for the episode the path raises
+    (`episode_rebase`). Restarted from 0 while a reference is not ready or the
+    operating-point guard holds (the innovations then describe the operating point, not
+    friction)."""
     shift = f[fo + E_DRIFT_SHIFT]
-    if not armed or shift <= 0.0:
+    if not armed or shift <= 0.0 or (drt >= 0 and ii[drt + 8] == 0):
         f[fo + E_DRIFT] = 0.0
         return
-    ref = fo + E_DRIFT_REF
+    ref = fo + E_DRIFT_FIT
     if f[fo + E_DRIFT] == 0.0:
-        th = ii[res + 20]
-        for q in range(4):
-            f[ref + q] = f[th + q]
-        f[ref + 4] = f[ii[res + 22] + 4]
+        _freeze(f, ii, res, fo + E_DRIFT_REF)
+        _freeze(f, ii, res if drt < 0 else drt, ref)
+    if drt >= 0:
+        g1 = f[out + O_DRIFT_G1]
+        g2 = f[out + O_DRIFT_G2]
     e = r - (f[ref] * g1 + f[ref + 1] * g2 + f[ref + 2] * xhat + f[ref + 3])
     total = f[fo + E_DRIFT] + cusum_increment(e, f[out + O_DRIFT_S], f[ref + 4], shift)
     f[fo + E_DRIFT] = total if total > 0.0 else 0.0

@@ -135,6 +135,7 @@ class Monitor:
             baseline=self.baseline is not None,
             arena=self.arena,
             baseline_bins=bins,
+            drift_reference=model.fault_filter.drift is not None,
         )
         self.pipeline = Pipeline(
             model,

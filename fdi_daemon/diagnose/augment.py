@@ -113,8 +113,8 @@ class AugmentedPlant:
 
     def _at_sensor(self, eff: FittedEffect) -> bool:
         """The effect acts on the measured output, after the force loop (the motion is the
-        plant's): an output effect where the loop is."""
-        return self._loop is not None and SPECS[eff.name].source == "output"
+        plant's): a sensor's effect where the loop is."""
+        return self._loop is not None and SPECS[eff.name].at_sensor
 
     def run(self, v_in: np.ndarray) -> np.ndarray:
         """A whole array, continuing from the current state."""

@@ -464,7 +464,7 @@ class _LoopFit:
         self.n_ff = n_ff = self.x_ff.shape[1]
         # the sensor's columns act on the output after the loop: the motion is the plant's
         self.sensor = np.concatenate(
-            [np.full(b.shape[1], SPECS[e.name].source == "output") for e, b in zip(self.ff, blocks)]
+            [np.full(b.shape[1], SPECS[e.name].at_sensor) for e, b in zip(self.ff, blocks)]
             or [np.zeros(0, bool)]
         )
         self.cols = cols = [c for e in self.fb for c in kinds(e.name, e.param)]

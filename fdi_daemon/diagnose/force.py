@@ -493,6 +493,8 @@ class _LoopFit:
 
     def fed_forward(self, theta_ff):
         """(what moves the mass: Ĝ u and the input side's effects; what the sensor adds)."""
+        if not self.sensor.any():
+            return self.ctx.y0 + self.x_ff @ theta_ff, np.zeros(len(self.ctx.y0))
         mech = self.x_ff[:, ~self.sensor] @ theta_ff[~self.sensor]
         return self.ctx.y0 + mech, self.x_ff[:, self.sensor] @ theta_ff[self.sensor]
 

@@ -20,8 +20,9 @@ held by s (v = 0; an acceleration output is 0 too, and the velocity state is cle
 that takes |s| ≤ 1. Otherwise it slides and the friction opposes the motion (at a reversal
 that the friction cannot hold, the fixed point may end on either sign for one sample).
 
-y_ff is everything fed forward from the input (Ĝ u, the linear refit, input and output
-effects). The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
+y_ff is everything fed forward from the input (Ĝ u, the linear refit, input effects, ŷ₀'s
+gain, shift and mode lines); the sensor's effects (`EffectSpec.at_sensor`: an offset, a clip)
+are added to the loop's output, so the motion (v, x) is the plant's. The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
 m ẍ + c ẋ + k x = F − F_f moves with the plant's poles), and its numerator B_F (one per
 regressor, same order as Â) is identified: first by linear least squares with the nominal
 motion (the feed-forward first approximation, `effects.fit_effect`), then refined by

@@ -98,17 +98,16 @@ class AugmentedPlant:
         y, sensed = y0, 0.0
         for eff, (reg, dynamic, outs) in zip(self._fed, self._blocks):
             phis = reg.step(v_in, v, x, y0)
-            part = 0.0
-            if dynamic:
-                for filt, phi in zip(outs, phis):
-                    part += filt.step(phi)
-            else:
-                for gain, phi in zip(outs, phis):
-                    part += gain * phi
-            if self._at_sensor(eff):
-                sensed += part
-            else:
-                y += part
+            parts = (
+                [filt.step(phi) for filt, phi in zip(outs, phis)]
+                if dynamic
+                else [gain * phi for gain, phi in zip(outs, phis)]
+            )
+            for part in parts:
+                if self._at_sensor(eff):
+                    sensed += part
+                else:
+                    y += part
         return (y if self._loop is None else self._loop.step(y)) + sensed
 
     def _at_sensor(self, eff: FittedEffect) -> bool:

@@ -103,6 +103,27 @@ def test_without_effects_it_is_the_plain_plant():
     )
 
 
+@pytest.mark.parametrize("sensor", ["sensor_offset", "output_saturation"])
+def test_a_sensor_effect_is_added_after_the_force_loop(sensor):
+    """A sensor's effect changes what is measured, not how the mass moves: the plant with a
+    Coulomb friction and the sensor's effect is the plant with the friction alone plus the
+    sensor's part computed on the plain plant's ŷ₀ (before, a fitted offset entered the loop
+    and its integral was taken for a velocity)."""
+    b, a = nominal_model()
+    b_force, _ = friction_tf(MsdParams())
+    path = AugmentedPlant(FS, b_force, a, "acceleration", 0.2)
+    b_path = np.zeros(len(path.a_dom))
+    b_path[: len(path.b_dom)] = path.b_dom
+    friction = FittedEffect("coulomb_friction", None, [-0.05 * b_path], n_linear=len(b_path))
+    size = {"sensor_offset": 0.5, "output_saturation": 0.3}[sensor]
+    at_sensor = FittedEffect(sensor, 2.0, [np.array([size])], n_linear=1)
+    u = np.random.default_rng(4).standard_normal(600)
+    both = AugmentedPlant(FS, b, a, "acceleration", 0.2, [friction, at_sensor]).run_signals(u)
+    alone = AugmentedPlant(FS, b, a, "acceleration", 0.2, [friction]).run(u)
+    assert np.max(np.abs(both["parts"][sensor])) > 0.01
+    np.testing.assert_allclose(both["y"], alone + both["parts"][sensor], rtol=1e-12, atol=1e-12)
+
+
 @pytest.mark.parametrize("kind", ["acceleration", "velocity"])
 def test_model_file_round_trip(kind):
     plant = _plant(kind)

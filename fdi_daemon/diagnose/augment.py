@@ -95,16 +95,25 @@ class AugmentedPlant:
         """One sample: the augmented model's output."""
         y0 = self._plant.step(v_in)
         v, x = self._chain.step(y0)
-        y = y0
-        for reg, dynamic, outs in self._blocks:
+        y, sensed = y0, 0.0
+        for eff, (reg, dynamic, outs) in zip(self._fed, self._blocks):
             phis = reg.step(v_in, v, x, y0)
-            if dynamic:
-                for filt, phi in zip(outs, phis):
-                    y += filt.step(phi)
-            else:
-                for gain, phi in zip(outs, phis):
-                    y += gain * phi
-        return y if self._loop is None else self._loop.step(y)
+            parts = (
+                [filt.step(phi) for filt, phi in zip(outs, phis)]
+                if dynamic
+                else [gain * phi for gain, phi in zip(outs, phis)]
+            )
+            for part in parts:
+                if self._at_sensor(eff):
+                    sensed += part
+                else:
+                    y += part
+        return (y if self._loop is None else self._loop.step(y)) + sensed
+
+    def _at_sensor(self, eff: FittedEffect) -> bool:
+        """The effect acts on the measured output, after the force loop (the motion is the
+        plant's): a sensor's effect where the loop is."""
+        return self._loop is not None and SPECS[eff.name].at_sensor
 
     def run(self, v_in: np.ndarray) -> np.ndarray:
         """A whole array, continuing from the current state."""
@@ -115,7 +124,7 @@ class AugmentedPlant:
         u = np.asarray(v_in, dtype=float)
         y0 = self._plant.run(u)
         v, x = self._chain.run(y0)
-        y = y0.copy()
+        y, sensed = y0.copy(), np.zeros_like(y0)
         parts: dict[str, np.ndarray] = {}
         for eff, (reg, dynamic, outs) in zip(self._fed, self._blocks):
             phis = reg.run(u, v, x, y0)
@@ -123,11 +132,15 @@ class AugmentedPlant:
             for j, out in enumerate(outs):
                 part += out.run(phis[:, j]) if dynamic else out * phis[:, j]
             parts[eff.name] = part
-            y += part
+            if self._at_sensor(eff):
+                sensed += part
+            else:
+                y += part
         if self._loop is not None:
             y_ff = y
             y = self._loop.run(y_ff)
             parts["force_loop"] = y - y_ff
+        y = y + sensed
         return {"y0": y0, "v": v, "x": x, "y": y, "parts": parts}
 
     def reset(self) -> None:

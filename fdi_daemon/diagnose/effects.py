@@ -110,6 +110,10 @@ class EffectSpec:
     #: a free coefficient times a small move is any derivative of the response), the
     #: coefficient fitted at the value found tells a pure change (≈ 1) from another
     searched_at_unit_weight: bool = False
+    #: it acts at the sensor, on the measured output after the force loop: it does not move
+    #: the mass, so the loop's motion is without it (an output effect that is not: ŷ₀'s
+    #: gain, shift or mode line, which change the plant's response)
+    at_sensor: bool = False
 
 
 def _ratios(c: Context) -> np.ndarray:
@@ -205,6 +209,7 @@ SPECS: dict[str, EffectSpec] = {
         "output units",
         lambda p, c, a: Static(out_saturate(p, c)),
         lambda c: _q(c.y0[c.split.fit], [0.8, 0.9, 0.95, 0.97, 0.98, 0.99, 0.995, 0.999]),
+        at_sensor=True,
     ),
     "dead_zone": EffectSpec(
         "dead_zone",
@@ -244,6 +249,7 @@ SPECS: dict[str, EffectSpec] = {
         None,
         "",
         lambda p, c, a: Static(lambda u, v, x, y0: [np.ones_like(u)]),
+        at_sensor=True,
     ),
     # the loop's spring alone (`force.mode_shift` says what it changes)
     "stiffness_change": EffectSpec(

@@ -20,8 +20,9 @@ held by s (v = 0; an acceleration output is 0 too, and the velocity state is cle
 that takes |s| ≤ 1. Otherwise it slides and the friction opposes the motion (at a reversal
 that the friction cannot hold, the fixed point may end on either sign for one sample).
 
-y_ff is everything fed forward from the input (Ĝ u, the linear refit, input and output
-effects). The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
+y_ff is everything fed forward from the input (Ĝ u, the linear refit, input effects, ŷ₀'s
+gain, shift and mode lines); the sensor's effects (`EffectSpec.at_sensor`: an offset, a clip)
+are added to the loop's output, so the motion (v, x) is the plant's. The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
 m ẍ + c ẋ + k x = F − F_f moves with the plant's poles), and its numerator B_F (one per
 regressor, same order as Â) is identified: first by linear least squares with the nominal
 motion (the feed-forward first approximation, `effects.fit_effect`), then refined by
@@ -459,8 +460,14 @@ class _LoopFit:
         self.ff = [e for e in effects if e.name not in LOOPED]
         self.fb = [e for e in effects if e.name in LOOPED]
         self.y_meas = ctx.target + ctx.y0
-        self.x_ff = effect_columns(ctx, self.ff) if self.ff else np.zeros((len(ctx.u), 0))
+        blocks = [effect_columns(ctx, [e]) for e in self.ff]
+        self.x_ff = np.column_stack(blocks) if blocks else np.zeros((len(ctx.u), 0))
         self.n_ff = n_ff = self.x_ff.shape[1]
+        # the sensor's columns act on the output after the loop: the motion is the plant's
+        self.sensor = np.concatenate(
+            [np.full(b.shape[1], SPECS[e.name].at_sensor) for e, b in zip(self.ff, blocks)]
+            or [np.zeros(0, bool)]
+        )
         self.cols = cols = [c for e in self.fb for c in kinds(e.name, e.param)]
         # a friction's force path: its high-frequency gain b_j0 ≤ 0 (`friction_bounds`); on
         # an acceleration output b_j0 is the direct term, elsewhere the path's leading terms
@@ -479,18 +486,26 @@ class _LoopFit:
         """The loop over the record: ((y, φ, v), the training SSE; inf where it diverges)."""
         ctx = self.ctx
         with np.errstate(all="ignore"):
-            y, phi, v = ForceLoop(ctx.a_dom, self.cols, nums, ctx.chain).trace(
-                ctx.y0 + self.x_ff @ theta_ff
-            )
+            y_mech, y_sensor = self.fed_forward(theta_ff)
+            y, phi, v = ForceLoop(ctx.a_dom, self.cols, nums, ctx.chain).trace(y_mech)
+            y = y + y_sensor
             sse = float(np.sum((self.y_meas - y)[ctx.split.fit] ** 2))
         return (y, phi, v), (sse if np.isfinite(sse) else np.inf)
+
+    def fed_forward(self, theta_ff):
+        """(what moves the mass: Ĝ u and the input side's effects; what the sensor adds)."""
+        if not self.sensor.any():
+            return self.ctx.y0 + self.x_ff @ theta_ff, np.zeros(len(self.ctx.y0))
+        mech = self.x_ff[:, ~self.sensor] @ theta_ff[~self.sensor]
+        return self.ctx.y0 + mech, self.x_ff[:, self.sensor] @ theta_ff[self.sensor]
 
     def training_error(self, theta_ff, nums):
         """The loop's output error on the training part (the loop run over it only)."""
         ctx, end = self.ctx, self.ctx.split.train_end
         with np.errstate(all="ignore"):
-            y_ff = (ctx.y0 + self.x_ff @ theta_ff)[:end]
-            y = ForceLoop(ctx.a_dom, self.cols, nums, ctx.chain).run(y_ff)
+            y_mech, y_sensor = self.fed_forward(theta_ff)
+            y = ForceLoop(ctx.a_dom, self.cols, nums, ctx.chain).run(y_mech[:end])
+            y = y + y_sensor[:end]
             e = (self.y_meas[:end] - y)[ctx.split.fit]
         # an unstable trial diverges: a large, finite residual keeps the solver going
         return np.clip(np.nan_to_num(e, nan=self.scale), -self.scale, self.scale)

@@ -118,37 +118,25 @@ class Detector:
         self.friction_clear_samples = s.samples(s.friction_clear_s, fs_hz)
         self.level_samples = s.samples(s.slow_persistence_s, fs_hz)
         self.arena = arena = arena if arena is not None else Arena()
-        # the residual test (φ = g1, g2, x̂̈, 1) and the command test (AR(4) of v_in)
-        self.residual_test = InnovationTest(
-            N_REGRESSORS,
-            self.window_samples,
-            self.lag_samples,
-            self.test_samples,
-            s.reference_every_samples,
-            s.min_sigma_mps2,
-            arena=arena,
-        )
-        self.command_test = InnovationTest(
-            COMMAND_ORDER,
-            self.window_samples,
-            self.lag_samples,
-            self.test_samples,
-            s.reference_every_samples,
-            s.guard_min_sigma_v,
-            arena=arena,
-        )
-        #: the growing-fault path's reference: (R) with the drift signature's regressors
-        #: (G_d[sign v̂_d], G_d[v̂_d], x̂̈, 1), fitted as the residual test's is
-        self.drift_test = (
-            InnovationTest(
-                N_REGRESSORS,
+
+        def innovation_test(order: int, min_sigma: float) -> InnovationTest:
+            return InnovationTest(
+                order,
                 self.window_samples,
                 self.lag_samples,
                 self.test_samples,
                 s.reference_every_samples,
-                s.min_sigma_mps2,
+                min_sigma,
                 arena=arena,
             )
+
+        # the residual test (φ = g1, g2, x̂̈, 1) and the command test (AR(4) of v_in)
+        self.residual_test = innovation_test(N_REGRESSORS, s.min_sigma_mps2)
+        self.command_test = innovation_test(COMMAND_ORDER, s.guard_min_sigma_v)
+        #: the growing-fault path's reference: (R) with the drift signature's regressors
+        #: (G_d[sign v̂_d], G_d[v̂_d], x̂̈, 1), fitted as the residual test's is
+        self.drift_test = (
+            innovation_test(N_REGRESSORS, s.min_sigma_mps2)
             if drift_reference and s.method == "sequential"
             else None
         )

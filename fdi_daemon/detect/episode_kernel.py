@@ -398,6 +398,133 @@ def load_stopped(f: F64, ii: I64, eo: int) -> bool:  # pragma: no cover - jit
     return stopped
 
 
+@jit(inline=True)
+def _drift_hold(f: F64, sc: int, e: float) -> None:  # pragma: no cover - jit
+    """The growing-fault CUSUM against the frozen reference along its regressor s
+    (S_DRIFT_S, set by the caller), capped at twice its threshold so that it falls below
+    the threshold within a bounded time once the shift is gone."""
+    if f[sc + S_DRIFT_SHIFT] > 0.0:
+        cap = 2.0 * f[sc + S_DRIFT_H]
+        d = f[sc + S_DRIFT] + cusum_increment(
+            e, f[sc + S_DRIFT_S], 1.0 / f[sc + S_SIGMA2_REF], f[sc + S_DRIFT_SHIFT]
+        )
+        f[sc + S_DRIFT] = cap if d > cap else (d if d > 0.0 else 0.0)
+
+
+@jit(inline=True)
+def _push_evidence(
+    f: F64, ii: I64, eo: int, beyond: bool, motion: bool, g1: float, xhat: float, e: float, r: float
+) -> None:  # pragma: no cover - jit
+    """This tick's rows of the friction evidence's windows: ``beyond``, the innovation e
+    against (g1, x̂̈, x̂̈ one tick back, 1) (the innovation beyond a linear change);
+    ``motion``, (Δẍ², ẍ², x̂̈²) for the stopped load (`load_stopped`)."""
+    n = ii[eo + P_N]
+    sc = ii[eo + P_O_SCAL]
+    xp = f[sc + S_XHAT_PAST]
+    if beyond and not math.isnan(xp):
+        b = ii[eo + P_O_ROW]
+        f[b] = g1 * g1
+        f[b + 1] = g1 * xhat
+        f[b + 2] = g1 * xp
+        f[b + 3] = g1 * 1.0
+        f[b + 4] = xhat * xhat
+        f[b + 5] = xhat * xp
+        f[b + 6] = xhat * 1.0
+        f[b + 7] = xp * xp
+        f[b + 8] = xp * 1.0
+        f[b + 9] = 1.0 * 1.0
+        f[b + 10] = g1 * e
+        f[b + 11] = xhat * e
+        f[b + 12] = xp * e
+        f[b + 13] = 1.0 * e
+        f[b + 14] = e * e
+        sums_push(f, ii, ii[eo + P_O_BEYOND], n, W, eo + P_BEYOND, b)
+    f[sc + S_XHAT_PAST] = xhat
+    accel = r + xhat
+    ap = f[sc + S_ACCEL_PAST]
+    if motion and not math.isnan(ap):
+        step = accel - ap
+        mo = sc + S_MOTION
+        f[mo] = step * step
+        f[mo + 1] = accel * accel
+        f[mo + 2] = xhat * xhat
+        sums_push(f, ii, ii[eo + P_O_MOTION], ii[eo + P_M], 3, eo + P_MOTION, mo)
+    f[sc + S_ACCEL_PAST] = accel
+
+
+@jit(inline=True)
+def _reported_theta(
+    f: F64, ii: I64, eo: int, moving: bool, theta1: float, theta2: float, out: F64
+) -> None:  # pragma: no cover - jit
+    """θ as reported, into out[0], out[1]: the settled window's, else the post window's,
+    else the sliding window's (``theta1``, ``theta2``; NaN at rest)."""
+    out[0] = theta1
+    out[1] = theta2
+    if moving:
+        th = ii[eo + P_O_TH]
+        if _window_theta(f, ii, eo, ii[eo + P_O_SETTLED], eo + P_SETTLED):
+            out[0] = f[th]
+            out[1] = f[th + 1]
+        elif _window_theta(f, ii, eo, ii[eo + P_O_POST], eo + P_POST):
+            out[0] = f[th]
+            out[1] = f[th + 1]
+
+
+@jit(inline=True)
+def _clearing(
+    f: F64,
+    ii: I64,
+    eo: int,
+    state: int,
+    over: float,
+    frozen_stat: float,
+    threshold: float,
+    moving: bool,
+    trusted: bool,
+    sliding: bool,
+) -> int:  # pragma: no cover - jit
+    """The clearing count of an episode that did not change state this tick: TO_CLEARED
+    once normal for the clearing time (friction: ``friction_clear_s``; an unconfirmed
+    episode: ``clear_s``), else NO_CHANGE (``over``: the friction level's excess over its
+    margin; ``frozen_stat``: the frozen-reference test's statistic, against ``threshold``)."""
+    sc = ii[eo + P_O_SCAL]
+    if state == 4:
+        if not trusted:
+            # sign v̂ is wrong for much of each cycle: θ1 cannot show that friction is gone
+            # (nor that it is there), so the clearing count holds
+            return NO_CHANGE
+        # the level back within half its margin, the load moving freely (a load that
+        # friction holds shows little of it in θ) and what raised the episode gone: an
+        # episode the residual test raised also needs its innovations against the frozen
+        # pre-fault reference back below h (a level episode's reference may hold the
+        # fault: the level alone)
+        normal = over < 0.5 and sliding and (ii[eo + P_LEVEL] != 0 or frozen_stat <= threshold)
+        needed = ii[eo + P_FRICTION_CLEAR]
+    else:
+        # an unconfirmed episode (fault_detected, other_fault) holds while the friction
+        # level is still at least half its margin above normal (issue 43): a fault that
+        # creeps in keeps its episode until the level path confirms it, never raise-clear
+        # ... and (growing-fault path) while the innovations against the frozen reference
+        # still show the shift along the signature (its CUSUM at or above h); it clears on
+        # the innovations' mean power over the window, not one test window
+        # (`innovations_back_to_normal`), and only under operation that would show the
+        # fault as measured: elsewhere the count holds (`fault_power`)
+        excess = _clear_excess(ii, eo, threshold)
+        if not math.isnan(f[sc + S_FAULT_CHANGE]) and fault_power(f, ii, eo) < excess:
+            return NO_CHANGE
+        normal = (
+            frozen_stat <= threshold
+            and innovations_back_to_normal(f, ii, eo, excess)
+            and not over >= 0.5
+            and f[sc + S_DRIFT] < f[sc + S_DRIFT_H]
+        )
+        needed = ii[eo + P_CLEAR]
+    ii[eo + P_QUIET] = ii[eo + P_QUIET] + 1 if normal and moving else 0
+    if ii[eo + P_QUIET] >= needed:
+        return TO_CLEARED
+    return NO_CHANGE
+
+
 @jit
 def episode_tick(
     f: F64,
@@ -445,63 +572,15 @@ def episode_tick(
     acc = acc + f[tr + 2] * xhat
     acc = acc + f[tr + 3] * 1.0
     e = r - acc
-    # the growing-fault CUSUM against the frozen reference along its regressor s (S_DRIFT_S,
-    # set by the caller), capped at twice its threshold so that it falls below the
-    # threshold within a bounded time once the shift is gone
-    if f[sc + S_DRIFT_SHIFT] > 0.0:
-        cap = 2.0 * f[sc + S_DRIFT_H]
-        d = f[sc + S_DRIFT] + cusum_increment(
-            e, f[sc + S_DRIFT_S], 1.0 / f[sc + S_SIGMA2_REF], f[sc + S_DRIFT_SHIFT]
-        )
-        f[sc + S_DRIFT] = cap if d > cap else (d if d > 0.0 else 0.0)
+    _drift_hold(f, sc, e)
     # isolated, the episode reports θ and waits to clear: the friction evidence (the post
     # window's refit, the innovation beyond a linear change) and the stopped load are not
     # looked at again, so their windows are not kept
     evidence = state != 4
     if ticks > iso:
         sums_push(f, ii, ii[eo + P_O_SETTLED], n, W, eo + P_SETTLED, row)
-    if ticks > iso and evidence:
-        xp = f[sc + S_XHAT_PAST]
-        if not math.isnan(xp):
-            b = ii[eo + P_O_ROW]
-            f[b] = g1 * g1
-            f[b + 1] = g1 * xhat
-            f[b + 2] = g1 * xp
-            f[b + 3] = g1 * 1.0
-            f[b + 4] = xhat * xhat
-            f[b + 5] = xhat * xp
-            f[b + 6] = xhat * 1.0
-            f[b + 7] = xp * xp
-            f[b + 8] = xp * 1.0
-            f[b + 9] = 1.0 * 1.0
-            f[b + 10] = g1 * e
-            f[b + 11] = xhat * e
-            f[b + 12] = xp * e
-            f[b + 13] = 1.0 * e
-            f[b + 14] = e * e
-            sums_push(f, ii, ii[eo + P_O_BEYOND], n, W, eo + P_BEYOND, b)
-    f[sc + S_XHAT_PAST] = xhat
-    accel = r + xhat
-    ap = f[sc + S_ACCEL_PAST]
-    if evidence and not math.isnan(ap):
-        step = accel - ap
-        mo = sc + S_MOTION
-        f[mo] = step * step
-        f[mo + 1] = accel * accel
-        f[mo + 2] = xhat * xhat
-        sums_push(f, ii, ii[eo + P_O_MOTION], m, 3, eo + P_MOTION, mo)
-    f[sc + S_ACCEL_PAST] = accel
-    # θ as reported: the settled window, else the post window, else the sliding window
-    out[0] = theta1
-    out[1] = theta2
-    if moving:
-        th = ii[eo + P_O_TH]
-        if _window_theta(f, ii, eo, ii[eo + P_O_SETTLED], eo + P_SETTLED):
-            out[0] = f[th]
-            out[1] = f[th + 1]
-        elif _window_theta(f, ii, eo, ii[eo + P_O_POST], eo + P_POST):
-            out[0] = f[th]
-            out[1] = f[th + 1]
+    _push_evidence(f, ii, eo, ticks > iso and evidence, evidence, g1, xhat, e, r)
+    _reported_theta(f, ii, eo, moving, theta1, theta2, out)
     rep1 = out[0]
     rep2 = out[1]
     f[sc + S_Z] = e * e / f[sc + S_SIGMA2_REF]
@@ -547,41 +626,7 @@ def episode_tick(
             ii[eo + P_QUIET] = 0
             measure_fault(f, ii, eo, threshold)
             return TO_OTHER
-    if state == 4:
-        if not trusted:
-            # sign v̂ is wrong for much of each cycle: θ1 cannot show that friction is gone
-            # (nor that it is there), so the clearing count holds
-            return NO_CHANGE
-        # the level back within half its margin, the load moving freely (a load that
-        # friction holds shows little of it in θ) and what raised the episode gone: an
-        # episode the residual test raised also needs its innovations against the frozen
-        # pre-fault reference back below h (a level episode's reference may hold the
-        # fault: the level alone)
-        normal = over < 0.5 and sliding and (ii[eo + P_LEVEL] != 0 or frozen_stat <= threshold)
-        needed = ii[eo + P_FRICTION_CLEAR]
-    else:
-        # an unconfirmed episode (fault_detected, other_fault) holds while the friction
-        # level is still at least half its margin above normal (issue 43): a fault that
-        # creeps in keeps its episode until the level path confirms it, never raise-clear
-        # ... and (growing-fault path) while the innovations against the frozen reference
-        # still show the shift along the signature (its CUSUM at or above h); it clears on
-        # the innovations' mean power over the window, not one test window
-        # (`innovations_back_to_normal`), and only under operation that would show the
-        # fault as measured: elsewhere the count holds (`fault_power`)
-        excess = _clear_excess(ii, eo, threshold)
-        if not math.isnan(f[sc + S_FAULT_CHANGE]) and fault_power(f, ii, eo) < excess:
-            return NO_CHANGE
-        normal = (
-            frozen_stat <= threshold
-            and innovations_back_to_normal(f, ii, eo, excess)
-            and not over >= 0.5
-            and f[sc + S_DRIFT] < f[sc + S_DRIFT_H]
-        )
-        needed = ii[eo + P_CLEAR]
-    ii[eo + P_QUIET] = ii[eo + P_QUIET] + 1 if normal and moving else 0
-    if ii[eo + P_QUIET] >= needed:
-        return TO_CLEARED
-    return NO_CHANGE
+    return _clearing(f, ii, eo, state, over, frozen_stat, threshold, moving, trusted, sliding)
 
 
 @jit

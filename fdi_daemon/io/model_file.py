@@ -167,12 +167,8 @@ def model_from_dict(data: Any, source: str = "model") -> FdiModel:
         )
         nk = _delay(ff, f"{source}: fault_filter")
         gamma = ff.get("gamma_f", 0.0)
-        if gamma is not None and (
-            isinstance(gamma, bool)
-            or not isinstance(gamma, (int, float))
-            or not math.isfinite(gamma)
-        ):
-            raise ConfigError(f"{source}: fault_filter.gamma_f must be a finite number or null")
+        if gamma is not None:
+            _finite(gamma, f"{source}: fault_filter.gamma_f", " or null")
         fault_filter = FaultFilter(
             b=_coefficients(ff, "b", f"{source}: fault_filter"),
             f=_coefficients(ff, "f", f"{source}: fault_filter", monic=True),
@@ -200,15 +196,27 @@ def _require(data: dict[str, Any], keys: tuple[str, ...], where: str) -> None:
 
 
 def _section(
-    data: dict[str, Any], key: str, known: tuple[str, ...], required: tuple[str, ...], source: str
+    data: dict[str, Any],
+    key: str,
+    known: tuple[str, ...],
+    required: tuple[str, ...],
+    source: str,
+    where: str | None = None,
 ) -> dict[str, Any]:
     """A mapping whose keys are checked: typos refused, other unknown keys ignored with a
-    warning, required ones present."""
-    section, _ = split_known(
-        _mapping(data, key, source, required=True), known, f"{source}: {key}", noun="key"
-    )
-    _require(section, required, f"{source}: {key}")
+    warning, required ones present (``where``: how errors name it, ``source: key`` unless
+    given, e.g. a nested section's dotted path)."""
+    where = where or f"{source}: {key}"
+    section, _ = split_known(_mapping(data, key, source, required=True), known, where, noun="key")
+    _require(section, required, where)
     return section
+
+
+def _finite(value: Any, where: str, alternative: str = "") -> float:
+    """A finite number (``alternative``: what else the message says is allowed)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{where} must be a finite number{alternative}")
+    return float(value)
 
 
 def _delay(section: dict[str, Any], where: str) -> int:
@@ -223,20 +231,18 @@ def _drift(fault_filter: dict[str, Any], where: str) -> DriftFilter | None:
     """``fault_filter.drift`` (the growing-fault path's signature), None when absent."""
     if fault_filter.get("drift") is None:
         return None
-    section = _mapping(fault_filter, "drift", where, required=True)
+    keys = ("b", "f", "nk", "gamma", "highpass_hz")
+    d = _section(fault_filter, "drift", keys, keys[:2] + keys[3:], where, f"{where}.drift")
     where = f"{where}.drift"
-    d, _ = split_known(section, ("b", "f", "nk", "gamma", "highpass_hz"), where, noun="key")
-    _require(d, ("b", "f", "gamma", "highpass_hz"), where)
-    gamma, hz = d["gamma"], d["highpass_hz"]
-    if isinstance(gamma, bool) or not isinstance(gamma, (int, float)) or not math.isfinite(gamma):
-        raise ConfigError(f"{where}.gamma must be a finite number")
+    gamma = _finite(d["gamma"], f"{where}.gamma")
+    hz = d["highpass_hz"]
     if isinstance(hz, bool) or not isinstance(hz, (int, float)) or not 0 < hz < math.inf:
         raise ConfigError(f"{where}.highpass_hz must be a positive number of Hz")
     return DriftFilter(
         b=_coefficients(d, "b", where),
         f=_coefficients(d, "f", where, monic=True),
         nk=_delay(d, where),
-        gamma=float(gamma),
+        gamma=gamma,
         highpass_hz=float(hz),
     )
 

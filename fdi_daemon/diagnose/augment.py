@@ -79,6 +79,9 @@ class AugmentedPlant:
             cols = [c for e in looped for c in kinds(e.name, e.param)]
             nums = [b for e in looped for b in e.coefficients]
             self._loop = ForceLoop(self.a_dom, cols, nums, self._chain.coefficients)
+        # per fed-forward effect: it acts on the measured output, after the force loop (the
+        # motion is the plant's): a sensor's effect where there is a loop
+        self._at_sensor = [self._loop is not None and SPECS[e.name].at_sensor for e in self._fed]
 
     def _block(self, eff: FittedEffect):
         spec = SPECS[eff.name]
@@ -96,7 +99,7 @@ class AugmentedPlant:
         y0 = self._plant.step(v_in)
         v, x = self._chain.step(y0)
         y, sensed = y0, 0.0
-        for eff, (reg, dynamic, outs) in zip(self._fed, self._blocks):
+        for at_sensor, (reg, dynamic, outs) in zip(self._at_sensor, self._blocks):
             phis = reg.step(v_in, v, x, y0)
             parts = (
                 [filt.step(phi) for filt, phi in zip(outs, phis)]
@@ -104,16 +107,11 @@ class AugmentedPlant:
                 else [gain * phi for gain, phi in zip(outs, phis)]
             )
             for part in parts:
-                if self._at_sensor(eff):
+                if at_sensor:
                     sensed += part
                 else:
                     y += part
         return (y if self._loop is None else self._loop.step(y)) + sensed
-
-    def _at_sensor(self, eff: FittedEffect) -> bool:
-        """The effect acts on the measured output, after the force loop (the motion is the
-        plant's): a sensor's effect where the loop is."""
-        return self._loop is not None and SPECS[eff.name].at_sensor
 
     def run(self, v_in: np.ndarray) -> np.ndarray:
         """A whole array, continuing from the current state."""
@@ -126,13 +124,13 @@ class AugmentedPlant:
         v, x = self._chain.run(y0)
         y, sensed = y0.copy(), np.zeros_like(y0)
         parts: dict[str, np.ndarray] = {}
-        for eff, (reg, dynamic, outs) in zip(self._fed, self._blocks):
+        for eff, at_sensor, (reg, dynamic, outs) in zip(self._fed, self._at_sensor, self._blocks):
             phis = reg.run(u, v, x, y0)
             part = np.zeros_like(y0)
             for j, out in enumerate(outs):
                 part += out.run(phis[:, j]) if dynamic else out * phis[:, j]
             parts[eff.name] = part
-            if self._at_sensor(eff):
+            if at_sensor:
                 sensed += part
             else:
                 y += part

@@ -22,11 +22,12 @@ that the friction cannot hold, the fixed point may end on either sign for one sa
 
 y_ff is everything fed forward from the input (Ĝ u, the linear refit, input effects, ŷ₀'s
 gain, shift and mode lines); the sensor's effects (`EffectSpec.at_sensor`: an offset, a clip)
-are added to the loop's output, so the motion (v, x) is the plant's. The force path G_F = B_F/Â: its poles are the nominal model's (eq. 6:
-m ẍ + c ẋ + k x = F − F_f moves with the plant's poles), and its numerator B_F (one per
-regressor, same order as Â) is identified: first by linear least squares with the nominal
-motion (the feed-forward first approximation, `effects.fit_effect`), then refined by
-output-error least squares with the motion in the loop (`_LoopFit`). A valve or an input
+are added to the loop's output, so the motion (v, x) is the plant's. The force path
+G_F = B_F/Â: its poles are the nominal model's (eq. 6: m ẍ + c ẋ + k x = F − F_f moves
+with the plant's poles), and its numerator B_F (one per regressor, same order as Â) is
+identified: first by linear least squares with the nominal motion (the feed-forward first
+approximation, `effects.fit_effect`), then refined by output-error least squares with the
+motion in the loop (`_LoopFit`). A valve or an input
 filter between the input and the force (poles of Ĝ that are not the mechanics') is
 cancelled by B_F's zeros; a force input makes B_F ∝ B̂.
 
@@ -493,7 +494,9 @@ class _LoopFit:
         return (y, phi, v), (sse if np.isfinite(sse) else np.inf)
 
     def fed_forward(self, theta_ff):
-        """(what moves the mass: Ĝ u and the input side's effects; what the sensor adds)."""
+        """(what moves the mass: Ĝ u and the input side's effects; what the sensor adds).
+        Without a sensor column, x_ff @ θ as a whole: summed in another order the loop fits
+        end elsewhere (docs/diagnose.md §9, "A measure of the fragility")."""
         if not self.sensor.any():
             return self.ctx.y0 + self.x_ff @ theta_ff, np.zeros(len(self.ctx.y0))
         mech = self.x_ff[:, ~self.sensor] @ theta_ff[~self.sensor]

@@ -19,8 +19,10 @@ alarms for ``guard_hold_s`` after it fires. Isolation fits φ again on the data 
 reference ended: an increase of the Coulomb coefficient by ``friction_min_level`` (units of
 the calibrated signature), held for ``track_samples`` ticks, is friction once the fault
 has persisted (the frozen-reference test still above the threshold on samples an
-isolation window after the detection: a knock or glitch does not persist); gain (x̂̈) or offset (1) changes without it, or no
-friction evidence within ``isolation_timeout_s``, are another fault. An episode the
+isolation window after the detection: a knock or glitch does not persist). Without it
+within ``isolation_timeout_s``, a fault that a gain (x̂̈) or offset (1) change of the
+residual fit describes, or a clipping accelerometer, is another fault; a fault that nothing
+describes stays ``fault_detected`` (friction under slow operation). An episode the
 growing-fault path raised (a CUSUM along friction's direction only) counts that timeout
 from the residual test's alarm: until then it stays ``fault_detected``, unconfirmed.
 

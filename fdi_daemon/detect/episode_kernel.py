@@ -342,18 +342,24 @@ def fault_power(f: F64, ii: I64, eo: int) -> float:  # pragma: no cover - jit
     under the window's operation. A valve's loss of gain shows in proportion to x̂̈, so
     hardly at 1-2 Hz, where the acceleration is small."""
     n = ii[eo + P_N]
-    s = ii[eo + P_O_POST] + (n + 2) * W
     sc = ii[eo + P_O_SCAL]
-    d = sc + S_FAULT_CHANGE
+    q = _packed_quadratic(f, ii[eo + P_O_POST] + (n + 2) * W, sc + S_FAULT_CHANGE)
+    rows = max(ii[eo + P_POST + 1], 1)
+    power: float = q / (rows * f[sc + S_SIGMA2_REF])
+    return power
+
+
+@jit(inline=True)
+def _packed_quadratic(f: F64, s: int, v: int) -> float:  # pragma: no cover - jit
+    """Σ (φᵀv)² over a window from its packed sums at ``s`` (4 regressors,
+    `packed_row_into`); v = f[v:v+4]."""
     q = 0.0
     k = 0
     for i in range(4):
         for j in range(i, 4):
-            q += (1.0 if i == j else 2.0) * f[d + i] * f[d + j] * f[s + k]
+            q += (1.0 if i == j else 2.0) * f[v + i] * f[v + j] * f[s + k]
             k += 1
-    rows = max(ii[eo + P_POST + 1], 1)
-    power: float = q / (rows * f[sc + S_SIGMA2_REF])
-    return power
+    return q
 
 
 @jit
@@ -375,6 +381,32 @@ def measure_fault(f: F64, ii: I64, eo: int, threshold: float) -> None:  # pragma
         f[d + q] = f[th + q] - f[sc + S_THETA_REF + q]
     if not fault_power(f, ii, eo) >= _clear_excess(ii, eo, threshold):
         f[d] = math.nan
+
+
+@jit
+def _described_by_linear_change(
+    f: F64, ii: I64, eo: int, sse: float, threshold: float
+) -> bool:  # pragma: no cover - jit
+    """The fault is a linear change of the residual fit (a bias in 1, a valve's gain in x̂̈,
+    a sensor gone): refitted on the post window (φ = g1, g2, x̂̈, 1; ``sse`` its residual
+    sum of squares), the innovations e = r − φᵀθ_ref are back within the alarm's deadband
+    (`_clear_excess`, as `innovations_back_to_normal` judges them for clearing), and the
+    refit took more of their excess over the fault-free level than it left. Friction whose
+    harmonics g1 does not describe (operation below the signature's band) leaves several
+    times the deadband, or barely shows (docs/detector.md §3, "Isolation")."""
+    n = ii[eo + P_N]
+    s = ii[eo + P_O_POST] + (n + 2) * W
+    sc = ii[eo + P_O_SCAL]
+    th = sc + S_THETA_REF
+    # Σe² = Σy² − 2 θ_refᵀ Σφy + θ_refᵀ Σφφᵀ θ_ref from the packed sums (`packed_row_into`)
+    see = f[s + 14] + _packed_quadratic(f, s, th)
+    for i in range(4):
+        see -= 2.0 * f[th + i] * f[s + 10 + i]
+    scale = ii[eo + P_POST + 1] * f[sc + S_SIGMA2_REF]
+    left = sse / scale
+    taken = (see - sse) / scale
+    described: bool = left <= 1.0 + _clear_excess(ii, eo, threshold) and taken > left - 1.0
+    return described
 
 
 @jit
@@ -596,10 +628,14 @@ def episode_tick(
         return _band_decision(f, ii, eo, state, ticks, rep1, rep2, band)
     fmin = f[sc + S_FMIN]
     kind = KIND_NONE
+    sse = math.inf  # the post window's refit: its residual sum of squares (none: inf)
     if evidence and ii[eo + P_POST + 1] >= iso:
         th = ii[eo + P_O_TH]
-        _, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th)
+        fit_sse, ok = solve_packed(
+            f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th
+        )
         if ok:
+            sse = fit_sse
             f[sc + S_LEVEL_CHANGE] = f[th] - f[sc + S_COULOMB_BASE]
             if f[sc + S_LEVEL_CHANGE] >= fmin or over > 1.0:
                 kind = _friction_kind(f, ii, eo, fmin)
@@ -617,12 +653,19 @@ def episode_tick(
             f[sc + S_LEVEL_CHANGE] = f[sc + S_EVIDENCE]
             ii[eo + P_QUIET] = 0
             return TO_ISOLATED
-        # no friction evidence within the timeout of the fault's evidence: another fault.
-        # An episode the growing-fault path raised (friction's direction only) has that
-        # evidence once the residual test's alarm holds (what raises a fast episode); until
-        # then it stays unconfirmed
+        # no friction evidence within the timeout of the fault's evidence, and evidence of
+        # another fault: a linear change of the plant describes it, or the accelerometer
+        # clipped. A fault that neither describes (friction below the band where g1 shows
+        # it, or holding the load part of each cycle) stays unconfirmed. An episode the
+        # growing-fault path raised (friction's direction only) has the fault's evidence
+        # once the residual test's alarm holds
         fault_at = ii[eo + P_FAULT_AT]
-        if state == 3 and fault_at >= 0 and ticks - fault_at >= ii[eo + P_TIMEOUT]:
+        if (
+            state == 3
+            and fault_at >= 0
+            and ticks - fault_at >= ii[eo + P_TIMEOUT]
+            and (ii[eo + P_CLIPPED] or _described_by_linear_change(f, ii, eo, sse, threshold))
+        ):
             ii[eo + P_QUIET] = 0
             measure_fault(f, ii, eo, threshold)
             return TO_OTHER

@@ -9,7 +9,8 @@ non-finite numbers are stored as None so that each line is strict JSON. Kinds:
 - ``friction_isolated``: (θ1, θ2) track the friction signature (1, γ_f);
 - ``other_fault``: an alarm whose estimates do not track the signature within
   ``isolation_timeout_s`` of the detection (for the drift path's: of the residual test's
-  alarm; with ``accel_clipping: true`` when the accelerometer sat at its rail during the
+  alarm) and that a linear change of the plant describes or a clipping accelerometer
+  explains (with ``accel_clipping: true`` when the accelerometer sat at its rail during the
   episode, ``load_stopped: true`` when the load had stopped although the model says it
   moves: held by friction, or its drive lost, which the accelerometer cannot tell apart);
 - ``cleared``: the estimates and the test statistic are back to normal;

@@ -63,8 +63,10 @@ class DetectorSettings:
     isolation_window_s: float = 0.25
     """Data after the detection that the isolation fit needs before it decides."""
     isolation_timeout_s: float = 2.0
-    """No friction evidence this long after the detection: other_fault (an episode the
-    growing-fault path raised: this long after the residual test's alarm)."""
+    """No friction evidence this long after the detection (an episode the growing-fault
+    path raised: after the residual test's alarm): other_fault once a linear change of the
+    residual fit describes the fault or the accelerometer clipped; until then
+    fault_detected (docs/detector.md §3, "Isolation")."""
     friction_min_level: float = 0.3
     """Increase of the Coulomb coefficient (units of the calibrated signature) that counts
     as friction."""

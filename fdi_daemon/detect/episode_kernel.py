@@ -366,20 +366,19 @@ def _packed_quadratic(f: F64, s: int, v: int) -> float:  # pragma: no cover - ji
 def measure_fault(f: F64, ii: I64, eo: int, threshold: float) -> None:  # pragma: no cover - jit
     """Δθ = θ_post − θ_ref, the fault as a linear change of the residual fit (eq. 16's φ
     with x̂̈ and 1), from the post window when the episode becomes another fault; kept only
-    where it explains what the clearing test would see (`fault_power` above
-    `_clear_excess`), NaN otherwise (a fault the linear change does not describe: the
-    clearing test alone decides)."""
+    where it describes the fault (`_described_by_linear_change`), NaN otherwise (a clipping
+    accelerometer: the clearing test alone decides)."""
     n = ii[eo + P_N]
     sc = ii[eo + P_O_SCAL]
     d = sc + S_FAULT_CHANGE
     f[d] = math.nan
     th = ii[eo + P_O_TH]
-    _, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th)
+    sse, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th)
     if not ok:
         return
     for q in range(4):
         f[d + q] = f[th + q] - f[sc + S_THETA_REF + q]
-    if not fault_power(f, ii, eo) >= _clear_excess(ii, eo, threshold):
+    if not _described_by_linear_change(f, ii, eo, sse, threshold):
         f[d] = math.nan
 
 

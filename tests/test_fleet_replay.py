@@ -382,13 +382,11 @@ def test_without_dask_the_error_names_the_extra(monkeypatch):
 #: death, and a cluster that never answers fails the test instead of hanging the suite
 _DIES = """
 import json, sys
-from dask.distributed import Client, LocalCluster
-from fdi_daemon.fleet.cluster import replay_fleet
+from fdi_daemon.fleet.cluster import dask_client, replay_fleet
 from fleet_support import replay_or_die
 if __name__ == "__main__":  # the worker processes are spawned: they import this file
     jobs = json.loads(sys.argv[1])
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster, Client(cluster) as client:
+    with dask_client(None, 1) as client:
         print(json.dumps(replay_fleet([tuple(j) for j in jobs], client, task=replay_or_die)))
 """
 

@@ -32,6 +32,8 @@ def _distributed():
 def dask_client(scheduler: str | None, workers: int):
     """A client of the given scheduler, or of a fresh local cluster of ``workers`` processes."""
     dd = _distributed()
+    import dask  # installed with dask.distributed
+
     if scheduler is not None:
         try:
             client = dd.Client(scheduler, timeout="10s")
@@ -41,7 +43,11 @@ def dask_client(scheduler: str | None, workers: int):
             yield client
         return
     environ = dict(os.environ)  # as it was before the nannies set theirs (`_restore_environ`)
-    with _sigint_ignored():  # the worker processes inherit it: Ctrl-C is the parent's job
+    # a file that kills its worker kills it again on every retry: no retries on the cluster
+    # (`replay_fleet` runs each failed file once more alone), so such a file costs two worker
+    # restarts instead of eight
+    no_retries = {"distributed.scheduler.allowed-failures": 0}
+    with _sigint_ignored(), dask.config.set(no_retries):  # Ctrl-C is the parent's job
         cluster = dd.LocalCluster(
             n_workers=workers,
             threads_per_worker=1,

@@ -556,6 +556,80 @@ def _clearing(
     return NO_CHANGE
 
 
+@jit(inline=True)
+def _friction_evidence(
+    f: F64, ii: I64, eo: int, evidence: bool, over: float, clipped: bool
+) -> tuple[int, float]:  # pragma: no cover - jit
+    """This tick's friction evidence (KIND_*) and the post window's refit SSE (inf where
+    not refitted): the Coulomb coefficient's change since the reference (S_LEVEL_CHANGE)
+    at least ``friction_min_level``, or the level above its margin (``over`` > 1), opens
+    `_friction_kind`; an episode the level path raised has the level alone; a clipped
+    window has none (and the episode remembers it saw one)."""
+    n = ii[eo + P_N]
+    sc = ii[eo + P_O_SCAL]
+    fmin = f[sc + S_FMIN]
+    kind = KIND_NONE
+    sse = math.inf
+    if evidence and ii[eo + P_POST + 1] >= ii[eo + P_ISO]:
+        th = ii[eo + P_O_TH]
+        fit_sse, ok = solve_packed(
+            f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th
+        )
+        if ok:
+            sse = fit_sse
+            f[sc + S_LEVEL_CHANGE] = f[th] - f[sc + S_COULOMB_BASE]
+            if f[sc + S_LEVEL_CHANGE] >= fmin or over > 1.0:
+                kind = _friction_kind(f, ii, eo, fmin)
+    if ii[eo + P_LEVEL]:
+        kind = KIND_LEVEL if over > 1.0 else KIND_NONE
+    if clipped:
+        kind = KIND_NONE
+        ii[eo + P_CLIPPED] = 1
+    return kind, sse
+
+
+@jit(inline=True)
+def _isolation(
+    f: F64,
+    ii: I64,
+    eo: int,
+    state: int,
+    ticks: int,
+    kind: int,
+    over: float,
+    sse: float,
+    threshold: float,
+) -> int:  # pragma: no cover - jit
+    """An unconfirmed episode's decision (``state`` 3 fault_detected, 5 other_fault):
+    friction once its evidence held ``track_samples`` ticks and the fault persisted; another
+    fault once the timeout from the fault's evidence passed without friction's and there is
+    evidence of another fault — a linear change of the plant describes it
+    (`_described_by_linear_change`), or the accelerometer clipped. A fault that neither
+    describes (friction below the band where g1 shows it, or holding the load part of each
+    cycle) stays unconfirmed. An episode the growing-fault path raised (friction's direction
+    only) has the fault's evidence once the residual test's alarm holds (P_FAULT_AT)."""
+    sc = ii[eo + P_O_SCAL]
+    ii[eo + P_TRACK] = ii[eo + P_TRACK] + 1 if kind != KIND_NONE else 0
+    if ii[eo + P_TRACK] >= ii[eo + P_TRACK_SAMPLES] and math.isnan(f[sc + S_EVIDENCE]):
+        f[sc + S_EVIDENCE] = over if ii[eo + P_LEVEL] else f[sc + S_LEVEL_CHANGE]
+        ii[eo + P_KIND] = kind
+    if not math.isnan(f[sc + S_EVIDENCE]) and ii[eo + P_PERSISTED]:
+        f[sc + S_LEVEL_CHANGE] = f[sc + S_EVIDENCE]
+        ii[eo + P_QUIET] = 0
+        return TO_ISOLATED
+    fault_at = ii[eo + P_FAULT_AT]
+    if (
+        state == 3
+        and fault_at >= 0
+        and ticks - fault_at >= ii[eo + P_TIMEOUT]
+        and (ii[eo + P_CLIPPED] or _described_by_linear_change(f, ii, eo, sse, threshold))
+    ):
+        ii[eo + P_QUIET] = 0
+        measure_fault(f, ii, eo, threshold)
+        return TO_OTHER
+    return NO_CHANGE
+
+
 @jit
 def episode_tick(
     f: F64,
@@ -625,49 +699,11 @@ def episode_tick(
         ii[eo + P_PERSISTED] = 1
     if ii[eo + P_BAND]:
         return _band_decision(f, ii, eo, state, ticks, rep1, rep2, band)
-    fmin = f[sc + S_FMIN]
-    kind = KIND_NONE
-    sse = math.inf  # the post window's refit: its residual sum of squares (none: inf)
-    if evidence and ii[eo + P_POST + 1] >= iso:
-        th = ii[eo + P_O_TH]
-        fit_sse, ok = solve_packed(
-            f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th
-        )
-        if ok:
-            sse = fit_sse
-            f[sc + S_LEVEL_CHANGE] = f[th] - f[sc + S_COULOMB_BASE]
-            if f[sc + S_LEVEL_CHANGE] >= fmin or over > 1.0:
-                kind = _friction_kind(f, ii, eo, fmin)
-    if ii[eo + P_LEVEL]:
-        kind = KIND_LEVEL if over > 1.0 else KIND_NONE
-    if clipped:
-        kind = KIND_NONE
-        ii[eo + P_CLIPPED] = 1
+    kind, sse = _friction_evidence(f, ii, eo, evidence, over, clipped)
     if state == 3 or state == 5:
-        ii[eo + P_TRACK] = ii[eo + P_TRACK] + 1 if kind != KIND_NONE else 0
-        if ii[eo + P_TRACK] >= ii[eo + P_TRACK_SAMPLES] and math.isnan(f[sc + S_EVIDENCE]):
-            f[sc + S_EVIDENCE] = over if ii[eo + P_LEVEL] else f[sc + S_LEVEL_CHANGE]
-            ii[eo + P_KIND] = kind
-        if not math.isnan(f[sc + S_EVIDENCE]) and ii[eo + P_PERSISTED]:
-            f[sc + S_LEVEL_CHANGE] = f[sc + S_EVIDENCE]
-            ii[eo + P_QUIET] = 0
-            return TO_ISOLATED
-        # no friction evidence within the timeout of the fault's evidence, and evidence of
-        # another fault: a linear change of the plant describes it, or the accelerometer
-        # clipped. A fault that neither describes (friction below the band where g1 shows
-        # it, or holding the load part of each cycle) stays unconfirmed. An episode the
-        # growing-fault path raised (friction's direction only) has the fault's evidence
-        # once the residual test's alarm holds
-        fault_at = ii[eo + P_FAULT_AT]
-        if (
-            state == 3
-            and fault_at >= 0
-            and ticks - fault_at >= ii[eo + P_TIMEOUT]
-            and (ii[eo + P_CLIPPED] or _described_by_linear_change(f, ii, eo, sse, threshold))
-        ):
-            ii[eo + P_QUIET] = 0
-            measure_fault(f, ii, eo, threshold)
-            return TO_OTHER
+        change = _isolation(f, ii, eo, state, ticks, kind, over, sse, threshold)
+        if change != NO_CHANGE:
+            return change
     return _clearing(f, ii, eo, state, over, frozen_stat, threshold, moving, trusted, sliding)
 
 

@@ -75,3 +75,29 @@ def test_the_deadband_is_the_test_windows_threshold_over_the_whole_window():
     assert math.isclose(window, mean_z, rel_tol=1e-9)
     assert mean_z > 1.0 + E._clear_excess(ii, eo, h)  # the fault is there
     assert not E.innovations_back_to_normal(f, ii, eo, E._clear_excess(ii, eo, h))
+
+
+def test_a_fault_is_described_by_a_linear_change_where_the_refit_leaves_the_deadband():
+    """`_described_by_linear_change` against a direct least-squares refit of the last n
+    samples: the valve's loss of gain leaves e − φΔθ within the deadband and the refit takes
+    most of Σe²; with the refit's SSE raised to just above the deadband, or to where the
+    refit takes less than it leaves, the same window is not described."""
+    monitor, rec, _ = _valve_run()
+    f, ii, eo, sc = _episode(monitor)
+    h, n = DetectorSettings().threshold, ii[eo + E.P_N]
+    phi, r = _signals(monitor, rec)
+    e = r - phi @ f[sc + E.S_THETA_REF : sc + E.S_THETA_REF + 4]
+    change, *_ = np.linalg.lstsq(phi, e, rcond=None)
+    sse = float(np.sum((e - phi @ change) ** 2))
+    scale = n * f[sc + E.S_SIGMA2_REF]
+    deadband = 1.0 + E._clear_excess(ii, eo, h)
+    assert sse / scale < deadband < float(np.sum(e**2)) / scale
+    assert E._described_by_linear_change(f, ii, eo, sse, h)
+    assert not E._described_by_linear_change(f, ii, eo, 1.001 * deadband * scale, h)
+    # taken = Σe²/scale − left must exceed left − 1: left below half of (Σe²/scale + 1).
+    # Here (19.9 + 1)/2 lies above the deadband, so test it under a threshold whose
+    # deadband holds both sides of it
+    half = 0.5 * (float(np.sum(e**2)) / scale + 1.0)
+    wide = 1.0 + 2.0 * half * math.sqrt(n / ii[eo + E.P_M])  # deadband 1 + 2·half
+    assert E._described_by_linear_change(f, ii, eo, 0.99 * half * scale, wide)
+    assert not E._described_by_linear_change(f, ii, eo, 1.01 * half * scale, wide)

@@ -323,6 +323,25 @@ def test_a_lost_supply_is_not_cleared_under_1_to_2_hz_operation():
 
 
 @pytest.mark.slow
+def test_a_lost_supply_raised_by_the_growing_fault_path_is_measured_and_not_cleared():
+    """The supply at 60 % (seed 7) is raised by the growing-fault path at 120.38 s and the
+    residual test never alarms, so the episode stays unconfirmed; its linear change is still
+    measured once it describes the fault, and the clearing count holds under operation that
+    would not show it. Before: `cleared` at 174.8 s under 3 Hz operation (never measured).
+    Removed at 130 s instead: `cleared` at 139.4 s."""
+    events = _changing_operation({"fault": "supply_pressure", "value": 0.6}, seed=7)
+    assert _kinds(events) == ["fault_detected"]
+    assert events[-1]["path"] == "drift"
+    removed = _changing_operation(
+        {"fault": "supply_pressure", "value": 0.6},
+        seed=7,
+        removed={"fault": "supply_pressure", "value": 1.0},
+    )
+    assert _kinds(removed) == ["fault_detected", "cleared"]
+    assert removed[-1]["t"] < 150.0
+
+
+@pytest.mark.slow
 def test_a_weakened_drive_restored_under_changing_operation_is_cleared():
     """The valve at 40 % from 120 s to 130 s (seed 6): cleared within 3 s of the repair."""
     events = [

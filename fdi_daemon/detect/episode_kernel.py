@@ -607,7 +607,9 @@ def _isolation(
     (`_described_by_linear_change`), or the accelerometer clipped. A fault that neither
     describes (friction below the band where g1 shows it, or holding the load part of each
     cycle) stays unconfirmed. An episode the growing-fault path raised (friction's direction
-    only) has the fault's evidence once the residual test's alarm holds (P_FAULT_AT)."""
+    only) has the fault's evidence once the residual test's alarm holds (P_FAULT_AT); until
+    then it stays unconfirmed, its timeout counted from the detection, and the first linear
+    change that describes it is measured for the clearing gate (`measure_fault`)."""
     sc = ii[eo + P_O_SCAL]
     ii[eo + P_TRACK] = ii[eo + P_TRACK] + 1 if kind != KIND_NONE else 0
     if ii[eo + P_TRACK] >= ii[eo + P_TRACK_SAMPLES] and math.isnan(f[sc + S_EVIDENCE]):
@@ -618,15 +620,16 @@ def _isolation(
         ii[eo + P_QUIET] = 0
         return TO_ISOLATED
     fault_at = ii[eo + P_FAULT_AT]
-    if (
-        state == 3
-        and fault_at >= 0
-        and ticks - fault_at >= ii[eo + P_TIMEOUT]
-        and (ii[eo + P_CLIPPED] or _described_by_linear_change(f, ii, eo, sse, threshold))
+    if state != 3 or ticks - max(fault_at, 0) < ii[eo + P_TIMEOUT]:
+        return NO_CHANGE
+    alarmed = fault_at >= 0
+    if (alarmed or math.isnan(f[sc + S_FAULT_CHANGE])) and (
+        ii[eo + P_CLIPPED] or _described_by_linear_change(f, ii, eo, sse, threshold)
     ):
-        ii[eo + P_QUIET] = 0
-        measure_fault(f, ii, eo, threshold)
-        return TO_OTHER
+        measure_fault(f, ii, eo, threshold)  # the clearing gate's fault as measured
+        if alarmed:
+            ii[eo + P_QUIET] = 0
+            return TO_OTHER
     return NO_CHANGE
 
 

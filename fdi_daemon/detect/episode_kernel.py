@@ -11,13 +11,15 @@ From ``fault_detected`` until ``cleared`` the detector keeps, on top of the quie
   e = r − φᵀθ_ref regressed on (g1, x̂̈(k), x̂̈(k−1), 1) (what g1 explains beyond any linear
   change of the plant);
 - whether the load has stopped although the model says it moves (energies of ẍ, Δẍ and x̂̈
-  over the test window): said in an ``other_fault`` event, never taken as friction (a weak
-  valve or a lost supply stops the load as friction does, and the accelerometer cannot
-  tell them apart);
+  over the test window): said in an ``other_fault`` event, never taken as friction nor as
+  evidence of another fault (a weak valve or a lost supply stops the load as friction
+  does, and the accelerometer cannot tell them apart);
+- whether a linear change of the residual fit describes the fault (the evidence of another
+  fault, `_described_by_linear_change`);
 - the frozen-reference test T = mean over M of e²/σ²_ref (persistence, clearing), and for
   clearing the mean of e²/σ²_ref over the window of n (the alarm's deadband) and the power
-  the fault as measured (Δθ at the ``other_fault`` decision) would show under the window's
-  operation.
+  the fault as measured (Δθ once a linear change describes it, `measure_fault`) would show
+  under the window's operation.
 
 ``episode_tick`` returns the transition of the tick (none, isolated, other fault, cleared)
 and applies it to the detector's state; Python only formats the event. The cost of a tick

@@ -63,13 +63,33 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import math
+    _check_arguments(args)
+    replay, shown, stopped = _replay(args)
+    summary = replay.summary
+    if stopped:  # the outputs hold what was replayed
+        summary.update(samples=stopped["samples"], interrupted_at_t=stopped["t"])
+    written = _write_outputs(args, replay, shown)
+    _report(replay.events, summary)
+    if written:
+        print("wrote " + "; ".join(written))
+    if replay.monitor.baseline_note:
+        print(f"note: {replay.monitor.baseline_note}")
+    if stopped:
+        import sys
 
-    import numpy as np
+        print(
+            f"fdi replay: interrupted at t = {stopped['t']:.4f} s; the outputs hold the "
+            f"{stopped['samples']} sample(s) replayed",
+            file=sys.stderr,
+        )
+        return 130
+    return 0
 
+
+def _check_arguments(args: argparse.Namespace) -> None:
+    """Options that do not go together, and output files that would overwrite an input."""
     from fdi_daemon.errors import UserError
-    from fdi_daemon.fleet.replay_one import replay_recording
-    from fdi_daemon.io.outputs import check_outputs, write_json
+    from fdi_daemon.io.outputs import check_outputs
 
     if args.dashboard and not args.realtime:
         raise UserError(
@@ -90,15 +110,23 @@ def run(args: argparse.Namespace) -> int:
         plots=("--plot",),
     )
 
+
+def _replay(args: argparse.Namespace):
+    """(the replay, the rows the trace file or the plot shows every, where a paced replay
+    stopped by Ctrl-C stopped: {} if it did not): batch, paced, with the dashboard, or
+    streamed piece by piece (a Parquet file, flat memory) with a progress bar."""
+    import math
+
+    from fdi_daemon.fleet.replay_one import replay_recording
+
     settings, status_period_s = _alarm_settings(args.alarms)
     # rows the trace file or the plot shows (the batch path traces them and the readings')
-    shown = args.trace_every if args.trace else 1  # a streamed replay calls no runner
-    stopped: dict = {}  # a paced replay stopped by Ctrl-C: where
+    shown = [args.trace_every if args.trace else 1]  # a streamed replay calls no runner
+    stopped: dict = {}
 
     def runner(monitor, rec, stride):
-        nonlocal shown
         n = len(rec)
-        shown = (
+        shown[0] = (
             args.trace_every if args.trace else (_plot_every(n, stride) if args.plot else stride)
         )
         if args.realtime and args.dashboard:
@@ -113,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
             )
         if args.realtime:
             return _paced(monitor, rec, stopped=stopped)
-        return _batch(monitor, rec, math.gcd(shown, stride))
+        return _batch(monitor, rec, math.gcd(shown[0], stride))
 
     bar: list = []  # a streamed replay's progress bar (Progress, task), made at its first piece
 
@@ -141,23 +169,23 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if bar:
             bar[0].stop()
-    rec, monitor, events, trace, summary = (
-        replay.recording,
-        replay.monitor,
-        replay.events,
-        replay.trace,
-        replay.summary,
-    )
-    written: list[str] = []  # "what PATH" of each output file, said at the end
-    if stopped:  # the outputs hold what was replayed
-        summary.update(samples=stopped["samples"], interrupted_at_t=stopped["t"])
+    return replay, shown[0], stopped
+
+
+def _write_outputs(args: argparse.Namespace, replay, shown: int) -> list[str]:
+    """--events, --summary, --trace (every ``shown`` samples) and --plot; "what PATH" of
+    each file written, said at the end."""
+    from fdi_daemon.io.outputs import write_json
+
+    events, trace = replay.events, replay.trace
+    written: list[str] = []
     if args.events:
         from fdi_daemon.detect.events import write_events
 
         write_events(args.events, events)
         written.append(f"events {args.events} ({len(events)} lines)")
     if args.summary:
-        write_json(args.summary, summary)
+        write_json(args.summary, replay.summary)
         written.append(f"summary {args.summary}")
     if args.trace:
         from fdi_daemon.detect.trace_file import write_trace
@@ -166,38 +194,33 @@ def run(args: argparse.Namespace) -> int:
         rows = -(-len(trace.t) // (shown // trace.every))
         written.append(f"trace {args.trace} ({rows} rows, every {shown} sample{'s' * (shown > 1)})")
     if args.plot:
-        from fdi_daemon.detect.plots import plot_replay
-
-        onset = None
-        if "fault_active" in rec.columns:
-            active = np.flatnonzero(np.asarray(rec["fault_active"]) > 0.5)
-            onset = float(rec.t[active[0]]) if active.size else None
-        plot_replay(
-            args.plot,
-            _thinned(trace, shown // trace.every),
-            events,
-            monitor.gamma_f,
-            monitor.detector.band,
-            monitor.detector.threshold,
-            onset,
-            title=str(args.recording),
-        )
+        _plot(args.plot, replay, shown, title=str(args.recording))
         written.append(f"plot {args.plot}")
-    _report(events, summary)
-    if written:
-        print("wrote " + "; ".join(written))
-    if monitor.baseline_note:
-        print(f"note: {monitor.baseline_note}")
-    if stopped:
-        import sys
+    return written
 
-        print(
-            f"fdi replay: interrupted at t = {stopped['t']:.4f} s; the outputs hold the "
-            f"{stopped['samples']} sample(s) replayed",
-            file=sys.stderr,
-        )
-        return 130
-    return 0
+
+def _plot(path: str, replay, shown: int, title: str) -> None:
+    """The replay figure of the trace every ``shown`` samples, the fault's onset marked
+    where the recording has a ``fault_active`` column (a simulated one)."""
+    import numpy as np
+
+    from fdi_daemon.detect.plots import plot_replay
+
+    rec, trace, monitor = replay.recording, replay.trace, replay.monitor
+    onset = None
+    if "fault_active" in rec.columns:
+        active = np.flatnonzero(np.asarray(rec["fault_active"]) > 0.5)
+        onset = float(rec.t[active[0]]) if active.size else None
+    plot_replay(
+        path,
+        _thinned(trace, shown // trace.every),
+        replay.events,
+        monitor.gamma_f,
+        monitor.detector.band,
+        monitor.detector.threshold,
+        onset,
+        title=title,
+    )
 
 
 def _alarm_settings(path: str | None):

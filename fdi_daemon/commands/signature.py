@@ -147,127 +147,34 @@ def _orders(text: str) -> tuple[int, int, int]:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from fdi_daemon.commands.identify import load_io
-    from fdi_daemon.core.velocity import DEFAULT_SETTINGS
-    from fdi_daemon.detect.monitor import check_stable
-    from fdi_daemon.detect.settings import velocity_settings
-    from fdi_daemon.diagnose.augment import nominal_plant
     from fdi_daemon.errors import UserError
-    from fdi_daemon.ident import signature as sig
-    from fdi_daemon.ident.signature_advice import CalibrationContext, plant_resonance_hz
-    from fdi_daemon.io.model_file import FaultFilter, load_model, save_model
+    from fdi_daemon.io.model_file import save_model
 
-    t0, t1, grid, orders = _checked_options(args)
-    model = load_model(args.model)
-    check_stable(model.plant_a, "plant.a")  # an unstable Ĝ gives no residual to fit
-    rec, v_in, accel = load_io(args.recording, args.columns)
-    t = rec.t
-    inside = _fault_window(args, rec, model.fs, t0, t1, orders)
-
-    # a plant-only model (`fdi identify`'s) has no velocity yet: auto; a model with velocity
-    # settings keeps them (without a method: the high-pass estimator, as every model before)
-    method = args.velocity_method or (
-        model.velocity.get("method", "highpass") if model.velocity else "auto"
-    )
-    candidates = AUTO_METHODS if method == "auto" else (method,)
-    if args.drift_highpass_hz is not None and method not in ("auto", "highpass"):
-        raise UserError(DRIFT_NEEDS_HIGHPASS)
-    prefilter = _prefilter(args, model.fs)
-    radius = args.max_pole_radius
-    if radius is None:
-        radius = sig.plant_pole_bound(model.plant_a)
-    elif not 0 < radius <= 1:
-        raise UserError("--max-pole-radius must lie in (0, 1]")
-
-    # residual (eq. 3) and velocity from the recording start, so that filter start-up
-    # transients have settled before the window; the fit uses the window only
-    plant_residual = residual = sig.plant_residual(nominal_plant(model), v_in, accel)
-    first, end = int(np.flatnonzero(inside)[0]), int(np.flatnonzero(inside)[-1]) + 1
-    start = 0
-    if args.reference_window is not None:
-        lag = _reference_lag(args, t, v_in, first, end, rec.fs)
-        residual = sig.reference_difference(residual, lag)
-        start = lag  # the difference exists from one lag on
-    t_win = t[first:end]
-    context = CalibrationContext(
-        fs_hz=float(model.fs),
-        referenced=args.reference_window is not None,
-        resonance_hz=plant_resonance_hz(model.plant_a, float(model.fs)),
-    )
-
-    def fit(candidate: str, estimator: Any) -> tuple[Any, ...]:
-        """(VAF %, fit %, candidate, estimator, result, G_e) of the signature under
-        ``estimator``'s velocity: the γ profile, then G_e on the full band at γ_f."""
-        velocity = _velocity(estimator, rec, args.recording, accel, plant_residual)
-        result = _estimate(
-            sig,
-            residual[start:end],
-            velocity[start:end],
-            first - start,
-            grid,
-            orders,
-            prefilter,
-            args.flat_fraction,
-            args.min_depth,
-            radius,
-            candidate,
-            context,
-        )
-        fault_fit = result.fit
-        if args.lowpass_hz is not None:  # G_e for the monitor: full band, at gamma_f
-            fault_fit = sig.fit_fault_filter(
-                residual[start:end],
-                velocity[start:end],
-                result.gamma_f,
-                orders,
-                first - start,
-                radius,
-            )
-        full_band_pct = sig.fit_percent(residual[first:end], fault_fit.y_sim)
-        full_band_vaf = sig.variance_accounted_for(residual[first:end], fault_fit.y_sim)
-        return full_band_vaf, full_band_pct, candidate, estimator, result, fault_fit
-
-    fits: list[tuple[Any, ...]] = []
-    for candidate in candidates:
-        if fits and fits[-1][0] >= sig.LOW_VAF_PERCENT:
-            break  # the signature fits: keep the estimator tried first
-        settings = velocity_settings(model.velocity or DEFAULT_SETTINGS)
-        if candidate != settings.get("method", "highpass"):
-            settings = {"method": candidate}  # the other method's own defaults
-        if args.highpass_hz is not None:
-            settings["highpass_hz"] = args.highpass_hz
-        fits.append(fit(candidate, _estimator(settings, model.fs, args.model)))
+    cal = _Calibration(args)
+    model, method = cal.model, cal.method
+    fits = cal.fits_by_velocity(AUTO_METHODS if method == "auto" else (method,))
     # of those tried, the velocity under which the signature explains most of the residual
     full_band_vaf, full_band_pct, _, estimator, result, fault_fit = max(
         fits, key=lambda fit: fit[0]
     )
-    fits_percent = (float(full_band_pct), float(full_band_vaf))
     drift = None
     if args.drift_highpass_hz is not None:  # the growing-fault path's own signature
         if estimator.settings().get("method", "highpass") != "highpass":
             raise UserError(DRIFT_NEEDS_HIGHPASS)  # auto took the observer
         slow = {**estimator.settings(), "highpass_hz": args.drift_highpass_hz}
-        drift = fit("highpass", _estimator(slow, model.fs, args.model))
+        drift = cal.fit("highpass", _estimator(slow, model.fs, args.model))
     explained = {fit[2]: round(float(fit[0]), 2) for fit in fits}
-
-    nb, nf, nk = orders
-    # at the grid's edge γ_f is no value: null in the model (the monitor's G_e, fitted at the
-    # edge γ, is kept; the band method, which tracks (1, γ_f), refuses such a model)
-    band = sig.calibration_band_hz(v_in[first:end], float(model.fs))
-    model.fault_filter = FaultFilter(
-        b=fault_fit.b,
-        f=fault_fit.f,
-        nk=nk,
-        gamma_f=None if result.at_edge else result.gamma_f,
-        band_hz=band,
-        drift=None if drift is None else _drift_filter(drift, nk, args.drift_highpass_hz),
-    )
-    model.velocity = estimator.settings()
+    band = cal.store(result, fault_fit, estimator, drift)
     prov = dict(model.provenance)
     prov["signature"] = _signature_provenance(
-        args, [t0, t1], int(inside.sum()), radius, method, explained, result, fits_percent
+        args,
+        [cal.t0, cal.t1],
+        int(cal.inside.sum()),
+        cal.radius,
+        method,
+        explained,
+        result,
+        (float(full_band_pct), float(full_band_vaf)),
     )
     if drift is not None:
         prov["signature"]["drift"] = _drift_provenance(drift, args.drift_highpass_hz)
@@ -278,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
 
         plot_signature(
             args.plot,
-            t_win,
+            cal.t[cal.first : cal.end],
             result.residual,
             result,
             residual_label=_fitted_residual_label(args),
@@ -297,6 +204,136 @@ def run(args: argparse.Namespace) -> int:
     if drift is not None:
         _report_drift(drift, args.drift_highpass_hz)
     return 0
+
+
+class _Calibration:
+    """The recording, the model and the fault window of one `fdi signature` run, and the
+    signature fitted on them under a velocity estimator (eqs. 11–13)."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        import numpy as np
+
+        from fdi_daemon.commands.identify import load_io
+        from fdi_daemon.detect.monitor import check_stable
+        from fdi_daemon.diagnose.augment import nominal_plant
+        from fdi_daemon.errors import UserError
+        from fdi_daemon.ident import signature as sig
+        from fdi_daemon.ident.signature_advice import CalibrationContext, plant_resonance_hz
+        from fdi_daemon.io.model_file import load_model
+
+        self.args = args
+        self.t0, self.t1, self.grid, self.orders = _checked_options(args)
+        self.model = model = load_model(args.model)
+        check_stable(model.plant_a, "plant.a")  # an unstable Ĝ gives no residual to fit
+        self.rec, self.v_in, self.accel = load_io(args.recording, args.columns)
+        self.t = self.rec.t
+        self.inside = _fault_window(args, self.rec, model.fs, self.t0, self.t1, self.orders)
+        # a plant-only model (`fdi identify`'s) has no velocity yet: auto; a model with
+        # velocity settings keeps them (without a method: the high-pass estimator, as every
+        # model before)
+        self.method = args.velocity_method or (
+            model.velocity.get("method", "highpass") if model.velocity else "auto"
+        )
+        if args.drift_highpass_hz is not None and self.method not in ("auto", "highpass"):
+            raise UserError(DRIFT_NEEDS_HIGHPASS)
+        self.prefilter = _prefilter(args, model.fs)
+        radius = args.max_pole_radius
+        if radius is None:
+            radius = sig.plant_pole_bound(model.plant_a)
+        elif not 0 < radius <= 1:
+            raise UserError("--max-pole-radius must lie in (0, 1]")
+        self.radius = radius
+        # residual (eq. 3) and velocity from the recording start, so that filter start-up
+        # transients have settled before the window; the fit uses the window only
+        self.plant_residual = sig.plant_residual(nominal_plant(model), self.v_in, self.accel)
+        self.residual = self.plant_residual
+        window = np.flatnonzero(self.inside)
+        self.first, self.end = int(window[0]), int(window[-1]) + 1
+        self.start = 0
+        if args.reference_window is not None:
+            lag = _reference_lag(args, self.t, self.v_in, self.first, self.end, self.rec.fs)
+            self.residual = sig.reference_difference(self.residual, lag)
+            self.start = lag  # the difference exists from one lag on
+        self.context = CalibrationContext(
+            fs_hz=float(model.fs),
+            referenced=args.reference_window is not None,
+            resonance_hz=plant_resonance_hz(model.plant_a, float(model.fs)),
+        )
+
+    def fit(self, candidate: str, estimator: Any) -> tuple[Any, ...]:
+        """(VAF %, fit %, candidate, estimator, result, G_e) of the signature under
+        ``estimator``'s velocity: the γ profile, then G_e on the full band at γ_f."""
+        from fdi_daemon.ident import signature as sig
+
+        args, start, end, first = self.args, self.start, self.end, self.first
+        velocity = _velocity(estimator, self.rec, args.recording, self.accel, self.plant_residual)
+        result = _estimate(
+            sig,
+            self.residual[start:end],
+            velocity[start:end],
+            first - start,
+            self.grid,
+            self.orders,
+            self.prefilter,
+            args.flat_fraction,
+            args.min_depth,
+            self.radius,
+            candidate,
+            self.context,
+        )
+        fault_fit = result.fit
+        if args.lowpass_hz is not None:  # G_e for the monitor: full band, at gamma_f
+            fault_fit = sig.fit_fault_filter(
+                self.residual[start:end],
+                velocity[start:end],
+                result.gamma_f,
+                self.orders,
+                first - start,
+                self.radius,
+            )
+        full_band_pct = sig.fit_percent(self.residual[first:end], fault_fit.y_sim)
+        full_band_vaf = sig.variance_accounted_for(self.residual[first:end], fault_fit.y_sim)
+        return full_band_vaf, full_band_pct, candidate, estimator, result, fault_fit
+
+    def fits_by_velocity(self, candidates: tuple[str, ...]) -> list[tuple[Any, ...]]:
+        """`fit` under each candidate velocity in turn, until one explains at least
+        LOW_VAF_PERCENT of the fault residual (``--velocity-method auto``)."""
+        from fdi_daemon.core.velocity import DEFAULT_SETTINGS
+        from fdi_daemon.detect.settings import velocity_settings
+        from fdi_daemon.ident import signature as sig
+
+        fits: list[tuple[Any, ...]] = []
+        for candidate in candidates:
+            if fits and fits[-1][0] >= sig.LOW_VAF_PERCENT:
+                break  # the signature fits: keep the estimator tried first
+            settings = velocity_settings(self.model.velocity or DEFAULT_SETTINGS)
+            if candidate != settings.get("method", "highpass"):
+                settings = {"method": candidate}  # the other method's own defaults
+            if self.args.highpass_hz is not None:
+                settings["highpass_hz"] = self.args.highpass_hz
+            fits.append(self.fit(candidate, _estimator(settings, self.model.fs, self.args.model)))
+        return fits
+
+    def store(self, result: Any, fault_fit: Any, estimator: Any, drift: Any) -> Any:
+        """G_e, γ_f, the calibration's band and the drift signature into the model, and the
+        estimator's velocity settings; returns the band (Hz)."""
+        from fdi_daemon.ident import signature as sig
+        from fdi_daemon.io.model_file import FaultFilter
+
+        nk = self.orders[2]
+        # at the grid's edge γ_f is no value: null in the model (the monitor's G_e, fitted
+        # at the edge γ, is kept; the band method, which tracks (1, γ_f), refuses such a model)
+        band = sig.calibration_band_hz(self.v_in[self.first : self.end], float(self.model.fs))
+        self.model.fault_filter = FaultFilter(
+            b=fault_fit.b,
+            f=fault_fit.f,
+            nk=nk,
+            gamma_f=None if result.at_edge else result.gamma_f,
+            band_hz=band,
+            drift=None if drift is None else _drift_filter(drift, nk, self.args.drift_highpass_hz),
+        )
+        self.model.velocity = estimator.settings()
+        return band
 
 
 def _checked_options(args: argparse.Namespace) -> tuple[float, float, Any, tuple[int, int, int]]:

@@ -102,13 +102,43 @@ def load_io(path: str, columns: dict[str, str] | None = None):
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from fdi_daemon.errors import UserError
-    from fdi_daemon.ident import plant, provenance
     from fdi_daemon.io.model_file import FdiModel, save_model
+
+    band = _checked_options(args)
+    rec, u, y = load_io(args.recording, args.columns)
+    ident = _identify(args, rec.fs, u, y, band)
+    u_val, y_val, t_val, val_label = _validation_data(args, rec, u, y)
+    check = _validate(args, ident, u_val, y_val)
+    prov = {"identify": _provenance(args, ident, check, val_label)}
+    save_model(
+        args.output, FdiModel(fs=rec.fs, plant_b=ident.fit.b, plant_a=ident.fit.a, provenance=prov)
+    )
+    if args.plot:
+        import numpy as np
+
+        from fdi_daemon.ident.plots import plot_identification
+
+        plot_identification(
+            args.plot,
+            ident.response,
+            ident.model_response(),
+            ident.band_hz,
+            {
+                "t": t_val,
+                "y": y_val - np.mean(y_val),
+                "y_sim": check["y_sim"] - np.mean(y_val),
+                "fit_percent": check["fit_percent"],
+                "label": val_label,
+            },
+        )
+    _report(args, ident, check, val_label)
+    return 0
+
+
+def _checked_options(args: argparse.Namespace) -> tuple[float, float] | None:
+    """The options that need no data, each checked (one line each); the --band (Hz)."""
+    from fdi_daemon.errors import UserError
     from fdi_daemon.io.outputs import check_outputs
-    from fdi_daemon.io.recordings import same_rate
 
     if not 1 <= args.order <= MAX_ORDER:
         raise UserError(f"--order must be 1..{MAX_ORDER}, got {args.order}")
@@ -119,14 +149,20 @@ def run(args: argparse.Namespace) -> int:
         (args.recording, args.validate),
         plots=("--plot",),
     )
-    band: tuple[float, float] | None = None
-    if args.band is not None:
-        lo, hi = parse_range(args.band, "--band")
-        band = (lo, hi)
-        if not 0 <= band[0] < band[1]:
-            raise UserError(f"--band needs 0 <= LO < HI, got {args.band}")
-    rec, u, y = load_io(args.recording, args.columns)
-    fs = rec.fs
+    if args.band is None:
+        return None
+    lo, hi = parse_range(args.band, "--band")
+    if not 0 <= lo < hi:
+        raise UserError(f"--band needs 0 <= LO < HI, got {args.band}")
+    return lo, hi
+
+
+def _identify(args: argparse.Namespace, fs: float, u, y, band: tuple[float, float] | None):
+    """Ĝ from the recording's valve voltage ``u`` (V) and acceleration ``y`` (m/s²), after
+    the checks that need the data."""
+    from fdi_daemon.errors import UserError
+    from fdi_daemon.ident import plant
+
     if band is not None and band[1] > fs / 2:
         raise UserError(f"--band {args.band} reaches above fs/2 = {fs / 2:g} Hz")
     if args.lag_samples is not None and not 2 <= args.lag_samples < len(u):
@@ -134,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
     if len(u) < 64:
         raise UserError(f"{args.recording}: {len(u)} samples are too few (need >= 64)")
     try:
-        ident = plant.identify_plant(
+        return plant.identify_plant(
             u,
             y,
             fs,
@@ -148,21 +184,39 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UserError(f"{args.recording}: {exc}") from None
 
-    if args.validate:
-        val_rec, u_val, y_val = load_io(args.validate, args.columns)
-        if not same_rate(val_rec.fs, fs):
-            raise UserError(
-                f"{args.validate}: fs = {val_rec.fs:g} Hz differs from "
-                f"{fs:g} Hz of {args.recording}"
-            )
-        val_label, t_val = f"validation: {args.validate}", val_rec.t
-    else:
-        u_val, y_val, t_val = u, y, rec.t
-        val_label = "estimation data (no --validate given)"
+
+def _validation_data(args: argparse.Namespace, rec, u, y):
+    """(u, y, t, label) to validate Ĝ on: --validate's recording, else the estimation data."""
+    from fdi_daemon.errors import UserError
+    from fdi_daemon.io.recordings import same_rate
+
+    if not args.validate:
+        return u, y, rec.t, "estimation data (no --validate given)"
+    val_rec, u_val, y_val = load_io(args.validate, args.columns)
+    if not same_rate(val_rec.fs, rec.fs):
+        raise UserError(
+            f"{args.validate}: fs = {val_rec.fs:g} Hz differs from "
+            f"{rec.fs:g} Hz of {args.recording}"
+        )
+    return u_val, y_val, val_rec.t, f"validation: {args.validate}"
+
+
+def _validate(args: argparse.Namespace, ident, u_val, y_val) -> dict:
+    from fdi_daemon.errors import UserError
+    from fdi_daemon.ident import plant
+
     try:
-        check = plant.validate_plant(ident, u_val, y_val)
+        return plant.validate_plant(ident, u_val, y_val)
     except ValueError as exc:
         raise UserError(f"{args.validate or args.recording}: validation: {exc}") from None
+
+
+def _provenance(args: argparse.Namespace, ident, check: dict, val_label: str) -> dict:
+    """The model file's ``provenance.identify``: source, command, choices and the metrics
+    of the fit and its validation."""
+    import numpy as np
+
+    from fdi_daemon.ident import provenance
 
     fit = ident.fit
     metrics = {
@@ -185,36 +239,13 @@ def run(args: argparse.Namespace) -> int:
         ),
     }
     choices = {k: v for k, v in ident.choices.items() if k != "lag_candidates"}
-    prov = {
-        "identify": {
-            **provenance.source_entry(args.recording, provenance.command_line("identify", args)),
-            "validation_source": args.validate,
-            "order": args.order,
-            "choices": choices,
-            "metrics": metrics,
-        }
+    return {
+        **provenance.source_entry(args.recording, provenance.command_line("identify", args)),
+        "validation_source": args.validate,
+        "order": args.order,
+        "choices": choices,
+        "metrics": metrics,
     }
-    model = FdiModel(fs=fs, plant_b=fit.b, plant_a=fit.a, provenance=prov)
-    save_model(args.output, model)
-
-    if args.plot:
-        from fdi_daemon.ident.plots import plot_identification
-
-        plot_identification(
-            args.plot,
-            ident.response,
-            ident.model_response(),
-            ident.band_hz,
-            {
-                "t": t_val,
-                "y": y_val - np.mean(y_val),
-                "y_sim": check["y_sim"] - np.mean(y_val),
-                "fit_percent": check["fit_percent"],
-                "label": val_label,
-            },
-        )
-    _report(args, ident, check, val_label)
-    return 0
 
 
 def _report(args, ident, check, val_label) -> None:

@@ -211,6 +211,39 @@ def chain_tick(
     if accel != accel:
         accel = xhat
     r = accel - xhat
+    v = _velocity(f, ii, io, out, xhat, accel, position)
+    s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+    g1 = iir_step(f, bo + 3 * L, ao + 3 * L, zo + 3 * (L - 1), ii[od + 3], s)
+    g2 = iir_step(f, bo + 4 * L, ao + 4 * L, zo + 4 * (L - 1), ii[od + 4], v)
+    v_low = iir_step(f, bo + 5 * L, ao + 5 * L, zo + 5 * (L - 1), ii[od + 5], v)
+    if ii[io + C_DRIFT]:
+        f[out + O_DRIFT_S] = _drift_regressor(f, ii, io, accel)
+    else:
+        f[out + O_DRIFT_S] = g1 + f[out + O_GAMMA] * g2
+    sl = _window_push(f, ii, io, g1, g2, r, v, v_low, accel, xhat)
+    t1, t2 = _window_fit(f, ii, io, out, sl)
+    moving = _window_flags(f, out, sl, ii[io + C_N], clipped)
+    f[out + O_T1] = t1 if moving else math.nan
+    f[out + O_T2] = t2 if moving else math.nan
+    _friction_level(f, ii, io, out, sl, moving)
+    f[out + O_XHAT] = xhat
+    f[out + O_R] = r
+    f[out + O_V] = v
+    f[out + O_G1] = g1
+    f[out + O_G2] = g2
+
+
+@jit(inline=True)
+def _velocity(
+    f: F64, ii: I64, io: int, out: int, xhat: float, accel: float, position: float
+) -> float:  # pragma: no cover - jit
+    """v̂ (m/s) by the chain's method (C_METHOD): 0, V(q) ẍ; 1, L(q) x̂̈ + V(q) r; 2,
+    P(q) x + A(q) ẍ on the position x (m), held at its last finite value (0 before one)."""
+    L = ii[io + C_WIDTH]
+    bo = ii[io + C_B]
+    ao = ii[io + C_A]
+    zo = ii[io + C_Z]
+    od = io + C_ORDER
     method = ii[io + C_METHOD]
     if method == 0:
         v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], accel)
@@ -228,14 +261,24 @@ def chain_tick(
         v = iir_step(f, bo + L, ao + L, zo + (L - 1), ii[od + 1], position) + iir_step(
             f, bo + 2 * L, ao + 2 * L, zo + 2 * (L - 1), ii[od + 2], accel
         )
-    s = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
-    g1 = iir_step(f, bo + 3 * L, ao + 3 * L, zo + 3 * (L - 1), ii[od + 3], s)
-    g2 = iir_step(f, bo + 4 * L, ao + 4 * L, zo + 4 * (L - 1), ii[od + 4], v)
-    v_low = iir_step(f, bo + 5 * L, ao + 5 * L, zo + 5 * (L - 1), ii[od + 5], v)
-    if ii[io + C_DRIFT]:
-        f[out + O_DRIFT_S] = _drift_regressor(f, ii, io, accel)
-    else:
-        f[out + O_DRIFT_S] = g1 + f[out + O_GAMMA] * g2
+    return v
+
+
+@jit(inline=True)
+def _window_push(
+    f: F64,
+    ii: I64,
+    io: int,
+    g1: float,
+    g2: float,
+    r: float,
+    v: float,
+    v_low: float,
+    accel: float,
+    xhat: float,
+) -> int:  # pragma: no cover - jit
+    """This tick's row of the window sums (g1², g1 g2, g2², g1 r, g2 r, r², v̂², v_low²,
+    ẍ², x̂̈²) pushed into the window; returns the offset of the window's sums."""
     row = ii[io + C_ROW]
     f[row] = g1 * g1
     f[row + 1] = g1 * g2
@@ -250,7 +293,17 @@ def chain_tick(
     n = ii[io + C_N]
     so = ii[io + C_SUMS]
     sums_push(f, ii, so, n, SUMS_WIDTH, io + C_POS, row)
-    sl = so + (n + 2) * SUMS_WIDTH
+    sl: int = so + (n + 2) * SUMS_WIDTH
+    return sl
+
+
+@jit(inline=True)
+def _window_fit(
+    f: F64, ii: I64, io: int, out: int, sl: int
+) -> tuple[float, float]:  # pragma: no cover - jit
+    """The window's θ = (θ1, θ2) (eqs. 16–17, from its sums at ``sl``), NaN while the
+    window is not full or its regressors too weak or collinear; also at O_WT1, O_WT2,
+    with O_WOK and the fit's residual sum of squares O_WSSE."""
     s11 = f[sl]
     s12 = f[sl + 1]
     s22 = f[sl + 2]
@@ -259,7 +312,7 @@ def chain_tick(
     syy = f[sl + 5]
     det = s11 * s22 - s12 * s12
     if (
-        ii[io + C_COUNT] == n
+        ii[io + C_COUNT] == ii[io + C_N]
         and s11 > f[out + O_MIN_S11]
         and s22 > f[out + O_MIN_S22]
         and det > f[out + O_MIN_RCOND] * (s11 * s22)
@@ -275,8 +328,17 @@ def chain_tick(
         f[out + O_WSSE] = math.nan
     f[out + O_WT1] = t1
     f[out + O_WT2] = t2
+    return t1, t2
+
+
+@jit(inline=True)
+def _window_flags(
+    f: F64, out: int, sl: int, n: int, clipped: bool
+) -> bool:  # pragma: no cover - jit
+    """The window's flags (module docstring: moving, trusted, sliding, clipped, level
+    valid) and its velocity RMS (m/s) at C_OUT; returns moving."""
     v2 = f[sl + 6]
-    moving = v2 >= f[out + O_MIN_V2]
+    moving: bool = v2 >= f[out + O_MIN_V2]
     f[out + O_MOVING] = 1.0 if moving else 0.0
     trusted = f[sl + 7] <= f[out + O_TRUST_SHARE] * v2
     sliding = f[sl + 9] > 0.0 and f[sl + 8] >= SLIDING_SHARE * f[sl + 9]
@@ -285,21 +347,22 @@ def chain_tick(
     f[out + O_CLIPPED] = 1.0 if clipped else 0.0
     f[out + O_LEVEL_VALID] = 1.0 if moving and trusted and not clipped else 0.0
     f[out + O_VRMS] = math.sqrt((0.0 if v2 < 0.0 else v2) / n)
-    f[out + O_T1] = t1 if moving else math.nan
-    f[out + O_T2] = t2 if moving else math.nan
-    # the friction level: the residual's least-squares multiple of the calibrated fault's
-    # regressor g1 + γ g2 (eq. 17 with θ on the signature's direction (1, γ))
+    return moving
+
+
+@jit(inline=True)
+def _friction_level(
+    f: F64, ii: I64, io: int, out: int, sl: int, moving: bool
+) -> None:  # pragma: no cover - jit
+    """The window's friction level at O_LEVEL (in calibrated faults): the residual's
+    least-squares multiple of the calibrated fault's regressor g1 + γ g2 (eq. 17 with θ on
+    the signature's direction (1, γ)); NaN unless moving with a full window."""
     gamma = f[out + O_GAMMA]
-    s_level = s11 + gamma * (2.0 * s12 + gamma * s22)
-    if moving and ii[io + C_COUNT] == n and s_level > 0.0:
-        f[out + O_LEVEL] = (s1y + gamma * s2y) / s_level
+    s_level = f[sl] + gamma * (2.0 * f[sl + 1] + gamma * f[sl + 2])
+    if moving and ii[io + C_COUNT] == ii[io + C_N] and s_level > 0.0:
+        f[out + O_LEVEL] = (f[sl + 3] + gamma * f[sl + 4]) / s_level
     else:
         f[out + O_LEVEL] = math.nan
-    f[out + O_XHAT] = xhat
-    f[out + O_R] = r
-    f[out + O_V] = v
-    f[out + O_G1] = g1
-    f[out + O_G2] = g2
 
 
 @jit(inline=True)
@@ -413,24 +476,57 @@ def detector_tick(
     """The detector's per-tick arithmetic and quiet decisions on this tick's signals (read
     at the chain's C_OUT, `chain_tick`); returns the tick's code."""
     out = ii[ii[io + D_CHAIN] + C_OUT]
+    fo = ii[io + D_FLOATS]
+    res = ii[io + D_RES]
+    stat, guard_stat = _tests_tick(f, ii, io, out, v_in)
+    tick = _guard_tick(f, ii, io, fo, guard_stat)
+    over = _friction_excess(f, ii, io, fo, out, over_baseline)
+    armed = ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL]
+    if ii[io + D_EPISODE]:
+        # the residual test's alarm, counted as on the quiet path: the evidence of a fault
+        # an episode of the growing-fault path waits for (`episode_tick`)
+        ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if armed and stat > f[fo + E_THRESHOLD] else 0
+        return _episode(
+            f,
+            ii,
+            io,
+            fo,
+            res,
+            tick,
+            f[out + O_R],
+            f[out + O_G1],
+            f[out + O_G2],
+            f[out + O_XHAT],
+            f[out + O_T1],
+            f[out + O_T2],
+            over,
+            f[out + O_TRUSTED] != 0.0,
+            f[out + O_SLIDING] != 0.0,
+            f[out + O_CLIPPED] != 0.0,
+            ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE],
+        )
+    return _quiet_tick(f, ii, io, fo, res, out, tick, stat, armed, over)
+
+
+@jit(inline=True)
+def _tests_tick(
+    f: F64, ii: I64, io: int, out: int, v_in: float
+) -> tuple[float, float]:  # pragma: no cover - jit
+    """This tick's rows of the residual test (φ = (g1, g2, x̂̈, 1), y = r), the command test
+    (φ = v_in(k−1..k−4), y = v_in) and the drift reference where there is one: the rest of
+    their `itest_tick` after `detector_pre`; returns the statistics (residual, command)."""
     xhat = f[out + O_XHAT]
     r = f[out + O_R]
-    g1 = f[out + O_G1]
-    g2 = f[out + O_G2]
-    theta1 = f[out + O_T1]
-    theta2 = f[out + O_T2]
-    fo = ii[io + D_FLOATS]
     res = ii[io + D_RES]
     cmd = ii[io + D_CMD]
     ph = ii[res + 15]
-    f[ph] = g1
-    f[ph + 1] = g2
+    f[ph] = f[out + O_G1]
+    f[ph + 1] = f[out + O_G2]
     f[ph + 2] = xhat
     f[ph + 3] = 1.0
     f[ph + 4] = r
     ph = ii[cmd + 15]  # φ = v_in(k−1..k−4): the command test's regressors are its history
     f[ph + 4] = v_in
-    # the rest of `itest_tick` of both tests after `detector_pre`
     itest_insert_p(f, ii, res, 4)
     itest_insert_p(f, ii, cmd, 4)
     if ii[res + 2] == 0:  # no lag: the reference fits end with this tick's rows
@@ -445,84 +541,129 @@ def detector_tick(
     for q in range(3, 0, -1):
         f[ph + q] = f[ph + q - 1]
     f[ph] = v_in
-    tick = ii[io + D_TICK]
+    return stat, guard_stat
+
+
+@jit(inline=True)
+def _guard_tick(
+    f: F64, ii: I64, io: int, fo: int, guard_stat: float
+) -> int:  # pragma: no cover - jit
+    """The operating-point guard (held D_HOLD ticks after the command test's statistic
+    exceeds its threshold) and the tick counter; returns this tick's number."""
+    tick: int = ii[io + D_TICK]
     if guard_stat > f[fo + E_GUARD_THRESHOLD]:
         ii[io + D_GUARD_UNTIL] = tick + ii[io + D_HOLD]
     ii[io + D_TICK] = tick + 1
+    return tick
+
+
+@jit(inline=True)
+def _friction_excess(
+    f: F64, ii: I64, io: int, fo: int, out: int, over_baseline: float
+) -> float:  # pragma: no cover - jit
+    """This tick's θ (E_THETA1, E_THETA2) and the friction level's excess over its
+    fault-free value (E_OVER, in units of friction_min_level): ``over_baseline`` against
+    a baseline, else θ1's over the calibrated level; returns the excess."""
+    theta1 = f[out + O_T1]
     f[fo + E_THETA1] = theta1
-    f[fo + E_THETA2] = theta2
+    f[fo + E_THETA2] = f[out + O_T2]
     if ii[io + D_HAS_BASELINE]:
         over = over_baseline
     else:
         over = (theta1 - f[fo + E_LEVEL_BASE]) / f[fo + E_FRICTION_MIN]
     f[fo + E_OVER] = over
-    armed = ii[res + 8] != 0 and tick >= ii[io + D_GUARD_UNTIL]
-    if ii[io + D_EPISODE]:
-        # the residual test's alarm, counted as on the quiet path: the evidence of a fault
-        # an episode of the growing-fault path waits for (`episode_tick`)
-        ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if armed and stat > f[fo + E_THRESHOLD] else 0
-        return _episode(
-            f,
-            ii,
-            io,
-            fo,
-            res,
-            tick,
-            r,
-            g1,
-            g2,
-            xhat,
-            theta1,
-            theta2,
-            over,
-            f[out + O_TRUSTED] != 0.0,
-            f[out + O_SLIDING] != 0.0,
-            f[out + O_CLIPPED] != 0.0,
-            ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE],
-        )
+    return over
+
+
+@jit(inline=True)
+def _quiet_tick(
+    f: F64,
+    ii: I64,
+    io: int,
+    fo: int,
+    res: int,
+    out: int,
+    tick: int,
+    stat: float,
+    armed: bool,
+    over: float,
+) -> int:  # pragma: no cover - jit
+    """A tick with no episode running: the warm-up hold (D_HOLD_UNTIL: the windows fill),
+    then the level path, the calibration buffer, the fast path and the growing-fault path;
+    returns the tick's code."""
     if tick < ii[io + D_HOLD_UNTIL]:
-        ii[io + D_ABOVE] = 0
-        ii[io + D_LEVEL_ABOVE] = 0
+        _clear_counts(ii, io)
         f[fo + E_DRIFT] = 0.0
         return QUIET
     ii[io + D_LEVEL_ABOVE] = ii[io + D_LEVEL_ABOVE] + 1 if over > 1.0 else 0
     if ii[io + D_LEVEL_ABOVE] >= ii[io + D_LEVEL_SAMPLES]:
-        ii[io + D_ABOVE] = 0
-        ii[io + D_LEVEL_ABOVE] = 0
+        _clear_counts(ii, io)
         _start(f, ii, io, res, 1, 0)
         return LEVEL_ALARM
     if ii[io + D_STATE] == STATE_CALIBRATING:
-        c = ii[io + D_CAL_COUNT]
-        if c < ii[io + D_CAL_SAMPLES]:  # full until `Detector.decide` takes it: not past it
-            f[fo + E_CAL + 2 * c] = theta1
-            f[fo + E_CAL + 2 * c + 1] = theta2
-            c += 1
-            ii[io + D_CAL_COUNT] = c
-        return CALIBRATED if c >= ii[io + D_CAL_SAMPLES] else QUIET
+        return _calibration_tick(f, ii, io, fo)
     if ii[io + D_METHOD] == 1:
-        alarm = ii[io + D_HAS_BAND] != 0 and (
-            theta1 < f[fo + E_LO1]
-            or theta1 > f[fo + E_HI1]
-            or theta2 < f[fo + E_LO2]
-            or theta2 > f[fo + E_HI2]
-        )
+        alarm = _outside_band(f, ii, io, fo)
     else:
         alarm = armed and stat > f[fo + E_THRESHOLD]
-        _drift_tick(f, ii, res, ii[io + D_DRIFT_RES], fo, out, armed, r, g1, g2, xhat)
+        _drift_tick(
+            f,
+            ii,
+            res,
+            ii[io + D_DRIFT_RES],
+            fo,
+            out,
+            armed,
+            f[out + O_R],
+            f[out + O_G1],
+            f[out + O_G2],
+            f[out + O_XHAT],
+        )
     ii[io + D_ABOVE] = ii[io + D_ABOVE] + 1 if alarm else 0
     if ii[io + D_ABOVE] >= ii[io + D_PERSISTENCE]:
-        ii[io + D_ABOVE] = 0
-        ii[io + D_LEVEL_ABOVE] = 0
+        _clear_counts(ii, io)
         f[fo + E_DRIFT] = 0.0
         _start(f, ii, io, res, 0, 0)
         return FAST_ALARM
     if f[fo + E_DRIFT] > f[fo + E_DRIFT_H]:
-        ii[io + D_ABOVE] = 0
-        ii[io + D_LEVEL_ABOVE] = 0
+        _clear_counts(ii, io)
         _start(f, ii, io, res, 0, 1)
         E.episode_rebase(f, ii, ii[io + D_EPI], fo + E_DRIFT_REF)
         return DRIFT_ALARM
     return QUIET
+
+
+@jit(inline=True)
+def _clear_counts(ii: I64, io: int) -> None:  # pragma: no cover - jit
+    """The fast and level paths' counts of alarming ticks back to 0."""
+    ii[io + D_ABOVE] = 0
+    ii[io + D_LEVEL_ABOVE] = 0
+
+
+@jit(inline=True)
+def _calibration_tick(f: F64, ii: I64, io: int, fo: int) -> int:  # pragma: no cover - jit
+    """This tick's θ into the calibration buffer (E_CAL); CALIBRATED once it is full."""
+    c = ii[io + D_CAL_COUNT]
+    if c < ii[io + D_CAL_SAMPLES]:  # full until `Detector.decide` takes it: not past it
+        f[fo + E_CAL + 2 * c] = f[fo + E_THETA1]
+        f[fo + E_CAL + 2 * c + 1] = f[fo + E_THETA2]
+        c += 1
+        ii[io + D_CAL_COUNT] = c
+    return CALIBRATED if c >= ii[io + D_CAL_SAMPLES] else QUIET
+
+
+@jit(inline=True)
+def _outside_band(f: F64, ii: I64, io: int, fo: int) -> bool:  # pragma: no cover - jit
+    """The band method's alarm: this tick's θ outside the calibrated band."""
+    theta1 = f[fo + E_THETA1]
+    theta2 = f[fo + E_THETA2]
+    outside: bool = ii[io + D_HAS_BAND] != 0 and (
+        theta1 < f[fo + E_LO1]
+        or theta1 > f[fo + E_HI1]
+        or theta2 < f[fo + E_LO2]
+        or theta2 > f[fo + E_HI2]
+    )
+    return outside
 
 
 @jit(inline=True)

@@ -103,22 +103,7 @@ class Detector:
         self.fs_hz = float(fs_hz)
         self.gamma_f = float(gamma_f)
         s = settings
-        self.window_samples = s.samples(s.window_s, fs_hz, minimum=8)
-        self.lag_samples = s.samples(s.reference_lag_s, fs_hz, minimum=0)
-        self.test_samples = s.samples(s.test_window_s, fs_hz)
-        self.calibration_samples = s.samples(s.calibration_s, fs_hz)
-        self.warmup_samples = self.window_samples + self.lag_samples + self.test_samples
-        hold = (
-            s.guard_hold_s
-            if s.guard_hold_s is not None
-            else (s.window_s + s.reference_lag_s + s.test_window_s)
-        )
-        self.hold_samples = s.samples(hold, fs_hz)
-        self.iso_samples = s.samples(s.isolation_window_s, fs_hz)
-        self.timeout_samples = max(self.iso_samples, s.samples(s.isolation_timeout_s, fs_hz))
-        self.clear_samples = s.samples(s.clear_s, fs_hz)
-        self.friction_clear_samples = s.samples(s.friction_clear_s, fs_hz)
-        self.level_samples = s.samples(s.slow_persistence_s, fs_hz)
+        self._set_sample_counts()
         self.arena = arena = arena if arena is not None else Arena()
 
         def innovation_test(order: int, min_sigma: float) -> InnovationTest:
@@ -143,12 +128,57 @@ class Detector:
             else None
         )
         bins = 0 if baseline_bins is None else len(baseline_bins[1])
-        self.fo, self.io = fo, io = arena.alloc(
+        self.fo, self.io = arena.alloc(
             K.E_CAL + 2 * self.calibration_samples + 3 * bins + 1, K.DET_INTS
         )
+        self.epo, self.epi = arena.alloc(
+            E.episode_floats(self.window_samples, self.test_samples), E.EPISODE_INTS
+        )
+        #: the growing-fault path's threshold h = τ·ln(ARL₀): τ ticks per independent innovation (`core.cusum`)
+        self.drift_threshold = s.drift_correlation_samples * cusum_threshold(
+            s.drift_false_alarm_years, fs_hz
+        )
+        self._set_episode_block()
+        self._set_detector_block(baseline_bins)
+        #: the friction level as reported (`detect.friction_level`), restarted by the kernel
+        #: when an episode begins or ends; events carry its value at their tick
+        self.level = FrictionLevel(
+            s.level_median_s, fs_hz, arena, settle_samples=self.window_samples
+        )
+        arena.i[self.io + K.D_LEVEL] = self.level.io
+        self.band: dict[str, list[float]] | None = None
+        #: θ as reported for the newest tick: eq. (17) over the sliding window, or during an
+        #: alarm episode over the data since the change (`_Episode.theta`)
+        self.theta1 = self.theta2 = math.nan
+        self.state = "calibrating"
+        #: the fault-free friction level without a baseline: θ1's median over the calibration
+        self.level_base = math.nan
+        self.restart()
+
+    def _set_sample_counts(self) -> None:
+        """The settings' durations (s) as whole samples at ``fs_hz``."""
+        s, fs_hz = self.settings, self.fs_hz
+        self.window_samples = s.samples(s.window_s, fs_hz, minimum=8)
+        self.lag_samples = s.samples(s.reference_lag_s, fs_hz, minimum=0)
+        self.test_samples = s.samples(s.test_window_s, fs_hz)
+        self.calibration_samples = s.samples(s.calibration_s, fs_hz)
+        self.warmup_samples = self.window_samples + self.lag_samples + self.test_samples
+        hold = (
+            s.guard_hold_s
+            if s.guard_hold_s is not None
+            else (s.window_s + s.reference_lag_s + s.test_window_s)
+        )
+        self.hold_samples = s.samples(hold, fs_hz)
+        self.iso_samples = s.samples(s.isolation_window_s, fs_hz)
+        self.timeout_samples = max(self.iso_samples, s.samples(s.isolation_timeout_s, fs_hz))
+        self.clear_samples = s.samples(s.clear_s, fs_hz)
+        self.friction_clear_samples = s.samples(s.friction_clear_s, fs_hz)
+        self.level_samples = s.samples(s.slow_persistence_s, fs_hz)
+
+    def _set_episode_block(self) -> None:
+        """The episode kernel's sizes and settings (`detect.episode_kernel`)."""
+        s, ii, f, epi = self.settings, self.arena.i, self.arena.f, self.epi
         n, m = self.window_samples, self.test_samples
-        self.epo, self.epi = epo, epi = arena.alloc(E.episode_floats(n, m), E.EPISODE_INTS)
-        ii, f = arena.i, arena.f
         ii[epi + E.P_N], ii[epi + E.P_M] = n, m
         ii[epi + E.P_ISO], ii[epi + E.P_TIMEOUT] = self.iso_samples, self.timeout_samples
         ii[epi + E.P_CLEAR] = self.clear_samples
@@ -156,12 +186,8 @@ class Detector:
         ii[epi + E.P_TRACK_SAMPLES] = s.track_samples
         ii[epi + E.P_BAND] = int(s.method == "band")
         ii[epi + E.P_WARMUP] = self.warmup_samples
-        ii[epi + E.P_O_POST : epi + E.P_O_G + 1] = E.episode_layout(epo, n, m)
+        ii[epi + E.P_O_POST : epi + E.P_O_G + 1] = E.episode_layout(self.epo, n, m)
         sc = int(ii[epi + E.P_O_SCAL])
-        #: the growing-fault path's threshold h = τ·ln(ARL₀): τ ticks per independent innovation (`core.cusum`)
-        self.drift_threshold = s.drift_correlation_samples * cusum_threshold(
-            s.drift_false_alarm_years, fs_hz
-        )
         f[sc + E.S_FMIN] = s.friction_min_level
         f[sc + E.S_THRESHOLD] = s.threshold
         f[sc + E.S_TOL1] = s.track_tolerance
@@ -169,7 +195,15 @@ class Detector:
         f[sc + E.S_GAMMA_F] = self.gamma_f
         f[sc + E.S_DRIFT_SHIFT] = s.drift_shift_level if s.method == "sequential" else 0.0
         f[sc + E.S_DRIFT_H] = self.drift_threshold
-        ii[io + K.D_EPI] = epi
+
+    def _set_detector_block(
+        self, baseline_bins: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+    ) -> None:
+        """The detector kernel's sizes, settings, the blocks it reads (the tests, the
+        episode) and the baseline's bins (`detect.kernel.detector_tick`)."""
+        s, ii, f, io, fo = self.settings, self.arena.i, self.arena.f, self.io, self.fo
+        bins = 0 if baseline_bins is None else len(baseline_bins[1])
+        ii[io + K.D_EPI] = self.epi
         ii[io + K.D_METHOD] = 1 if s.method == "band" else 0
         ii[io + K.D_HAS_BASELINE] = int(self.has_baseline)
         ii[io + K.D_HOLD] = self.hold_samples
@@ -191,20 +225,6 @@ class Detector:
             f[o : o + 3 * bins + 1] = np.concatenate(
                 [np.asarray(v, dtype=float) for v in baseline_bins]
             )
-        #: the friction level as reported (`detect.friction_level`), restarted by the kernel
-        #: when an episode begins or ends; events carry its value at their tick
-        self.level = FrictionLevel(
-            s.level_median_s, fs_hz, arena, settle_samples=self.window_samples
-        )
-        arena.i[io + K.D_LEVEL] = self.level.io
-        self.band: dict[str, list[float]] | None = None
-        #: θ as reported for the newest tick: eq. (17) over the sliding window, or during an
-        #: alarm episode over the data since the change (`_Episode.theta`)
-        self.theta1 = self.theta2 = math.nan
-        self.state = "calibrating"
-        #: the fault-free friction level without a baseline: θ1's median over the calibration
-        self.level_base = math.nan
-        self.restart()
 
     # ------------------------------------------------------------------ state in the arena
     @staticmethod

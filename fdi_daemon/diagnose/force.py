@@ -496,7 +496,7 @@ class _LoopFit:
     def fed_forward(self, theta_ff):
         """(what moves the mass: Ĝ u and the input side's effects; what the sensor adds).
         Without a sensor column, x_ff @ θ as a whole: summed in another order the loop fits
-        end elsewhere (docs/diagnose.md §9, "A measure of the fragility")."""
+        end elsewhere (docs/diagnose_probes.md, "A measure of the fragility")."""
         if not self.sensor.any():
             return self.ctx.y0 + self.x_ff @ theta_ff, np.zeros(len(self.ctx.y0))
         mech = self.x_ff[:, ~self.sensor] @ theta_ff[~self.sensor]

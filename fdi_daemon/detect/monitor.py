@@ -301,16 +301,9 @@ class Monitor:
         across pieces stays one event; without ``seq``, the time step from the previous
         piece's last sample tells a gap).
         """
-        cols = rec.columns
-        n = len(cols["t"])
-        t = np.asarray(cols["t"], dtype=float)
-        v_in = np.asarray(cols["v_in"], dtype=float)
-        accel = np.asarray(cols["accel"], dtype=float)
-        # per chunk (in cache): the sample numbers of a recording without seq, and NaN for
-        # the position the velocity does not use
+        t, v_in, accel, position, seq = self._columns(rec)
+        n = t.size
         needs_position = self.pipeline.needs_position
-        position = self.position_column(rec) if needs_position else np.full(min(n, _CHUNK), np.nan)
-        seq = np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols else None
         last: int | None = None  # the number of the sample before the chunk (no seq column)
         events: list[dict[str, Any]] = []
         parts: dict[str, list[np.ndarray]] = {k: [] for k in TRACE_NAMES}
@@ -335,10 +328,12 @@ class Monitor:
                 first = last + 1
             else:
                 first = 0 if self._last_seq is None else self._last_seq + 1
+            follows = not (resumed and start == 0) and (
+                self._last_seq is None or first == self._last_seq + 1
+            )
             if (
-                not self._bad_run
-                and not (resumed and start == 0)
-                and (self._last_seq is None or first == self._last_seq + 1)
+                follows
+                and not self._bad_run
                 and _clean_chunk(
                     t,
                     v_in,
@@ -357,16 +352,7 @@ class Monitor:
                 events.extend(self._run_good(*chunk, parts, trace_every))
                 self._last_seq = last = first + stop - start - 1
             else:
-                if seq is not None:
-                    numbers = seq[start:stop]
-                elif resumed and start == 0:
-                    with_last = np.concatenate(([self._last_t], t[:stop]))
-                    numbers = self.sample_numbers(with_last, self._last_seq)[1:]
-                    last = int(numbers[-1])
-                else:
-                    lo = max(start - 1, 0)
-                    numbers = self.sample_numbers(t[lo:stop], last)[start - lo :]
-                    last = int(numbers[-1])
+                numbers, last = self._chunk_numbers(t, seq, start, stop, last, resumed)
                 events.extend(self._run_chunk(*chunk, numbers, parts, trace_every))
             start = stop
             if progress is not None:
@@ -411,6 +397,49 @@ class Monitor:
                 "position_observer) but the recording has no position column"
             )
         return np.asarray(rec.columns["position"], dtype=float)
+
+    def _columns(
+        self, rec: Recording
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """(t s, v_in V, accel m/s², position m, seq or None) of a recording as arrays; the
+        position is NaN for a velocity that does not use it (one chunk's worth, reused)."""
+        cols = rec.columns
+        n = len(cols["t"])
+        position = (
+            self.position_column(rec)
+            if self.pipeline.needs_position
+            else np.full(min(n, _CHUNK), np.nan)
+        )
+        return (
+            np.asarray(cols["t"], dtype=float),
+            np.asarray(cols["v_in"], dtype=float),
+            np.asarray(cols["accel"], dtype=float),
+            position,
+            np.asarray(cols["seq"], dtype=np.int64) if "seq" in cols else None,
+        )
+
+    def _chunk_numbers(
+        self,
+        t: np.ndarray,
+        seq: np.ndarray | None,
+        start: int,
+        stop: int,
+        last: int | None,
+        resumed: bool,
+    ) -> tuple[np.ndarray, int | None]:
+        """(the sample numbers of t[start:stop], the number of its last sample, or ``last``
+        as it was with a seq column): the recording's seq, else from the time steps, after
+        the sample before the chunk or, for a piece that resumes an earlier one, after that
+        piece's last sample."""
+        if seq is not None:
+            return seq[start:stop], last
+        if resumed and start == 0:
+            with_last = np.concatenate(([self._last_t], t[:stop]))
+            numbers = self.sample_numbers(with_last, self._last_seq)[1:]
+        else:
+            lo = max(start - 1, 0)
+            numbers = self.sample_numbers(t[lo:stop], last)[start - lo :]
+        return numbers, int(numbers[-1])
 
     def sample_numbers(self, t: np.ndarray, base: int | None = None) -> np.ndarray:
         """Sample numbers from the time column (recordings without ``seq``); ``base``: the

@@ -365,22 +365,23 @@ def _packed_quadratic(f: F64, s: int, v: int) -> float:  # pragma: no cover - ji
 
 
 @jit
-def measure_fault(f: F64, ii: I64, eo: int, threshold: float) -> None:  # pragma: no cover - jit
+def measure_fault(f: F64, ii: I64, eo: int, described: bool) -> None:  # pragma: no cover - jit
     """Δθ = θ_post − θ_ref, the fault as a linear change of the residual fit (eq. 16's φ
     with x̂̈ and 1), from the post window when the episode becomes another fault; kept only
-    where it describes the fault (`_described_by_linear_change`), NaN otherwise (a clipping
-    accelerometer: the clearing test alone decides)."""
+    where it describes the fault (``described``: `_described_by_linear_change` of this
+    tick), NaN otherwise (a clipping accelerometer: the clearing test alone decides). The
+    post window is solved again: this tick's `_friction_kind` reused the solution's slots."""
     n = ii[eo + P_N]
     sc = ii[eo + P_O_SCAL]
     d = sc + S_FAULT_CHANGE
     f[d] = math.nan
     th = ii[eo + P_O_TH]
-    sse, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th)
+    _, ok = solve_packed(f, ii[eo + P_O_POST] + (n + 2) * W, 4, 1e-9, ii[eo + P_O_SCR], th)
     if not ok:
         return
     for q in range(4):
         f[d + q] = f[th + q] - f[sc + S_THETA_REF + q]
-    if not _described_by_linear_change(f, ii, eo, sse, threshold):
+    if not described:
         f[d] = math.nan
 
 
@@ -625,10 +626,11 @@ def _isolation(
     if state != 3 or ticks - max(fault_at, 0) < ii[eo + P_TIMEOUT]:
         return NO_CHANGE
     alarmed = fault_at >= 0
-    if (alarmed or math.isnan(f[sc + S_FAULT_CHANGE])) and (
-        ii[eo + P_CLIPPED] or _described_by_linear_change(f, ii, eo, sse, threshold)
-    ):
-        measure_fault(f, ii, eo, threshold)  # the clearing gate's fault as measured
+    if not (alarmed or math.isnan(f[sc + S_FAULT_CHANGE])):
+        return NO_CHANGE
+    described = _described_by_linear_change(f, ii, eo, sse, threshold)
+    if described or ii[eo + P_CLIPPED]:
+        measure_fault(f, ii, eo, described)  # the clearing gate's fault as measured
         if alarmed:
             ii[eo + P_QUIET] = 0
             return TO_OTHER

@@ -101,16 +101,16 @@ class AugmentedPlant:
         y, sensed = y0, 0.0
         for at_sensor, (reg, dynamic, outs) in zip(self._at_sensor, self._blocks):
             phis = reg.step(v_in, v, x, y0)
-            parts = (
-                [filt.step(phi) for filt, phi in zip(outs, phis)]
+            # the effect's columns summed first, then added, as `run_signals` does
+            part = (
+                sum(filt.step(phi) for filt, phi in zip(outs, phis))
                 if dynamic
-                else [gain * phi for gain, phi in zip(outs, phis)]
+                else sum(gain * phi for gain, phi in zip(outs, phis))
             )
-            for part in parts:
-                if at_sensor:
-                    sensed += part
-                else:
-                    y += part
+            if at_sensor:
+                sensed += part
+            else:
+                y += part
         return (y if self._loop is None else self._loop.step(y)) + sensed
 
     def run(self, v_in: np.ndarray) -> np.ndarray:

@@ -32,8 +32,6 @@ def _distributed():
 def dask_client(scheduler: str | None, workers: int):
     """A client of the given scheduler, or of a fresh local cluster of ``workers`` processes."""
     dd = _distributed()
-    import dask  # installed with dask.distributed
-
     if scheduler is not None:
         try:
             client = dd.Client(scheduler, timeout="10s")
@@ -42,6 +40,8 @@ def dask_client(scheduler: str | None, workers: int):
         with client:
             yield client
         return
+    import dask  # installed with dask.distributed
+
     environ = dict(os.environ)  # as it was before the nannies set theirs (`_restore_environ`)
     # a file that kills its worker kills it again on every retry: no retries on the cluster
     # (`replay_fleet` runs each failed file once more alone), so such a file costs two worker
